@@ -1,0 +1,468 @@
+"""Numba kernels of yarn–yarn contact: segment closest points, a uniform-grid broad phase, the
+augmented-Lagrangian contact terms of the quasi-static solve and the XPBD contact projection with
+position-based friction.
+
+Only ``@njit`` code lives here. A contact is a pair of edges ``(a, b)``; its gap is
+``g = |xa(s) − xb(t)| − (ra + rb)`` at the closest points ``xa(s) = (1 − s) a0 + s a1`` and
+``xb(t) = (1 − t) b0 + t b1``; the constraint is unilateral, ``g ≥ 0`` (minimum centreline
+distance ``ra + rb``, i.e. ``2r`` for equal yarns).
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._quat import cross, dot, norm, row3
+
+# Relative size of a·e − b² below which two segments are treated as parallel (their closest
+# points are then not unique and the middle of the overlap is used, a continuous choice).
+_PARALLEL_TOLERANCE = 1e-12
+
+
+@njit(cache=True)
+def _clamp01(x):
+    return 0.0 if x < 0.0 else (1.0 if x > 1.0 else x)
+
+
+@njit(cache=True)
+def segment_closest_points(a0, a1, b0, b1):
+    """Closest points of segments ``a0a1`` and ``b0b1``.
+
+    Returns ``(s, t, distance, normal)`` with ``normal`` the unit vector from ``xb(t)`` to
+    ``xa(s)`` (a fallback perpendicular when the segments intersect).
+    """
+    d1 = (a1[0] - a0[0], a1[1] - a0[1], a1[2] - a0[2])
+    d2 = (b1[0] - b0[0], b1[1] - b0[1], b1[2] - b0[2])
+    r = (a0[0] - b0[0], a0[1] - b0[1], a0[2] - b0[2])
+    a = dot(d1, d1)
+    e = dot(d2, d2)
+    f = dot(d2, r)
+    c = dot(d1, r)
+    b = dot(d1, d2)
+    denom = a * e - b * b
+    if denom > _PARALLEL_TOLERANCE * a * e:
+        s = _clamp01((b * f - c * e) / denom)
+    else:
+        # Parallel: middle of the projection of b onto a.
+        s = _clamp01(0.5 * ((-c) + (b - c)) / a)
+    t = (b * s + f) / e
+    if t < 0.0:
+        t = 0.0
+        s = _clamp01(-c / a)
+    elif t > 1.0:
+        t = 1.0
+        s = _clamp01((b - c) / a)
+    xa = (a0[0] + s * d1[0], a0[1] + s * d1[1], a0[2] + s * d1[2])
+    xb = (b0[0] + t * d2[0], b0[1] + t * d2[1], b0[2] + t * d2[2])
+    diff = (xa[0] - xb[0], xa[1] - xb[1], xa[2] - xb[2])
+    dist = norm(diff)
+    if dist > 1e-14 * math.sqrt(a + e):
+        inv = 1.0 / dist
+        return s, t, dist, (diff[0] * inv, diff[1] * inv, diff[2] * inv)
+    nrm = cross(d1, d2)
+    nn = norm(nrm)
+    if nn < 1e-14 * math.sqrt(a * e):
+        # Intersecting and parallel: any direction perpendicular to a.
+        nrm = cross(d1, (1.0, 0.0, 0.0)) if abs(d1[0]) < 0.9 * math.sqrt(a) else cross(d1, (0.0, 1.0, 0.0))
+        nn = norm(nrm)
+    return s, t, dist, (nrm[0] / nn, nrm[1] / nn, nrm[2] / nn)
+
+
+@njit(cache=True)
+def _edge_points(pos, edge_nodes, edge_offset, e):
+    i0 = edge_nodes[e, 0]
+    i1 = edge_nodes[e, 1]
+    p0 = row3(pos, i0)
+    p1 = (pos[i1, 0] + edge_offset[e, 0], pos[i1, 1] + edge_offset[e, 1], pos[i1, 2] + edge_offset[e, 2])
+    return p0, p1
+
+
+# ---------------------------------------------------------------------------------------------
+# Broad phase
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _arc_gap(a, b, edge_rod, edge_arc_start, edge_rest_length, rod_length, rod_closed):
+    """Rest arc length between edges ``a`` and ``b`` of one rod (0 when they share a node)."""
+    sa = edge_arc_start[a]
+    sb = edge_arc_start[b]
+    la = edge_rest_length[a]
+    lb = edge_rest_length[b]
+    if sa > sb:
+        sa, sb = sb, sa
+        la, lb = lb, la
+    gap = sb - (sa + la)
+    if rod_closed[edge_rod[a]]:
+        gap = min(gap, sa + rod_length[edge_rod[a]] - (sb + lb))
+    return max(gap, 0.0)
+
+
+@njit(cache=True)
+def _pair_excluded(a, b, edge_nodes, edge_rod, edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, exclusion_factor):
+    if edge_rod[a] != edge_rod[b]:
+        return False
+    if (
+        edge_nodes[a, 0] == edge_nodes[b, 0]
+        or edge_nodes[a, 0] == edge_nodes[b, 1]
+        or edge_nodes[a, 1] == edge_nodes[b, 0]
+        or edge_nodes[a, 1] == edge_nodes[b, 1]
+    ):
+        return True
+    gap = _arc_gap(a, b, edge_rod, edge_arc_start, edge_rest_length, rod_length, rod_closed)
+    return gap < exclusion_factor * (edge_radius[a] + edge_radius[b])
+
+
+@njit(cache=True)
+def edge_boxes(pos, pos_end, edge_nodes, edge_offset, edge_radius, margin, lower, upper):
+    """Axis-aligned boxes ``(E, 3)`` of the edges swept from ``pos`` to ``pos_end``, inflated by
+    ``radius + margin / 2``."""
+    for e in range(edge_nodes.shape[0]):
+        p0, p1 = _edge_points(pos, edge_nodes, edge_offset, e)
+        q0, q1 = _edge_points(pos_end, edge_nodes, edge_offset, e)
+        pad = edge_radius[e] + 0.5 * margin
+        for k in range(3):
+            lower[e, k] = min(min(p0[k], p1[k]), min(q0[k], q1[k])) - pad
+            upper[e, k] = max(max(p0[k], p1[k]), max(q0[k], q1[k])) + pad
+
+
+@njit(cache=True)
+def _scan_grid(keys, order, entry_edge, entry_cell, lower, upper, cell_size, origin, edge_nodes, edge_rod,
+               edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, exclusion_factor,
+               node_free, out, count_only):
+    n_pairs = 0
+    n = keys.shape[0]
+    start = 0
+    while start < n:
+        stop = start + 1
+        key = keys[order[start]]
+        while stop < n and keys[order[stop]] == key:
+            stop += 1
+        for u in range(start, stop):
+            a = entry_edge[order[u]]
+            for v in range(u + 1, stop):
+                b = entry_edge[order[v]]
+                lo = a if a < b else b
+                hi = b if a < b else a
+                overlap = True
+                owner = True
+                for k in range(3):
+                    if lower[lo, k] > upper[hi, k] or lower[hi, k] > upper[lo, k]:
+                        overlap = False
+                        break
+                    # Report the pair only from the lowest cell of the boxes' intersection.
+                    first = math.floor((max(lower[lo, k], lower[hi, k]) - origin[k]) / cell_size)
+                    if first != entry_cell[order[u], k]:
+                        owner = False
+                if not overlap or not owner:
+                    continue
+                if not (node_free[edge_nodes[lo, 0]] or node_free[edge_nodes[lo, 1]]
+                        or node_free[edge_nodes[hi, 0]] or node_free[edge_nodes[hi, 1]]):
+                    continue
+                if _pair_excluded(lo, hi, edge_nodes, edge_rod, edge_arc_start, edge_rest_length, edge_radius,
+                                  rod_length, rod_closed, exclusion_factor):
+                    continue
+                if not count_only:
+                    out[n_pairs, 0] = lo
+                    out[n_pairs, 1] = hi
+                n_pairs += 1
+        start = stop
+    return n_pairs
+
+
+@njit(cache=True)
+def broad_phase(pos, pos_end, edge_nodes, edge_offset, edge_radius, edge_rod, edge_arc_start, edge_rest_length,
+                rod_length, rod_closed, node_free, margin, exclusion_factor):
+    """Candidate contact pairs ``(P, 2)`` (``a < b``) whose inflated boxes, swept from ``pos`` to
+    ``pos_end`` (pass the same array twice for a static query), overlap.
+
+    Uniform grid with cell size equal to the largest box, so each box covers at most 2×2×2 cells;
+    entries are sorted by cell key, so the cost is O(E log E) plus the pairs found. Pairs of one rod
+    closer than ``exclusion_factor · (ra + rb)`` in rest arc length (neighbours along the yarn) and
+    pairs whose four nodes are all pinned are left out.
+    """
+    n_edges = edge_nodes.shape[0]
+    lower = np.empty((n_edges, 3))
+    upper = np.empty((n_edges, 3))
+    edge_boxes(pos, pos_end, edge_nodes, edge_offset, edge_radius, margin, lower, upper)
+    if n_edges < 2:
+        return np.empty((0, 2), dtype=np.int64)
+    cell_size = 0.0
+    origin = np.empty(3)
+    extent = np.empty(3, dtype=np.int64)
+    for k in range(3):
+        origin[k] = lower[:, k].min()
+    for e in range(n_edges):
+        for k in range(3):
+            cell_size = max(cell_size, upper[e, k] - lower[e, k])
+    for k in range(3):
+        extent[k] = int(math.floor((upper[:, k].max() - origin[k]) / cell_size)) + 1
+    n_entries = 0
+    for e in range(n_edges):
+        m = 1
+        for k in range(3):
+            m *= int(math.floor((upper[e, k] - origin[k]) / cell_size)) - int(math.floor((lower[e, k] - origin[k]) / cell_size)) + 1
+        n_entries += m
+    keys = np.empty(n_entries, dtype=np.int64)
+    entry_edge = np.empty(n_entries, dtype=np.int64)
+    entry_cell = np.empty((n_entries, 3), dtype=np.int64)
+    u = 0
+    for e in range(n_edges):
+        c0 = np.empty(3, dtype=np.int64)
+        c1 = np.empty(3, dtype=np.int64)
+        for k in range(3):
+            c0[k] = int(math.floor((lower[e, k] - origin[k]) / cell_size))
+            c1[k] = int(math.floor((upper[e, k] - origin[k]) / cell_size))
+        for ix in range(c0[0], c1[0] + 1):
+            for iy in range(c0[1], c1[1] + 1):
+                for iz in range(c0[2], c1[2] + 1):
+                    keys[u] = ix + extent[0] * (iy + extent[1] * iz)
+                    entry_edge[u] = e
+                    entry_cell[u, 0] = ix
+                    entry_cell[u, 1] = iy
+                    entry_cell[u, 2] = iz
+                    u += 1
+    order = np.argsort(keys, kind="mergesort")
+    dummy = np.empty((0, 2), dtype=np.int64)
+    n_pairs = _scan_grid(keys, order, entry_edge, entry_cell, lower, upper, cell_size, origin, edge_nodes, edge_rod,
+                         edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, exclusion_factor,
+                         node_free, dummy, True)
+    pairs = np.empty((n_pairs, 2), dtype=np.int64)
+    _scan_grid(keys, order, entry_edge, entry_cell, lower, upper, cell_size, origin, edge_nodes, edge_rod,
+               edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, exclusion_factor,
+               node_free, pairs, False)
+    return pairs
+
+
+@njit(cache=True)
+def tunneling_step_limit(pos, dx, edge_nodes, edge_offset, pairs, fraction):
+    """Largest step length ``α ≤ 1`` along node displacements ``dx (N, 3)`` such that no pair's
+    centreline distance can reach zero: the distance of two segments changes by at most the sum of
+    their largest node moves, so ``α (δa + δb) ≤ fraction · d0`` keeps every pair apart."""
+    alpha = 1.0
+    for p in range(pairs.shape[0]):
+        ea = pairs[p, 0]
+        eb = pairs[p, 1]
+        a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
+        b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
+        _, _, dist, _ = segment_closest_points(a0, a1, b0, b1)
+        travel = 0.0
+        for e in (ea, eb):
+            move = 0.0
+            for m in range(2):
+                i = edge_nodes[e, m]
+                move = max(move, math.sqrt(dx[i, 0] ** 2 + dx[i, 1] ** 2 + dx[i, 2] ** 2))
+            travel += move
+        if travel * alpha > fraction * dist:
+            alpha = fraction * dist / travel
+    return alpha
+
+
+# ---------------------------------------------------------------------------------------------
+# Augmented-Lagrangian contact terms (quasi-static solve)
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _contact_local_gradient(a0, a1, b0, b1, radius_sum, multiplier, stiffness, out):
+    """Gradient (12,) of the augmented-Lagrangian term of one pair; returns (energy, gap, force)."""
+    s, t, dist, n = segment_closest_points(a0, a1, b0, b1)
+    gap = dist - radius_sum
+    force = max(0.0, multiplier - stiffness * gap)
+    energy = (force * force - multiplier * multiplier) / (2.0 * stiffness)
+    # ∂ψ/∂x = −force ∂g/∂x, ∂g/∂(a0, a1, b0, b1) = ((1 − s) n, s n, −(1 − t) n, −t n)
+    for k in range(3):
+        out[k] = -force * (1.0 - s) * n[k]
+        out[3 + k] = -force * s * n[k]
+        out[6 + k] = force * (1.0 - t) * n[k]
+        out[9 + k] = force * t * n[k]
+    return energy, gap, force
+
+
+@njit(cache=True)
+def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, multiplier, stiffness,
+                            node_grad, node_scale, out_gap, out_force):
+    """Augmented-Lagrangian contact energy ``Σ (max(0, λ − k g)² − λ²) / (2k)`` (J).
+
+    Adds the gradient into ``node_grad (N, 3)`` and force magnitudes into ``node_scale``; writes
+    each pair's gap (m) and normal force ``max(0, λ − k g)`` (N).
+    """
+    local = np.empty(12)
+    energy = 0.0
+    for p in range(pairs.shape[0]):
+        ea = pairs[p, 0]
+        eb = pairs[p, 1]
+        a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
+        b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
+        e, gap, force = _contact_local_gradient(a0, a1, b0, b1, edge_radius[ea] + edge_radius[eb],
+                                                multiplier[p], stiffness[p], local)
+        energy += e
+        out_gap[p] = gap
+        out_force[p] = force
+        if force == 0.0:
+            continue
+        nodes = (edge_nodes[ea, 0], edge_nodes[ea, 1], edge_nodes[eb, 0], edge_nodes[eb, 1])
+        for m in range(4):
+            mag = 0.0
+            for k in range(3):
+                node_grad[nodes[m], k] += local[3 * m + k]
+                mag += local[3 * m + k] ** 2
+            node_scale[nodes[m]] += math.sqrt(mag)
+    return energy
+
+
+@njit(cache=True)
+def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, multiplier, stiffness,
+                        fd_relative_step, rows, cols, vals, start):
+    """Hessian of the contact terms as COO triplets (144 per active pair) from ``start``.
+
+    Central differences of the analytic pair gradient (step ``fd_relative_step`` times the sum of
+    radii), which include the motion of the closest points. Returns the new entry count.
+    """
+    local = np.empty((12, 12))
+    gp = np.empty(12)
+    gm = np.empty(12)
+    idx = start
+    for p in range(pairs.shape[0]):
+        ea = pairs[p, 0]
+        eb = pairs[p, 1]
+        a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
+        b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
+        rsum = edge_radius[ea] + edge_radius[eb]
+        h = fd_relative_step * rsum
+        _, gap, force = _contact_local_gradient(a0, a1, b0, b1, rsum, multiplier[p], stiffness[p], gp)
+        # Inactive beyond the reach of the finite-difference stencil: no curvature.
+        if multiplier[p] - stiffness[p] * (gap - 2.0 * h) <= 0.0:
+            continue
+        pts = np.empty((4, 3))
+        for k in range(3):
+            pts[0, k] = a0[k]
+            pts[1, k] = a1[k]
+            pts[2, k] = b0[k]
+            pts[3, k] = b1[k]
+        for col in range(12):
+            m = col // 3
+            k = col % 3
+            pts[m, k] += h
+            _contact_local_gradient(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), rsum, multiplier[p], stiffness[p], gp)
+            pts[m, k] -= 2.0 * h
+            _contact_local_gradient(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), rsum, multiplier[p], stiffness[p], gm)
+            pts[m, k] += h
+            for row in range(12):
+                local[row, col] = (gp[row] - gm[row]) / (2.0 * h)
+        nodes = (edge_nodes[ea, 0], edge_nodes[ea, 1], edge_nodes[eb, 0], edge_nodes[eb, 1])
+        for i in range(12):
+            for j in range(12):
+                rows[idx] = 3 * nodes[i // 3] + i % 3
+                cols[idx] = 3 * nodes[j // 3] + j % 3
+                vals[idx] = 0.5 * (local[i, j] + local[j, i])
+                idx += 1
+    return idx
+
+
+# ---------------------------------------------------------------------------------------------
+# XPBD contact projection with position-based friction (Müller et al. 2020, "Detailed rigid body
+# simulation with extended position based dynamics", §3.5)
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge_radius, pairs, lam_normal,
+                     lam_tangent, static_friction):
+    """One Gauss–Seidel sweep over the contact pairs (hard unilateral constraints).
+
+    ``lam_normal (P,)`` and ``lam_tangent (P,)`` accumulate the multipliers of the step (kg·m).
+    Static friction: when the tangential slip of the contact points since the start of the step
+    can be cancelled with a multiplier below ``static_friction · λn``, it is cancelled.
+    """
+    for p in range(pairs.shape[0]):
+        ea = pairs[p, 0]
+        eb = pairs[p, 1]
+        ia0 = edge_nodes[ea, 0]
+        ia1 = edge_nodes[ea, 1]
+        ib0 = edge_nodes[eb, 0]
+        ib1 = edge_nodes[eb, 1]
+        a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
+        b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
+        s, t, dist, n = segment_closest_points(a0, a1, b0, b1)
+        c = dist - (edge_radius[ea] + edge_radius[eb])
+        wa0 = node_inv_mass[ia0] * (1.0 - s)
+        wa1 = node_inv_mass[ia1] * s
+        wb0 = node_inv_mass[ib0] * (1.0 - t)
+        wb1 = node_inv_mass[ib1] * t
+        weight = wa0 * (1.0 - s) + wa1 * s + wb0 * (1.0 - t) + wb1 * t
+        if weight == 0.0:
+            continue
+        if c < 0.0:
+            dl = -c / weight
+            lam_normal[p] += dl
+            for k in range(3):
+                pos[ia0, k] += wa0 * n[k] * dl
+                pos[ia1, k] += wa1 * n[k] * dl
+                pos[ib0, k] -= wb0 * n[k] * dl
+                pos[ib1, k] -= wb1 * n[k] * dl
+        if lam_normal[p] <= 0.0 or static_friction <= 0.0:
+            continue
+        # Relative slip of the contact points since the step started, tangential part.
+        slip = np.empty(3)
+        for k in range(3):
+            da = (1.0 - s) * (pos[ia0, k] - prev_pos[ia0, k]) + s * (pos[ia1, k] - prev_pos[ia1, k])
+            db = (1.0 - t) * (pos[ib0, k] - prev_pos[ib0, k]) + t * (pos[ib1, k] - prev_pos[ib1, k])
+            slip[k] = da - db
+        sn = slip[0] * n[0] + slip[1] * n[1] + slip[2] * n[2]
+        for k in range(3):
+            slip[k] -= sn * n[k]
+        slip_norm = math.sqrt(slip[0] ** 2 + slip[1] ** 2 + slip[2] ** 2)
+        if slip_norm == 0.0:
+            continue
+        dlt = slip_norm / weight
+        if lam_tangent[p] + dlt < static_friction * lam_normal[p]:
+            lam_tangent[p] += dlt
+            f = dlt / slip_norm
+            for k in range(3):
+                pos[ia0, k] -= wa0 * slip[k] * f
+                pos[ia1, k] -= wa1 * slip[k] * f
+                pos[ib0, k] += wb0 * slip[k] * f
+                pos[ib1, k] += wb1 * slip[k] * f
+
+
+@njit(cache=True)
+def apply_kinetic_friction(pos, vel, node_inv_mass, edge_nodes, edge_offset, pairs, lam_normal, kinetic_friction, dt):
+    """Velocity pass: each touching pair loses up to ``μk |Jn|`` of tangential relative momentum,
+    with ``Jn = λn / Δt`` the normal impulse of the step."""
+    for p in range(pairs.shape[0]):
+        if lam_normal[p] <= 0.0:
+            continue
+        ea = pairs[p, 0]
+        eb = pairs[p, 1]
+        ia0 = edge_nodes[ea, 0]
+        ia1 = edge_nodes[ea, 1]
+        ib0 = edge_nodes[eb, 0]
+        ib1 = edge_nodes[eb, 1]
+        a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
+        b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
+        s, t, _, n = segment_closest_points(a0, a1, b0, b1)
+        wa0 = node_inv_mass[ia0] * (1.0 - s)
+        wa1 = node_inv_mass[ia1] * s
+        wb0 = node_inv_mass[ib0] * (1.0 - t)
+        wb1 = node_inv_mass[ib1] * t
+        weight = wa0 * (1.0 - s) + wa1 * s + wb0 * (1.0 - t) + wb1 * t
+        if weight == 0.0:
+            continue
+        vt = np.empty(3)
+        for k in range(3):
+            vt[k] = ((1.0 - s) * vel[ia0, k] + s * vel[ia1, k]) - ((1.0 - t) * vel[ib0, k] + t * vel[ib1, k])
+        vn = vt[0] * n[0] + vt[1] * n[1] + vt[2] * n[2]
+        for k in range(3):
+            vt[k] -= vn * n[k]
+        speed = math.sqrt(vt[0] ** 2 + vt[1] ** 2 + vt[2] ** 2)
+        if speed == 0.0:
+            continue
+        dv = min(weight * kinetic_friction * lam_normal[p] / dt, speed)
+        impulse = dv / (weight * speed)
+        for k in range(3):
+            vel[ia0, k] -= wa0 * vt[k] * impulse
+            vel[ia1, k] -= wa1 * vt[k] * impulse
+            vel[ib0, k] += wb0 * vt[k] * impulse
+            vel[ib1, k] += wb1 * vt[k] * impulse

@@ -1,0 +1,677 @@
+"""Numba kernels of the Cosserat rod model: element energies and gradients, Hessian assembly, XPBD
+projections and constraint colouring.
+
+Only ``@njit`` code lives here; orchestration is in ``energy.py``, ``xpbd.py`` and
+``quasistatic.py``. Every kernel works on the flat arrays of :class:`~yarnfit.engine.model.RodModel`
+and writes into output arrays passed by the caller.
+
+Formulas (``docs/design.md`` §4, paper Eq. yarn_energy):
+
+stretch–shear, per edge ``e = (p0, p1, q)`` with rest length ``l0``::
+
+    c = R(q)ᵀ (p1 + offset − p0) / l0 − e3                 (material frame)
+    U = l0 [ ½ GA (c1² + c2²) + ½ EA c3² + h |c3|³ / 6 ]     h = A k_tension if c3 > 0 else A k_compression
+
+The cubic term is the exact integral of the nonlinear axial force law ``N(ε) = EA ε + ½ h ε|ε|``,
+whose tangent modulus ``dN/dε / A = E + k |ε|`` grows linearly with strain (paper §4.1).
+
+bend–twist, per joint between edges ``a`` and ``b`` with mean rest length ``l̄``::
+
+    Ω = q̄a qb,   s = sign⟨Ω, Ω0⟩,   C = Im(Ω) − s Im(Ω0)
+    U = (2 / l̄) (EI1 C1² + EI2 C2² + GJ C3²)
+
+Gradients are taken with respect to node positions and to world-frame rotation vectors ``θ``
+acting as ``q ← exp(θ) ⊗ q`` (the "torque" ∂U/∂θ, N·m).
+"""
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ._quat import (
+    cross,
+    norm,
+    quat_conj,
+    quat_dot,
+    quat_mul,
+    quat_normalized,
+    quat_rotate,
+    quat_rotate_inv,
+    quat_rotate_world,
+    row3,
+    row4,
+)
+
+# ---------------------------------------------------------------------------------------------
+# Elements
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def axial_force(strain, stretch_stiffness, hardening):
+    """Axial force ``N(ε) = EA ε + ½ h ε|ε|`` (N) and its tangent ``dN/dε`` (N)."""
+    a = abs(strain)
+    return stretch_stiffness * strain + 0.5 * hardening * strain * a, stretch_stiffness + hardening * a
+
+
+@njit(cache=True)
+def stretch_shear_element(p0, p1, q, rest_length, shear_stiffness, stretch_stiffness, hard_c, hard_t):
+    """Energy and gradient of one stretch–shear element.
+
+    Args:
+        p0, p1: end points (m), ``p1`` already shifted by the edge offset.
+        q: edge frame (unit quaternion).
+        rest_length: l0 (m).
+        shear_stiffness: GA (N). stretch_stiffness: EA (N).
+        hard_c, hard_t: axial hardening ``A k`` in compression and tension (N).
+
+    Returns:
+        ``(U_stretch, U_shear, n, tau)``: energies (J), ``n = ∂U/∂p1 = −∂U/∂p0`` (N, world) and
+        ``tau = ∂U/∂θ`` (N·m, world).
+    """
+    ex = p1[0] - p0[0]
+    ey = p1[1] - p0[1]
+    ez = p1[2] - p0[2]
+    inv_l0 = 1.0 / rest_length
+    cm = quat_rotate_inv(q, (ex * inv_l0, ey * inv_l0, ez * inv_l0))
+    c1 = cm[0]
+    c2 = cm[1]
+    c3 = cm[2] - 1.0
+    hard = hard_t if c3 > 0.0 else hard_c
+    n3, _ = axial_force(c3, stretch_stiffness, hard)
+    u_shear = 0.5 * rest_length * shear_stiffness * (c1 * c1 + c2 * c2)
+    a3 = abs(c3)
+    u_stretch = rest_length * (0.5 * stretch_stiffness * c3 * c3 + hard * a3 * a3 * a3 / 6.0)
+    n = quat_rotate(q, (shear_stiffness * c1, shear_stiffness * c2, n3))
+    tau = cross(n, (ex, ey, ez))
+    return u_stretch, u_shear, n, tau
+
+
+@njit(cache=True)
+def bend_twist_element(qa, qb, rest_darboux, mean_rest_length, bend1, bend2, twist):
+    """Energy and gradient of one bend–twist element.
+
+    Args:
+        qa, qb: frames of the two edges (unit quaternions).
+        rest_darboux: ``Ω0 = q̄a qb`` in the rest state.
+        mean_rest_length: l̄ (m). bend1, bend2: EI1, EI2 (N·m²). twist: GJ (N·m²).
+
+    Returns:
+        ``(U_bend, U_twist, tau_b)`` with ``tau_b = ∂U/∂θb = −∂U/∂θa`` (N·m, world).
+    """
+    om = quat_mul(quat_conj(qa), qb)
+    s = 1.0 if quat_dot(om, rest_darboux) >= 0.0 else -1.0
+    k1 = om[1] - s * rest_darboux[1]
+    k2 = om[2] - s * rest_darboux[2]
+    k3 = om[3] - s * rest_darboux[3]
+    f = 2.0 / mean_rest_length
+    u_bend = f * (bend1 * k1 * k1 + bend2 * k2 * k2)
+    u_twist = f * twist * k3 * k3
+    # m = ∂U/∂C; ∂C/∂θb = ½ (w I − [u]×) R(qa)ᵀ with Ω = (w, u)  =>  tau_b = ½ R(qa) (w m + u × m)
+    m = (2.0 * f * bend1 * k1, 2.0 * f * bend2 * k2, 2.0 * f * twist * k3)
+    u = (om[1], om[2], om[3])
+    um = cross(u, m)
+    w = om[0]
+    tau_b = quat_rotate(qa, (0.5 * (w * m[0] + um[0]), 0.5 * (w * m[1] + um[1]), 0.5 * (w * m[2] + um[2])))
+    return u_bend, u_twist, tau_b
+
+
+@njit(cache=True)
+def _edge_end(pos, edge_nodes, edge_offset, e):
+    i1 = edge_nodes[e, 1]
+    return (pos[i1, 0] + edge_offset[e, 0], pos[i1, 1] + edge_offset[e, 1], pos[i1, 2] + edge_offset[e, 2])
+
+
+# ---------------------------------------------------------------------------------------------
+# Whole-model energy and gradient
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def rod_energy_gradient(
+    pos,
+    quat,
+    edge_nodes,
+    edge_offset,
+    edge_rest_length,
+    edge_shear_stiffness,
+    edge_stretch_stiffness,
+    edge_hardening,
+    joint_edges,
+    joint_rest_darboux,
+    joint_rest_length,
+    joint_stiffness,
+    node_grad,
+    edge_grad,
+    node_scale,
+    edge_scale,
+):
+    """Internal rod energy, its gradient, and the magnitude sums used as residual scales.
+
+    Adds into ``node_grad (N, 3)`` (N), ``edge_grad (E, 3)`` (N·m), ``node_scale (N,)`` and
+    ``edge_scale (E,)`` (sum of the magnitudes of every contribution, the scale a residual is
+    measured against). Returns ``(U_stretch, U_shear, U_bend, U_twist)`` in J.
+    """
+    u_stretch = 0.0
+    u_shear = 0.0
+    u_bend = 0.0
+    u_twist = 0.0
+    for e in range(edge_nodes.shape[0]):
+        i0 = edge_nodes[e, 0]
+        i1 = edge_nodes[e, 1]
+        us, uh, n, tau = stretch_shear_element(
+            row3(pos, i0),
+            _edge_end(pos, edge_nodes, edge_offset, e),
+            row4(quat, e),
+            edge_rest_length[e],
+            edge_shear_stiffness[e],
+            edge_stretch_stiffness[e],
+            edge_hardening[e, 0],
+            edge_hardening[e, 1],
+        )
+        u_stretch += us
+        u_shear += uh
+        nn = norm(n)
+        for k in range(3):
+            node_grad[i0, k] -= n[k]
+            node_grad[i1, k] += n[k]
+            edge_grad[e, k] += tau[k]
+        node_scale[i0] += nn
+        node_scale[i1] += nn
+        edge_scale[e] += norm(tau)
+    for j in range(joint_edges.shape[0]):
+        a = joint_edges[j, 0]
+        b = joint_edges[j, 1]
+        ub, ut, tau_b = bend_twist_element(
+            row4(quat, a),
+            row4(quat, b),
+            row4(joint_rest_darboux, j),
+            joint_rest_length[j],
+            joint_stiffness[j, 0],
+            joint_stiffness[j, 1],
+            joint_stiffness[j, 2],
+        )
+        u_bend += ub
+        u_twist += ut
+        tn = norm(tau_b)
+        for k in range(3):
+            edge_grad[a, k] -= tau_b[k]
+            edge_grad[b, k] += tau_b[k]
+        edge_scale[a] += tn
+        edge_scale[b] += tn
+    return u_stretch, u_shear, u_bend, u_twist
+
+
+# ---------------------------------------------------------------------------------------------
+# Hessian by central differences of the analytic element gradients
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def stretch_shear_hessian(p0, p1, q, rest_length, shear_stiffness, stretch_stiffness, hard_c, hard_t, stress, out):
+    """Hessian ``(9, 9)`` of a stretch–shear element over (p0, p1, θ), written into ``out``.
+
+    ``H = (1/l0) Bᵀ D B + H_geo(n)`` with ``B = [−Rᵀ, Rᵀ, Rᵀ[e]×]`` (so ``∂c/∂(p0, p1, θ) = B / l0``),
+    ``D = diag(GA, GA, dN/dε)`` and the geometric part of the stress resultant ``n = R σ``:
+    ``H[p0, θ] = [n]×``, ``H[p1, θ] = −[n]×``, ``H[θ, θ] = sym([e]×[n]×)`` (the symmetric part is the
+    Hessian in the exponential chart). ``stress`` is σ in the material frame (N), the element's own
+    ``(GA c1, GA c2, N(c3))`` (see :func:`element_stress`) for the exact Hessian.
+    """
+    w, x, y, z = q
+    # R(q) columns d1, d2, d3
+    r00 = 1.0 - 2.0 * (y * y + z * z)
+    r01 = 2.0 * (x * y - w * z)
+    r02 = 2.0 * (x * z + w * y)
+    r10 = 2.0 * (x * y + w * z)
+    r11 = 1.0 - 2.0 * (x * x + z * z)
+    r12 = 2.0 * (y * z - w * x)
+    r20 = 2.0 * (x * z - w * y)
+    r21 = 2.0 * (y * z + w * x)
+    r22 = 1.0 - 2.0 * (x * x + y * y)
+    ex = p1[0] - p0[0]
+    ey = p1[1] - p0[1]
+    ez = p1[2] - p0[2]
+    c3 = (r02 * ex + r12 * ey + r22 * ez) / rest_length - 1.0
+    hard = hard_t if c3 > 0.0 else hard_c
+    _, tangent = axial_force(c3, stretch_stiffness, hard)
+    # Row k of B: (−d_k, d_k, d_k × e), the directors d_k being the rows of Rᵀ.
+    d = ((r00, r10, r20), (r01, r11, r21), (r02, r12, r22))
+    stiff = (shear_stiffness, shear_stiffness, tangent)
+    inv_l0 = 1.0 / rest_length
+    for i in range(9):
+        for j in range(9):
+            out[i, j] = 0.0
+    for kk in range(3):
+        dk = d[kk]
+        # d_kᵀ [e]× θ = d_k · (e × θ) = (d_k × e) · θ
+        ce = cross(dk, (ex, ey, ez))
+        row = (-dk[0], -dk[1], -dk[2], dk[0], dk[1], dk[2], ce[0], ce[1], ce[2])
+        f = stiff[kk] * inv_l0
+        for i in range(9):
+            ri = row[i] * f
+            for j in range(9):
+                out[i, j] += ri * row[j]
+    n = quat_rotate(q, (stress[0], stress[1], stress[2]))
+    # [n]× entries
+    nx = ((0.0, -n[2], n[1]), (n[2], 0.0, -n[0]), (-n[1], n[0], 0.0))
+    ex3 = ((0.0, -ez, ey), (ez, 0.0, -ex), (-ey, ex, 0.0))
+    for i in range(3):
+        for j in range(3):
+            out[i, 6 + j] += nx[i][j]
+            out[6 + j, i] += nx[i][j]
+            out[3 + i, 6 + j] -= nx[i][j]
+            out[6 + j, 3 + i] -= nx[i][j]
+            en = 0.0
+            ne = 0.0
+            for m in range(3):
+                en += ex3[i][m] * nx[m][j]
+                ne += nx[i][m] * ex3[m][j]
+            out[6 + i, 6 + j] += 0.5 * (en + ne)
+
+
+@njit(cache=True)
+def element_stress(p0, p1, q, rest_length, shear_stiffness, stretch_stiffness, hard_c, hard_t):
+    """Material-frame strain ``c`` and stress ``σ = (GA c1, GA c2, N(c3))`` of a stretch–shear
+    element, and the axial tangent ``dN/dε`` (N)."""
+    cm = quat_rotate_inv(q, ((p1[0] - p0[0]) / rest_length, (p1[1] - p0[1]) / rest_length, (p1[2] - p0[2]) / rest_length))
+    c3 = cm[2] - 1.0
+    hard = hard_t if c3 > 0.0 else hard_c
+    n3, tangent = axial_force(c3, stretch_stiffness, hard)
+    return (cm[0], cm[1], c3), (shear_stiffness * cm[0], shear_stiffness * cm[1], n3), tangent
+
+
+@njit(cache=True)
+def _bend_local_gradient(qa, qb, theta_a, theta_b, rest, lbar, b1, b2, t, out):
+    _, _, tau_b = bend_twist_element(
+        quat_rotate_world(theta_a, qa), quat_rotate_world(theta_b, qb), rest, lbar, b1, b2, t
+    )
+    for k in range(3):
+        out[k] = -tau_b[k]
+        out[3 + k] = tau_b[k]
+
+
+@njit(cache=True)
+def _axis(component, length):
+    """``length`` times the unit vector of axis ``component``."""
+    return (length if component == 0 else 0.0, length if component == 1 else 0.0, length if component == 2 else 0.0)
+
+
+@njit(cache=True)
+def _shift(a, d, sign):
+    return (a[0] + sign * d[0], a[1] + sign * d[1], a[2] + sign * d[2])
+
+
+@njit(cache=True)
+def _write_local(local, dofs, base, rows, cols, vals):
+    """Symmetrise a local Hessian and append it to COO arrays at ``base``."""
+    n = dofs.shape[0]
+    idx = base
+    for i in range(n):
+        for j in range(n):
+            rows[idx] = dofs[i]
+            cols[idx] = dofs[j]
+            vals[idx] = 0.5 * (local[i, j] + local[j, i])
+            idx += 1
+    return idx
+
+
+@njit(cache=True)
+def rod_hessian_coo(
+    pos,
+    quat,
+    edge_nodes,
+    edge_offset,
+    edge_rest_length,
+    edge_shear_stiffness,
+    edge_stretch_stiffness,
+    edge_hardening,
+    joint_edges,
+    joint_rest_darboux,
+    joint_rest_length,
+    joint_stiffness,
+    fd_relative_step,
+    rows,
+    cols,
+    vals,
+):
+    """Hessian of the internal rod energy as COO triplets (duplicates summed by the caller).
+
+    Degrees of freedom: node ``i`` owns ``3i..3i+2`` (m), edge ``e`` owns ``3N+3e..3N+3e+2``
+    (world rotation vector, rad). Stretch–shear elements are analytic
+    (:func:`stretch_shear_hessian`). Bend–twist
+    elements are central differences of their analytic gradient (rotations stepped by
+    ``fd_relative_step`` rad), symmetrised: the symmetric part of the derivative of the world torque
+    is the Hessian in the exponential chart, so only the O(step²) truncation error remains.
+    Needs ``81 E + 36 J`` entries; returns the number written.
+    """
+    n_nodes = pos.shape[0]
+    local9 = np.empty((9, 9))
+    local6 = np.empty((6, 6))
+    gp = np.empty(6)
+    gm = np.empty(6)
+    dofs9 = np.empty(9, dtype=np.int64)
+    dofs6 = np.empty(6, dtype=np.int64)
+    zero = (0.0, 0.0, 0.0)
+    idx = 0
+    for e in range(edge_nodes.shape[0]):
+        i0 = edge_nodes[e, 0]
+        i1 = edge_nodes[e, 1]
+        for k in range(3):
+            dofs9[k] = 3 * i0 + k
+            dofs9[3 + k] = 3 * i1 + k
+            dofs9[6 + k] = 3 * n_nodes + 3 * e + k
+        p0 = row3(pos, i0)
+        p1 = _edge_end(pos, edge_nodes, edge_offset, e)
+        q = row4(quat, e)
+        args = (edge_rest_length[e], edge_shear_stiffness[e], edge_stretch_stiffness[e], edge_hardening[e, 0],
+                edge_hardening[e, 1])
+        _, stress, _ = element_stress(p0, p1, q, *args)
+        stretch_shear_hessian(p0, p1, q, *args, stress, local9)
+        idx = _write_local(local9, dofs9, idx, rows, cols, vals)
+    for j in range(joint_edges.shape[0]):
+        a = joint_edges[j, 0]
+        b = joint_edges[j, 1]
+        qa = row4(quat, a)
+        qb = row4(quat, b)
+        rest = row4(joint_rest_darboux, j)
+        lbar = joint_rest_length[j]
+        b1 = joint_stiffness[j, 0]
+        b2 = joint_stiffness[j, 1]
+        t = joint_stiffness[j, 2]
+        for k in range(3):
+            dofs6[k] = 3 * n_nodes + 3 * a + k
+            dofs6[3 + k] = 3 * n_nodes + 3 * b + k
+        hr = fd_relative_step
+        for col in range(6):
+            dp = _axis(col % 3, hr)
+            dm = _shift(zero, dp, -1.0)
+            if col < 3:
+                _bend_local_gradient(qa, qb, dp, zero, rest, lbar, b1, b2, t, gp)
+                _bend_local_gradient(qa, qb, dm, zero, rest, lbar, b1, b2, t, gm)
+            else:
+                _bend_local_gradient(qa, qb, zero, dp, rest, lbar, b1, b2, t, gp)
+                _bend_local_gradient(qa, qb, zero, dm, rest, lbar, b1, b2, t, gm)
+            for row in range(6):
+                local6[row, col] = (gp[row] - gm[row]) * (0.5 / hr)
+        idx = _write_local(local6, dofs6, idx, rows, cols, vals)
+    return idx
+
+
+# ---------------------------------------------------------------------------------------------
+# XPBD projections (Kugelstadt & Schömer 2016 with compliance, docs/design.md §4)
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def project_stretch_shear_one(
+    e,
+    pos,
+    quat,
+    node_inv_mass,
+    edge_inv_qmass,
+    edge_nodes,
+    edge_offset,
+    edge_rest_length,
+    edge_shear_stiffness,
+    edge_stretch_stiffness,
+    edge_hardening,
+    lam,
+    inv_dt2,
+):
+    """One XPBD projection of the stretch–shear constraint of edge ``e``.
+
+    ``lam (E, 3)`` holds the accumulated multipliers of the step (material frame, scaled by Δt²).
+    The axial component uses the tangent compliance of the nonlinear force law: the residual
+    ``Δt² ∂U/∂c3 + λ = 0`` is driven to zero by Newton steps, which reduces to the linear XPBD
+    update ``−(c + α̃λ)/(W + α̃)`` when the hardening is zero.
+    """
+    i0 = edge_nodes[e, 0]
+    i1 = edge_nodes[e, 1]
+    w0 = node_inv_mass[i0]
+    w1 = node_inv_mass[i1]
+    wq = edge_inv_qmass[e]
+    l0 = edge_rest_length[e]
+    weight = (w0 + w1) / (l0 * l0) + 4.0 * wq
+    if weight == 0.0:
+        return
+    q = row4(quat, e)
+    inv_l0 = 1.0 / l0
+    ev = (
+        (pos[i1, 0] + edge_offset[e, 0] - pos[i0, 0]) * inv_l0,
+        (pos[i1, 1] + edge_offset[e, 1] - pos[i0, 1]) * inv_l0,
+        (pos[i1, 2] + edge_offset[e, 2] - pos[i0, 2]) * inv_l0,
+    )
+    c = quat_rotate_inv(q, ev)
+    # Shear (linear): alpha = 1 / (l0 GA).
+    alpha_shear = inv_dt2 / (l0 * edge_shear_stiffness[e])
+    d0 = -(c[0] + alpha_shear * lam[e, 0]) / (weight + alpha_shear)
+    d1 = -(c[1] + alpha_shear * lam[e, 1]) / (weight + alpha_shear)
+    # Stretch (nonlinear): effective constraint ψ'/ψ'' and tangent compliance 1 / ψ''.
+    c3 = c[2] - 1.0
+    hard = edge_hardening[e, 1] if c3 > 0.0 else edge_hardening[e, 0]
+    force, tangent = axial_force(c3, edge_stretch_stiffness[e], hard)
+    alpha_stretch = inv_dt2 / (l0 * tangent)
+    d2 = -(force / tangent + alpha_stretch * lam[e, 2]) / (weight + alpha_stretch)
+    lam[e, 0] += d0
+    lam[e, 1] += d1
+    lam[e, 2] += d2
+    g = quat_rotate(q, (d0, d1, d2))
+    f0 = w0 * inv_l0
+    f1 = w1 * inv_l0
+    for k in range(3):
+        pos[i0, k] -= f0 * g[k]
+        pos[i1, k] += f1 * g[k]
+    if wq > 0.0:
+        # Δq = −2 wq (0, g) ⊗ q ⊗ ē3
+        t = quat_mul(quat_mul((0.0, g[0], g[1], g[2]), q), (0.0, 0.0, 0.0, -1.0))
+        qn = quat_normalized((q[0] - 2.0 * wq * t[0], q[1] - 2.0 * wq * t[1], q[2] - 2.0 * wq * t[2], q[3] - 2.0 * wq * t[3]))
+        for k in range(4):
+            quat[e, k] = qn[k]
+
+
+@njit(cache=True)
+def project_bend_twist_one(
+    j, quat, edge_inv_qmass, joint_edges, joint_rest_darboux, joint_rest_length, joint_stiffness, lam, inv_dt2
+):
+    """One XPBD projection of the bend–twist constraint of joint ``j`` (``lam (J, 3)``)."""
+    a = joint_edges[j, 0]
+    b = joint_edges[j, 1]
+    wa = edge_inv_qmass[a]
+    wb = edge_inv_qmass[b]
+    weight = wa + wb
+    if weight == 0.0:
+        return
+    qa = row4(quat, a)
+    qb = row4(quat, b)
+    rest = row4(joint_rest_darboux, j)
+    om = quat_mul(quat_conj(qa), qb)
+    s = 1.0 if quat_dot(om, rest) >= 0.0 else -1.0
+    scale_a = joint_rest_length[j] * 0.25 * inv_dt2
+    alpha1 = scale_a / joint_stiffness[j, 0]
+    alpha2 = scale_a / joint_stiffness[j, 1]
+    alpha3 = scale_a / joint_stiffness[j, 2]
+    d1 = -((om[1] - s * rest[1]) + alpha1 * lam[j, 0]) / (weight + alpha1)
+    d2 = -((om[2] - s * rest[2]) + alpha2 * lam[j, 1]) / (weight + alpha2)
+    d3 = -((om[3] - s * rest[3]) + alpha3 * lam[j, 2]) / (weight + alpha3)
+    lam[j, 0] += d1
+    lam[j, 1] += d2
+    lam[j, 2] += d3
+    d = (0.0, d1, d2, d3)
+    if wa > 0.0:
+        ta = quat_mul(qb, d)
+        na = quat_normalized((qa[0] - wa * ta[0], qa[1] - wa * ta[1], qa[2] - wa * ta[2], qa[3] - wa * ta[3]))
+        for k in range(4):
+            quat[a, k] = na[k]
+    if wb > 0.0:
+        tb = quat_mul(qa, d)
+        nb = quat_normalized((qb[0] + wb * tb[0], qb[1] + wb * tb[1], qb[2] + wb * tb[2], qb[3] + wb * tb[3]))
+        for k in range(4):
+            quat[b, k] = nb[k]
+
+
+@njit(cache=True)
+def project_rods_serial(
+    pos,
+    quat,
+    node_inv_mass,
+    edge_inv_qmass,
+    edge_nodes,
+    edge_offset,
+    edge_rest_length,
+    edge_shear_stiffness,
+    edge_stretch_stiffness,
+    edge_hardening,
+    joint_edges,
+    joint_rest_darboux,
+    joint_rest_length,
+    joint_stiffness,
+    lam_edge,
+    lam_joint,
+    inv_dt2,
+):
+    """One Gauss–Seidel sweep over every stretch–shear and bend–twist constraint, in order."""
+    for e in range(edge_nodes.shape[0]):
+        project_stretch_shear_one(
+            e, pos, quat, node_inv_mass, edge_inv_qmass, edge_nodes, edge_offset, edge_rest_length,
+            edge_shear_stiffness, edge_stretch_stiffness, edge_hardening, lam_edge, inv_dt2,
+        )
+    for j in range(joint_edges.shape[0]):
+        project_bend_twist_one(
+            j, quat, edge_inv_qmass, joint_edges, joint_rest_darboux, joint_rest_length, joint_stiffness,
+            lam_joint, inv_dt2,
+        )
+
+
+@njit(cache=True, parallel=True)
+def project_rods_colored(
+    pos,
+    quat,
+    node_inv_mass,
+    edge_inv_qmass,
+    edge_nodes,
+    edge_offset,
+    edge_rest_length,
+    edge_shear_stiffness,
+    edge_stretch_stiffness,
+    edge_hardening,
+    joint_edges,
+    joint_rest_darboux,
+    joint_rest_length,
+    joint_stiffness,
+    lam_edge,
+    lam_joint,
+    inv_dt2,
+    edge_order,
+    edge_color_start,
+    joint_order,
+    joint_color_start,
+):
+    """One sweep with constraints of a colour projected in parallel.
+
+    Constraints of one colour share no node and no edge frame (see :func:`greedy_coloring`), so a
+    colour is a set of independent projections; colours run one after another (Gauss–Seidel
+    between colours, Jacobi-free within).
+    """
+    for c in range(edge_color_start.shape[0] - 1):
+        start = edge_color_start[c]
+        for k in prange(edge_color_start[c + 1] - start):
+            project_stretch_shear_one(
+                edge_order[start + k], pos, quat, node_inv_mass, edge_inv_qmass, edge_nodes, edge_offset,
+                edge_rest_length, edge_shear_stiffness, edge_stretch_stiffness, edge_hardening, lam_edge, inv_dt2,
+            )
+    for c in range(joint_color_start.shape[0] - 1):
+        start = joint_color_start[c]
+        for k in prange(joint_color_start[c + 1] - start):
+            project_bend_twist_one(
+                joint_order[start + k], quat, edge_inv_qmass, joint_edges, joint_rest_darboux, joint_rest_length,
+                joint_stiffness, lam_joint, inv_dt2,
+            )
+
+
+@njit(cache=True)
+def greedy_coloring(resources, n_resources):
+    """Colour constraints so that no two of one colour share a resource.
+
+    ``resources (C, k)`` lists the resources (node or frame ids, ``-1`` for none) each constraint
+    writes. Returns ``colors (C,)``. Greedy first-fit over at most 64 colours, tracked as a bit
+    mask per resource.
+    """
+    n = resources.shape[0]
+    colors = np.empty(n, dtype=np.int64)
+    used = np.zeros(n_resources, dtype=np.uint64)
+    for c in range(n):
+        forbidden = np.uint64(0)
+        for k in range(resources.shape[1]):
+            r = resources[c, k]
+            if r >= 0:
+                forbidden |= used[r]
+        color = 0
+        while (forbidden >> np.uint64(color)) & np.uint64(1):
+            color += 1
+        if color >= 64:
+            raise ValueError("constraint colouring needs more than 64 colours")
+        colors[c] = color
+        bit = np.uint64(1) << np.uint64(color)
+        for k in range(resources.shape[1]):
+            r = resources[c, k]
+            if r >= 0:
+                used[r] |= bit
+    return colors
+
+
+# ---------------------------------------------------------------------------------------------
+# Time integration helpers (XPBD prediction and velocity update)
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def predict(pos, quat, vel, omega, node_inv_mass, edge_inv_inertia, node_accel, edge_torque, dt, prev_pos, prev_quat):
+    """Symplectic Euler prediction of positions and frames; stores the step's start state."""
+    for i in range(pos.shape[0]):
+        for k in range(3):
+            prev_pos[i, k] = pos[i, k]
+        if node_inv_mass[i] > 0.0:
+            for k in range(3):
+                vel[i, k] += dt * node_accel[i, k]
+                pos[i, k] += dt * vel[i, k]
+    for e in range(quat.shape[0]):
+        for k in range(4):
+            prev_quat[e, k] = quat[e, k]
+        if edge_inv_inertia[e] > 0.0:
+            for k in range(3):
+                omega[e, k] += dt * edge_inv_inertia[e] * edge_torque[e, k]
+            theta = (dt * omega[e, 0], dt * omega[e, 1], dt * omega[e, 2])
+            qn = quat_rotate_world(theta, row4(quat, e))
+            for k in range(4):
+                quat[e, k] = qn[k]
+
+
+@njit(cache=True)
+def update_velocities(pos, quat, vel, omega, node_inv_mass, edge_inv_inertia, prev_pos, prev_quat, dt, damping):
+    """Velocities from the position change of the step, then linear damping ``exp(−damping dt)``."""
+    decay = math.exp(-damping * dt)
+    inv_dt = 1.0 / dt
+    for i in range(pos.shape[0]):
+        for k in range(3):
+            vel[i, k] = (pos[i, k] - prev_pos[i, k]) * inv_dt * decay if node_inv_mass[i] > 0.0 else 0.0
+    for e in range(quat.shape[0]):
+        if edge_inv_inertia[e] > 0.0:
+            dq = quat_mul(row4(quat, e), quat_conj(row4(prev_quat, e)))
+            sgn = 1.0 if dq[0] >= 0.0 else -1.0
+            # ω ≈ 2 Im(q q̄_prev) / dt (shortest arc)
+            for k in range(3):
+                omega[e, k] = 2.0 * sgn * dq[k + 1] * inv_dt * decay
+        else:
+            for k in range(3):
+                omega[e, k] = 0.0
+
+
+@njit(cache=True)
+def rotate_frames(quat, theta, out):
+    """``out[e] = exp(theta[e]) ⊗ quat[e]`` for frames ``(E, 4)`` and rotation vectors ``(E, 3)``."""
+    for e in range(quat.shape[0]):
+        qn = quat_rotate_world(row3(theta, e), row4(quat, e))
+        for k in range(4):
+            out[e, k] = qn[k]
+
