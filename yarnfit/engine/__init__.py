@@ -12,7 +12,7 @@ Typical use::
 """
 
 from .energy import EnergyTerms, energy, energy_gradient
-from .model import Rod, RodMaterial, RodModel, parallel_transport_frames
+from .model import Rod, RodMaterial, RodModel, parallel_transport_frames, straight_points
 from .quasistatic import ConvergenceWarning, QuasiStaticOptions, QuasiStaticResult, QuasiStaticSolver, Residual
 from .state import Loads, RodState
 from .xpbd import XPBDOptions, XPBDSolver
@@ -34,4 +34,5 @@ __all__ = [
     "energy",
     "energy_gradient",
     "parallel_transport_frames",
+    "straight_points",
 ]

@@ -265,11 +265,18 @@ def tunneling_step_limit(pos, dx, edge_nodes, edge_offset, pairs, fraction):
 
 
 @njit(cache=True)
-def _contact_local_gradient(a0, a1, b0, b1, radius_sum, multiplier, stiffness, out):
-    """Gradient (12,) of the augmented-Lagrangian term of one pair; returns (energy, gap, force)."""
+def _contact_local_gradient(a0, a1, b0, b1, radius_sum, multiplier, stiffness, active, out):
+    """Gradient (12,) of the augmented-Lagrangian term of one pair; returns (energy, gap, force).
+
+    A pair in the active set uses the smooth term ``((λ − k g)² − λ²) / 2k`` (its force
+    ``λ − k g`` may turn tensile while Newton iterates; the active-set update then releases it);
+    any other pair the one-sided ``(max(0, λ − k g)² − λ²) / 2k``.
+    """
     s, t, dist, n = segment_closest_points(a0, a1, b0, b1)
     gap = dist - radius_sum
-    force = max(0.0, multiplier - stiffness * gap)
+    force = multiplier - stiffness * gap
+    if not active and force < 0.0:
+        force = 0.0
     energy = (force * force - multiplier * multiplier) / (2.0 * stiffness)
     # ∂ψ/∂x = −force ∂g/∂x, ∂g/∂(a0, a1, b0, b1) = ((1 − s) n, s n, −(1 − t) n, −t n)
     for k in range(3):
@@ -281,12 +288,13 @@ def _contact_local_gradient(a0, a1, b0, b1, radius_sum, multiplier, stiffness, o
 
 
 @njit(cache=True)
-def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, multiplier, stiffness,
+def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, multiplier, stiffness, active,
                             node_grad, node_scale, out_gap, out_force):
-    """Augmented-Lagrangian contact energy ``Σ (max(0, λ − k g)² − λ²) / (2k)`` (J).
+    """Augmented-Lagrangian contact energy ``Σ (f² − λ²) / (2k)`` (J) with the pair forces
+    ``f = λ − k g`` for pairs in the active set ``active (P,)`` and ``max(0, λ − k g)`` otherwise.
 
     Adds the gradient into ``node_grad (N, 3)`` and force magnitudes into ``node_scale``; writes
-    each pair's gap (m) and normal force ``max(0, λ − k g)`` (N).
+    each pair's gap (m) and normal force (N).
     """
     local = np.empty(12)
     energy = 0.0
@@ -296,7 +304,7 @@ def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, mu
         a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
         b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
         e, gap, force = _contact_local_gradient(a0, a1, b0, b1, edge_radius[ea] + edge_radius[eb],
-                                                multiplier[p], stiffness[p], local)
+                                                multiplier[p], stiffness[p], active[p], local)
         energy += e
         out_gap[p] = gap
         out_force[p] = force
@@ -313,7 +321,7 @@ def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, mu
 
 
 @njit(cache=True)
-def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, multiplier, stiffness,
+def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, multiplier, stiffness, active,
                         fd_relative_step, rows, cols, vals, start):
     """Hessian of the contact terms as COO triplets (144 per active pair) from ``start``.
 
@@ -331,9 +339,9 @@ def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, multip
         b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
         rsum = edge_radius[ea] + edge_radius[eb]
         h = fd_relative_step * rsum
-        _, gap, force = _contact_local_gradient(a0, a1, b0, b1, rsum, multiplier[p], stiffness[p], gp)
-        # Inactive beyond the reach of the finite-difference stencil: no curvature.
-        if multiplier[p] - stiffness[p] * (gap - 2.0 * h) <= 0.0:
+        _, gap, force = _contact_local_gradient(a0, a1, b0, b1, rsum, multiplier[p], stiffness[p], active[p], gp)
+        # Separated beyond the reach of the finite-difference stencil: no curvature.
+        if not active[p] and multiplier[p] - stiffness[p] * (gap - 2.0 * h) <= 0.0:
             continue
         pts = np.empty((4, 3))
         for k in range(3):
@@ -345,9 +353,11 @@ def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, multip
             m = col // 3
             k = col % 3
             pts[m, k] += h
-            _contact_local_gradient(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), rsum, multiplier[p], stiffness[p], gp)
+            _contact_local_gradient(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), rsum, multiplier[p],
+                                    stiffness[p], active[p], gp)
             pts[m, k] -= 2.0 * h
-            _contact_local_gradient(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), rsum, multiplier[p], stiffness[p], gm)
+            _contact_local_gradient(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), rsum, multiplier[p],
+                                    stiffness[p], active[p], gm)
             pts[m, k] += h
             for row in range(12):
                 local[row, col] = (gp[row] - gm[row]) / (2.0 * h)

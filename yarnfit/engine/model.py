@@ -107,6 +107,13 @@ class Rod:
     name: str = ""
 
 
+def straight_points(length: float, n_edges: int, start=(0.0, 0.0, 0.0), direction=(1.0, 0.0, 0.0)) -> np.ndarray:
+    """``n_edges + 1`` equally spaced points ``(n, 3)`` on a segment of ``length`` (m)."""
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    return np.asarray(start, dtype=np.float64) + np.linspace(0.0, length, n_edges + 1)[:, None] * d
+
+
 def parallel_transport_frames(points: np.ndarray, closed: bool = False) -> np.ndarray:
     """Edge frames ``(E, 4)`` with ``d3`` along each edge, transported without twist.
 

@@ -11,21 +11,27 @@ solver here is a damped Newton method on the exact energy of :mod:`yarnfit.engin
 - Hessian: analytic for stretch–shear elements, central differences of the analytic gradient for
   bend–twist and contact elements; assembled sparse and factorised with SuperLU;
   Levenberg–Marquardt damping ``μ diag(H)`` keeps every step a descent direction where the
-  Hessian is indefinite;
+  Hessian is indefinite or singular (a rod held only by points can spin its frames freely);
 - backtracking (Armijo) line search on the total potential, then a few chord steps with the same
   factorisation; a step never brings two segments closer than a tenth of their distance, so yarns
   cannot pass through each other;
+- contact: the unilateral constraint ``g ≥ 0`` by an augmented Lagrangian with a primal active
+  set. A pair joins the set when it penetrates; inside the set its term
+  ``((λ − k g)² − λ²) / 2k`` is smooth, so Newton converges quadratically (the one-sided
+  ``max(0, λ − k g)²`` has a kink within ~1e-10 m of every resting contact, which Newton's last
+  corrections keep crossing). When the iterate is nearly balanced, multipliers take the contact
+  forces (``λ ← λ − k g``), which drives the penetration to zero, and pairs whose force turned
+  tensile leave the set. Friction does no work in a minimisation; the frictionless minimiser is an
+  equilibrium of the frictional problem too (zero tangential force is inside every Coulomb cone),
+  and it is the reproducible one. Frictional paths are for the dynamic
+  :class:`~yarnfit.engine.xpbd.XPBDSolver`;
 - slender rods converge more slowly (Newton's quadratic model misses the quartic stretch energy
   of a rotating edge: L/r = 100 takes ~20 iterations for a large-deflection cantilever, L/r = 1000
-  ~100); ``load_steps`` splits strongly nonlinear loads;
-- contact: the unilateral constraint ``g ≥ 0`` by an augmented Lagrangian (multiplier updates
-  drive the penetration below ``penetration_tolerance``). Friction does no work in a minimisation;
-  the frictionless minimiser is an equilibrium of the frictional problem too (zero tangential force
-  is inside every Coulomb cone), and it is the reproducible one. Frictional paths are for the
-  dynamic :class:`~yarnfit.engine.xpbd.XPBDSolver`.
+  ~100); ``load_steps`` splits strongly nonlinear loads.
 
 Convergence is declared only when the force and torque imbalances (relative to the load scale),
-the relative energy change of the last step and the contact penetration are all below tolerance.
+the relative energy change of the last step, the contact penetration and any tensile contact
+force are all below tolerance.
 """
 
 from __future__ import annotations
@@ -44,7 +50,6 @@ from .energy import EnergyTerms, internal_forces
 from .model import CONTACT_EXCLUSION_FACTOR, RodModel
 from .state import Loads, RodState
 
-
 # Sufficient-decrease constant of the Armijo line search (the usual 1e-4 of Nocedal & Wright).
 ARMIJO_SLOPE = 1e-4
 # Chord (lagged-Hessian) steps tried after each accepted Newton step while they decrease the
@@ -54,11 +59,19 @@ CHORD_STEPS = 3
 # Round-off floor of a residual, in units of one rounding of the largest coordinate times the
 # stiffness: the strain's subtraction and the sums over a node's elements add a few roundings more.
 ROUNDOFF_FACTOR = 10.0
+# Residual below which contact multipliers are updated: late enough that the forces copied into
+# them are close to equilibrium, early enough to spare Newton iterations on a moving target.
+MULTIPLIER_UPDATE_RESIDUAL = 1e-3
+# A step cut to less than this fraction of the Newton step (by the rotation or tunneling cap, or by
+# backtracking) marks the Newton model as poor and raises the damping; otherwise it falls, because
+# damping scaled by diag(H) ~ EA/l0 swamps the soft bending modes of slender rods.
+POOR_STEP = 0.1
 # A step never moves two segments closer by more than this fraction of their current centreline
 # distance, so yarns cannot pass through each other between two contact checks.
 TUNNELING_FRACTION = 0.9
-# Levenberg–Marquardt damping never drops below this fraction of diag(H): far below the Hessian's
-# own finite-difference error (~1e-10 relative), so it never biases a converged Newton step.
+# Levenberg–Marquardt damping bounds, relative to diag(H). The floor is far below the Hessian's
+# own error (~1e-10 relative); it only regularises exactly singular directions.
+INITIAL_DAMPING = 1e-8
 MIN_DAMPING = 1e-12
 
 
@@ -72,7 +85,7 @@ class QuasiStaticOptions:
 
     Attributes:
         force_tolerance: max |net force| on a free node over the force scale (the largest sum of
-            force magnitudes acting on any node).
+            force magnitudes acting on any node, torques counted as τ / l0).
         torque_tolerance: the same for torques on free edge frames.
         energy_tolerance: |ΔΠ| of the last step over max(|Π|, internal energy).
         penetration_tolerance: max contact penetration over (ra + rb).
@@ -84,7 +97,8 @@ class QuasiStaticOptions:
             stiffer edge of each pair (a yarn piece one diameter long pressed end on).
         contact_margin: broad-phase margin in units of the smallest radius.
         max_rotation_step: largest frame rotation per iteration (rad).
-        fd_relative_step: central-difference step of the element Hessians (relative to l0; rad).
+        fd_relative_step: central-difference step of the bend–twist and contact Hessians
+            (relative to the sum of radii for contacts; rad for rotations).
     """
 
     force_tolerance: float = 1e-8
@@ -109,33 +123,41 @@ class QuasiStaticOptions:
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"QuasiStaticOptions.{name} must be a positive integer, got {value!r}")
-        if self.contact_stiffness is not None and not (math.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
-            raise ValueError(f"QuasiStaticOptions.contact_stiffness must be positive, got {self.contact_stiffness!r}")
+        stiffness = self.contact_stiffness
+        if stiffness is not None and not (isinstance(stiffness, (int, float)) and math.isfinite(stiffness) and stiffness > 0):
+            raise ValueError(f"QuasiStaticOptions.contact_stiffness must be positive, got {stiffness!r}")
 
 
 @dataclass
 class Residual:
     """Convergence measures of a quasi-static state (all dimensionless).
 
-    ``force_floor`` and ``torque_floor`` estimate the smallest imbalance float64 can resolve for
-    this stiffness and load (positions are known to ``ε |x|``, so an edge force only to
-    ``ε |x| EA / l0``), relative to the same scales. A tolerance below the floor is unreachable; the
-    floor then takes its place and the result says so.
+    ``tension`` is the largest tensile force of a contact still in the active set, over the force
+    scale (zero at a converged state). ``force_floor`` and ``torque_floor`` estimate the smallest
+    imbalance float64 can resolve for this stiffness and load (positions are known to ``ε |x|``,
+    so an edge force only to ``ε |x| EA / l0``), relative to the same scales. A tolerance below the
+    floor is unreachable; the floor then takes its place and the result says so.
     """
 
     force: float
     torque: float
     energy_change: float
     penetration: float
+    tension: float = 0.0
     force_floor: float = 0.0
     torque_floor: float = 0.0
 
+    def balanced(self, options: QuasiStaticOptions, slack: float = 0.0) -> bool:
+        """Force and torque imbalances within tolerance (or ``slack``, or the round-off floor)."""
+        return (self.force <= max(options.force_tolerance, self.force_floor, slack)
+                and self.torque <= max(options.torque_tolerance, self.torque_floor, slack))
+
     def within(self, options: QuasiStaticOptions) -> bool:
         return (
-            self.force <= max(options.force_tolerance, self.force_floor)
-            and self.torque <= max(options.torque_tolerance, self.torque_floor)
+            self.balanced(options)
             and self.energy_change <= options.energy_tolerance
             and self.penetration <= options.penetration_tolerance
+            and self.tension <= max(options.force_tolerance, self.force_floor)
         )
 
     def __str__(self) -> str:
@@ -143,6 +165,8 @@ class Residual:
             f"force {self.force:.2e}, torque {self.torque:.2e}, energy change {self.energy_change:.2e}, "
             f"penetration {self.penetration:.2e}"
         )
+        if self.tension > 0.0:
+            text += f", contact tension {self.tension:.2e}"
         return text + f" (round-off floors: force {self.force_floor:.1e}, torque {self.torque_floor:.1e})"
 
 
@@ -170,6 +194,77 @@ class QuasiStaticResult:
     contact_pairs: np.ndarray
     contact_force: np.ndarray
     history: list = field(default_factory=list)
+
+
+@dataclass
+class _Contacts:
+    """Contact pairs ``(P, 2)`` of one query with their multipliers (N), penalties (N/m) and
+    active-set flags."""
+
+    pairs: np.ndarray
+    multiplier: np.ndarray
+    stiffness: np.ndarray
+    active: np.ndarray
+
+    @classmethod
+    def none(cls) -> "_Contacts":
+        return cls(np.empty((0, 2), dtype=np.int64), np.empty(0), np.empty(0), np.empty(0, dtype=np.bool_))
+
+
+class _ContactMemory:
+    """Multipliers and active flags remembered per edge pair across broad-phase queries."""
+
+    def __init__(self, n_edges: int):
+        self._n_edges = n_edges
+        self._keys = np.empty(0, dtype=np.int64)
+        self._multiplier = np.empty(0)
+        self._active = np.empty(0, dtype=np.bool_)
+
+    def recall(self, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        multiplier = np.zeros(len(pairs))
+        active = np.zeros(len(pairs), dtype=np.bool_)
+        if self._keys.size and len(pairs):
+            keys = pairs[:, 0] * self._n_edges + pairs[:, 1]
+            pos = np.minimum(np.searchsorted(self._keys, keys), self._keys.size - 1)
+            hit = self._keys[pos] == keys
+            multiplier[hit] = self._multiplier[pos[hit]]
+            active[hit] = self._active[pos[hit]]
+        return multiplier, active
+
+    def store(self, contacts: _Contacts) -> None:
+        """Remember the state of these pairs (pairs no longer detected are forgotten)."""
+        keys = contacts.pairs[:, 0] * self._n_edges + contacts.pairs[:, 1]
+        order = np.argsort(keys)
+        self._keys = keys[order]
+        self._multiplier = contacts.multiplier[order]
+        self._active = contacts.active[order]
+
+
+@dataclass
+class _Evaluation:
+    """Potential, gradient (full DOF vector) and residual measures of one configuration."""
+
+    gradient: np.ndarray
+    potential: float
+    internal: float
+    contact_force: np.ndarray
+    residual: Residual
+
+
+@dataclass
+class _Work:
+    """Mutable iterate of a solve: configuration, path-integrated moment work (J), and the
+    contacts of the last evaluation with their forces."""
+
+    position: np.ndarray
+    quaternion: np.ndarray
+    moment_work: float = 0.0
+    contacts: _Contacts = field(default_factory=_Contacts.none)
+    contact_force: np.ndarray = field(default_factory=lambda: np.empty(0))
+
+    @property
+    def point(self) -> tuple[np.ndarray, np.ndarray, float]:
+        return self.position, self.quaternion, self.moment_work
 
 
 class QuasiStaticSolver:
@@ -210,26 +305,19 @@ class QuasiStaticSolver:
             position=np.array(state.node_position, dtype=np.float64),
             quaternion=np.array(state.edge_quaternion, dtype=np.float64),
         )
+        memory = _ContactMemory(model.n_edges)
         history: list[Residual] = []
         total_iterations = 0
         converged = False
         for step in range(1, opt.load_steps + 1):
             step_loads = loads.scaled(step / opt.load_steps)
-            converged, iterations = self._solve_step(work, step_loads, history, callback, total_iterations)
+            converged, iterations = self._solve_step(work, memory, step_loads, history, callback, total_iterations)
             total_iterations += iterations
         residual = history[-1]
-        result_state = RodState(
-            node_position=work.position,
-            edge_quaternion=work.quaternion,
-            node_velocity=np.zeros_like(work.position),
-            edge_angular_velocity=np.zeros((model.n_edges, 3)),
-        )
         forces = internal_forces(model, work.position, work.quaternion)
         external = -float(np.sum(loads.total_node_force(model) * (work.position - model.node_rest_position)))
-        external -= work.moment_work
         stretch, shear, bend, twist = forces.terms
-        terms = EnergyTerms(stretch=stretch, shear=shear, bend=bend, twist=twist, external=external)
-        touching = work.contact_force > 0.0
+        terms = EnergyTerms(stretch=stretch, shear=shear, bend=bend, twist=twist, external=external - work.moment_work)
         if not converged:
             warnings.warn(
                 f"quasi-static solve did not converge in {total_iterations} iterations: {residual} "
@@ -238,138 +326,186 @@ class QuasiStaticSolver:
                 ConvergenceWarning,
                 stacklevel=2,
             )
+        touching = work.contact_force > 0.0
         return QuasiStaticResult(
-            state=result_state,
+            state=RodState(
+                node_position=work.position,
+                edge_quaternion=work.quaternion,
+                node_velocity=np.zeros_like(work.position),
+                edge_angular_velocity=np.zeros((model.n_edges, 3)),
+            ),
             converged=converged,
             iterations=total_iterations,
             energy=terms,
             residual=residual,
-            contact_pairs=work.pairs[touching],
+            contact_pairs=work.contacts.pairs[touching],
             contact_force=work.contact_force[touching],
             history=history,
         )
 
     # -- one load step ------------------------------------------------------------------------
 
-    def _solve_step(self, work, loads, history, callback, iteration_base) -> tuple[bool, int]:
+    def _solve_step(self, work, memory, loads, history, callback, iteration_base) -> tuple[bool, int]:
         opt = self.options
         node_force = loads.total_node_force(self.model)
         moment = np.asarray(loads.edge_moment)
-        damping = 1e-8  # initial Levenberg–Marquardt damping, relative to diag(H)
+        damping = INITIAL_DAMPING
         energy_change = 0.0
         for it in range(opt.max_iterations + 1):
-            ev = self._evaluate(work, node_force, moment)
-            residual = ev.residual(energy_change)
-            history.append(residual)
+            ev = self._evaluate(work, memory, node_force, moment, energy_change)
+            history.append(ev.residual)
             if callback is not None:
-                callback(iteration_base + it, residual)
-            if residual.within(opt):
+                callback(iteration_base + it, ev.residual)
+            if ev.residual.within(opt):
                 return True, it
             if it == opt.max_iterations:
                 return False, it
-            balanced = (ev.force_residual <= max(opt.force_tolerance, ev.force_floor)
-                        and ev.torque_residual <= max(opt.torque_tolerance, ev.torque_floor))
-            if balanced and ev.penetration > opt.penetration_tolerance:
-                # Augmented-Lagrangian update: the current contact forces become the multipliers.
-                self._update_multipliers(work)
+            if self._multipliers_due(work, ev):
+                self._update_multipliers(work, memory)
                 energy_change = 0.0
                 continue
             direction, solve, damping = self._newton_direction(work, ev, damping)
             if direction is None:
                 return False, it
-            alpha, energy_change, damping = self._line_search(work, ev, direction, solve, node_force, moment, damping)
+            alpha, energy_change, damping = self._line_search(work, memory, ev, direction, solve, node_force,
+                                                              moment, damping)
             if alpha == 0.0:
                 # No decrease is possible any more; report the residuals of the current state.
-                ev = self._evaluate(work, node_force, moment)
-                history.append(ev.residual(energy_change))
-                return history[-1].within(opt), it + 1
+                ev = self._evaluate(work, memory, node_force, moment, 0.0)
+                history.append(ev.residual)
+                return ev.residual.within(opt), it + 1
         return False, opt.max_iterations
 
-    # -- evaluation ---------------------------------------------------------------------------
+    # -- contacts -----------------------------------------------------------------------------
 
-    def _detect(self, position: np.ndarray, position_end: np.ndarray | None = None) -> np.ndarray:
-        """Candidate contact pairs near ``position`` or anywhere on the way to ``position_end``."""
+    def _contacts(self, memory: _ContactMemory, position: np.ndarray, position_end: np.ndarray | None = None) -> _Contacts:
+        """Candidate pairs near ``position`` (or anywhere on the way to ``position_end``) with
+        their remembered multipliers and active flags."""
         m = self.model
         if not self.options.contact:
-            return np.empty((0, 2), dtype=np.int64)
+            return _Contacts.none()
         end = position if position_end is None else np.ascontiguousarray(position_end)
-        return _contact_kernels.broad_phase(
+        pairs = _contact_kernels.broad_phase(
             position, end, m.edge_nodes, m.edge_offset, m.edge_radius, m.edge_rod, m.edge_arc_start,
             m.edge_rest_length, m.rod_length, m.rod_closed, self._node_free,
             self.options.contact_margin * self._min_radius, CONTACT_EXCLUSION_FACTOR,
         )
-
-    def _pair_stiffness(self, pairs: np.ndarray) -> np.ndarray:
-        m = self.model
-        if len(pairs) == 0:
-            return np.empty(0)
+        multiplier, active = memory.recall(pairs)
         if self.options.contact_stiffness is not None:
-            return np.full(len(pairs), float(self.options.contact_stiffness))
-        ea = np.maximum(m.edge_stretch_stiffness[pairs[:, 0]], m.edge_stretch_stiffness[pairs[:, 1]])
-        return ea / (m.edge_radius[pairs[:, 0]] + m.edge_radius[pairs[:, 1]])
+            stiffness = np.full(len(pairs), float(self.options.contact_stiffness))
+        else:
+            ea = np.maximum(m.edge_stretch_stiffness[pairs[:, 0]], m.edge_stretch_stiffness[pairs[:, 1]])
+            stiffness = ea / (m.edge_radius[pairs[:, 0]] + m.edge_radius[pairs[:, 1]])
+        return _Contacts(pairs, multiplier, stiffness, active)
 
-    def _evaluate(self, work: "_Work", node_force: np.ndarray, moment: np.ndarray) -> "_Evaluation":
-        """Detect contacts at the current iterate and assess it."""
-        m = self.model
-        work.pairs = self._detect(work.position)
-        work.multiplier = work.multipliers_of(work.pairs, m.n_edges)
-        work.stiffness = self._pair_stiffness(work.pairs)
-        ev = self._assess(work.position, work.quaternion, work.moment_work, work.pairs, work.multiplier,
-                          work.stiffness, node_force, moment)
+    def _multipliers_due(self, work: _Work, ev: _Evaluation) -> bool:
+        """Update multipliers once the iterate is nearly balanced and a contact penetrates too far,
+        pulls, or touches without a multiplier yet."""
+        opt = self.options
+        if not ev.residual.balanced(opt, slack=MULTIPLIER_UPDATE_RESIDUAL):
+            return False
+        c = work.contacts
+        unassigned = np.any(c.active & (c.multiplier == 0.0))
+        return bool(unassigned or ev.residual.penetration > opt.penetration_tolerance
+                    or ev.residual.tension > max(opt.force_tolerance, ev.residual.force_floor))
+
+    def _update_multipliers(self, work: _Work, memory: _ContactMemory) -> None:
+        """λ ← λ − k g for the active set; pairs whose force turned tensile leave it."""
+        c = work.contacts
+        force = work.contact_force
+        keep = c.active & (force > 0.0)
+        c.multiplier = np.where(keep, force, 0.0)
+        c.active = keep
+        memory.store(c)
+
+    # -- evaluation ---------------------------------------------------------------------------
+
+    def _evaluate(self, work: _Work, memory: _ContactMemory, node_force, moment, energy_change) -> _Evaluation:
+        """Detect contacts at the current iterate, update the active set and assess the iterate.
+
+        Pairs whose force turned tensile leave the set; penetrating pairs join it (their term is
+        the same on both sides of the kink while they penetrate, so the assessment stands).
+        """
+        work.contacts = self._contacts(memory, work.position)
+        c = work.contacts
+        if np.any(c.active):
+            # Pairs pulled apart beyond their multiplier's reach (λ − k g < 0) leave the set first.
+            ev = self._assess(work.point, c, node_force, moment, energy_change)
+            leaving = c.active & (ev.contact_force < 0.0)
+            if np.any(leaving):
+                c.active = c.active & ~leaving
+                c.multiplier = np.where(leaving, 0.0, c.multiplier)
+        ev = self._assess(work.point, c, node_force, moment, energy_change)
         work.contact_force = ev.contact_force
+        joining = ev.contact_force > 0.0
+        c.active = c.active | joining
+        memory.store(c)
         return ev
 
-    def _assess(self, position, quaternion, moment_work, pairs, multiplier, stiffness, node_force, moment):
-        """Potential, gradient and residuals of a configuration for a fixed set of contact pairs."""
+    def _assess(self, point, contacts: _Contacts, node_force, moment, energy_change=0.0) -> _Evaluation:
+        """Potential, gradient and residuals of a configuration for a fixed set of contacts."""
         m = self.model
+        position, quaternion, moment_work = point
         forces = internal_forces(m, position, quaternion)
         node_gradient = forces.node_gradient - node_force
         edge_gradient = forces.edge_gradient - moment
         node_scale = forces.node_scale + np.linalg.norm(node_force, axis=1)
         edge_scale = forces.edge_scale + np.linalg.norm(moment, axis=1)
-        gap = np.empty(len(pairs))
-        contact_force = np.empty(len(pairs))
+        n_pairs = len(contacts.pairs)
+        gap = np.empty(n_pairs)
+        contact_force = np.empty(n_pairs)
         contact_energy = 0.0
-        penetration = 0.0
-        if len(pairs):
+        if n_pairs:
             contact_energy = _contact_kernels.contact_energy_gradient(
-                position, m.edge_nodes, m.edge_offset, m.edge_radius, pairs, multiplier, stiffness,
-                node_gradient, node_scale, gap, contact_force,
+                position, m.edge_nodes, m.edge_offset, m.edge_radius, contacts.pairs, contacts.multiplier,
+                contacts.stiffness, contacts.active, node_gradient, node_scale, gap, contact_force,
             )
-            rsum = m.edge_radius[pairs[:, 0]] + m.edge_radius[pairs[:, 1]]
+        # A torque τ on an edge is carried by forces τ / l0 on its nodes, and a force F on a node
+        # makes torques F l0 on its edges: each scale includes the other's equivalent, so that
+        # pure-moment and pure-force problems have meaningful scales for both residuals.
+        l0 = m.edge_rest_length
+        node_ends = np.maximum(node_scale[m.edge_nodes[:, 0]], node_scale[m.edge_nodes[:, 1]])
+        force_scale = max(float(node_scale.max(initial=0.0)), float((edge_scale / l0).max(initial=0.0)))
+        torque_scale = max(float(edge_scale.max(initial=0.0)), float((node_ends * l0).max(initial=0.0)))
+        net_force = float(np.linalg.norm(node_gradient[self._node_free], axis=1).max(initial=0.0))
+        net_torque = float(np.linalg.norm(edge_gradient[~m.edge_pinned], axis=1).max(initial=0.0))
+        roundoff = ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(position).max(initial=0.0))
+        penetration = 0.0
+        if n_pairs:
+            rsum = m.edge_radius[contacts.pairs[:, 0]] + m.edge_radius[contacts.pairs[:, 1]]
             penetration = float(np.max(-gap / rsum, initial=0.0))
-        force_scale = float(node_scale.max(initial=0.0))
-        torque_scale = float(edge_scale.max(initial=0.0))
-        net_force = np.linalg.norm(node_gradient[self._node_free], axis=1).max(initial=0.0)
-        net_torque = np.linalg.norm(edge_gradient[~m.edge_pinned], axis=1).max(initial=0.0)
+
+        def relative(value: float, scale: float) -> float:
+            return value / scale if scale > 0.0 else 0.0
+
+        residual = Residual(
+            force=relative(net_force, force_scale),
+            torque=relative(net_torque, torque_scale),
+            energy_change=energy_change,
+            penetration=penetration,
+            tension=relative(float(np.max(-contact_force, initial=0.0)), force_scale),
+            force_floor=relative(roundoff * float(self._node_stiffness.max(initial=0.0)), force_scale),
+            torque_floor=relative(roundoff * float(self._edge_stiffness.max(initial=0.0)), torque_scale),
+        )
         internal = sum(forces.terms)
         potential = (
             internal + contact_energy - float(np.sum(node_force * (position - m.node_rest_position))) - moment_work
         )
-        roundoff = ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(position).max(initial=0.0))
-        force_floor = roundoff * float(self._node_stiffness.max(initial=0.0))
-        torque_floor = roundoff * float(self._edge_stiffness.max(initial=0.0))
         return _Evaluation(
-            pairs=pairs,
             gradient=np.concatenate([node_gradient.ravel(), edge_gradient.ravel()]),
             potential=potential,
             internal=internal,
-            force_residual=net_force / force_scale if force_scale > 0 else 0.0,
-            torque_residual=net_torque / torque_scale if torque_scale > 0 else 0.0,
-            force_floor=force_floor / force_scale if force_scale > 0 else 0.0,
-            torque_floor=torque_floor / torque_scale if torque_scale > 0 else 0.0,
-            penetration=penetration,
             contact_force=contact_force,
+            residual=residual,
         )
-
-    def _update_multipliers(self, work: "_Work") -> None:
-        work.remember_multipliers(work.contact_force.copy(), self.model.n_edges)
 
     # -- Newton step --------------------------------------------------------------------------
 
-    def _hessian(self, work: "_Work", pairs: np.ndarray) -> sp.csc_matrix:
+    def _hessian(self, work: _Work) -> sp.csc_matrix:
+        """Hessian of the potential on the free DOFs at the current iterate."""
         m, opt = self.model, self.options
-        n_entries = 81 * m.n_edges + 36 * m.n_joints + 144 * len(pairs)
+        c = work.contacts
+        n_entries = 81 * m.n_edges + 36 * m.n_joints + 144 * len(c.pairs)
         rows = np.empty(n_entries, dtype=np.int64)
         cols = np.empty(n_entries, dtype=np.int64)
         vals = np.empty(n_entries)
@@ -378,23 +514,23 @@ class QuasiStaticSolver:
             m.edge_stretch_stiffness, m.edge_hardening, m.joint_edges, m.joint_rest_darboux, m.joint_rest_length,
             m.joint_stiffness, opt.fd_relative_step, rows, cols, vals,
         )
-        if len(pairs):
+        if len(c.pairs):
             count = _contact_kernels.contact_hessian_coo(
-                work.position, m.edge_nodes, m.edge_offset, m.edge_radius, pairs, work.multiplier, work.stiffness,
-                opt.fd_relative_step, rows, cols, vals, count,
+                work.position, m.edge_nodes, m.edge_offset, m.edge_radius, c.pairs, c.multiplier, c.stiffness,
+                c.active, opt.fd_relative_step, rows, cols, vals, count,
             )
         r = self._dof_map[rows[:count]]
-        c = self._dof_map[cols[:count]]
-        keep = (r >= 0) & (c >= 0)
+        col = self._dof_map[cols[:count]]
+        keep = (r >= 0) & (col >= 0)
         n_free = self._free.size
-        return sp.csc_matrix((vals[:count][keep], (r[keep], c[keep])), shape=(n_free, n_free))
+        return sp.csc_matrix((vals[:count][keep], (r[keep], col[keep])), shape=(n_free, n_free))
 
-    def _newton_direction(self, work, ev, damping):
+    def _newton_direction(self, work: _Work, ev: _Evaluation, damping: float):
         """Levenberg–Marquardt direction on the free DOFs and the factorised matrix's solve;
         ``(None, None, damping)`` when no descent direction is found."""
         if self._free.size == 0:
             return None, None, damping
-        hessian = self._hessian(work, ev.pairs)
+        hessian = self._hessian(work)
         g = ev.gradient[self._free]
         diag = hessian.diagonal()
         floor = 1e-12 * max(float(np.abs(diag).max(initial=0.0)), 1e-300)
@@ -418,7 +554,12 @@ class QuasiStaticSolver:
         full[self._free] = free_step
         return full[: 3 * m.n_nodes].reshape(-1, 3), full[3 * m.n_nodes :].reshape(-1, 3)
 
-    def _line_search(self, work, ev, direction, solve, node_force, moment, damping):
+    def _moved(self, point, moment, step_x: np.ndarray, step_theta: np.ndarray):
+        position, quaternion, moment_work = point
+        return (position + step_x, _rotate_frames(quaternion, step_theta),
+                moment_work + float(np.sum(moment * step_theta)))
+
+    def _line_search(self, work, memory, ev, direction, solve, node_force, moment, damping):
         """Backtracking Armijo line search along ``direction``, then chord steps; moves ``work`` and
         returns ``(step length, relative potential change, damping)`` (step length 0: no decrease
         was found)."""
@@ -428,58 +569,52 @@ class QuasiStaticSolver:
         rot = float(np.linalg.norm(dtheta, axis=1).max(initial=0.0))
         if rot > opt.max_rotation_step:
             alpha_max = opt.max_rotation_step / rot
-        pairs, multiplier, stiffness = ev.pairs, work.multiplier, work.stiffness
+        contacts = work.contacts
         if opt.contact:
             # Pairs that may touch anywhere along the step, and a cap so that none passes through another.
-            pairs = self._detect(work.position, work.position + alpha_max * dx)
-            multiplier = work.multipliers_of(pairs, m.n_edges)
-            stiffness = self._pair_stiffness(pairs)
-            if len(pairs):
+            contacts = self._contacts(memory, work.position, work.position + alpha_max * dx)
+            if len(contacts.pairs):
                 alpha_max *= _contact_kernels.tunneling_step_limit(
-                    work.position, alpha_max * dx, m.edge_nodes, m.edge_offset, pairs, TUNNELING_FRACTION
+                    work.position, alpha_max * dx, m.edge_nodes, m.edge_offset, contacts.pairs, TUNNELING_FRACTION
                 )
 
         def assess(point):
-            return self._assess(*point, pairs, multiplier, stiffness, node_force, moment)
+            return self._assess(point, contacts, node_force, moment)
 
-        def moved(point, step_x, step_theta):
-            position, quaternion, moment_work = point
-            return (position + step_x, _rotate_frames(quaternion, step_theta),
-                    moment_work + float(np.sum(moment * step_theta)))
-
-        start_point = (work.position, work.quaternion, work.moment_work)
-        start = assess(start_point).potential
+        start = assess(work.point).potential
         g_dot_d = float(ev.gradient[self._free] @ direction)
         scale = max(abs(start), abs(ev.internal), 1e-300)
 
-        def acceptable(trial, alpha):
+        def acceptable(trial: float, alpha: float) -> bool:
             # Below round-off of the potential the Armijo test is noise; Newton steps are then
             # accepted whole (the gradient, not the energy, measures progress there).
             return abs(alpha * g_dot_d) < 1e-13 * scale or trial <= start + ARMIJO_SLOPE * alpha * g_dot_d
 
-        def accept(point, trial, alpha, damping):
-            if hasattr(trial, "potential"):
-                trial = trial.potential
+        def accept(point, trial: float, alpha: float, damping: float):
             work.position, work.quaternion, work.moment_work = point
             change = abs(trial - start) / max(abs(trial), abs(start), abs(ev.internal), 1e-300)
             return alpha, change, damping
 
-        point = moved(start_point, alpha_max * dx, alpha_max * dtheta)
+        def next_damping(alpha: float) -> float:
+            # A step cut (by a cap or by backtracking) to a small fraction of the Newton step means
+            # the quadratic model reached too far: damp more. Otherwise damp less.
+            return damping * 10.0 if alpha < POOR_STEP else max(damping / 10.0, MIN_DAMPING)
+
+        point = self._moved(work.point, moment, alpha_max * dx, alpha_max * dtheta)
         trial = assess(point)
         if acceptable(trial.potential, alpha_max):
-            return accept(*self._chord_steps(point, trial, solve, assess, moved), alpha_max,
-                          max(damping / 10.0, MIN_DAMPING))
+            point, trial = self._chord_steps(point, trial, solve, assess, moment)
+            return accept(point, trial.potential, alpha_max, next_damping(alpha_max))
         alpha = 0.5 * alpha_max
         while alpha > 1e-12 * alpha_max:
-            point = moved(start_point, alpha * dx, alpha * dtheta)
-            trial = assess(point).potential
-            if acceptable(trial, alpha):
-                return accept(point, trial, alpha, damping * 10.0 if alpha < 0.5 * alpha_max else damping)
+            point = self._moved(work.point, moment, alpha * dx, alpha * dtheta)
+            potential = assess(point).potential
+            if acceptable(potential, alpha):
+                return accept(point, potential, alpha, next_damping(alpha))
             alpha *= 0.5
         return 0.0, 0.0, damping * 100.0
 
-
-    def _chord_steps(self, point, trial, solve, assess, moved):
+    def _chord_steps(self, point, trial: _Evaluation, solve, assess, moment):
         """Further steps with the same factorisation while each decreases the potential."""
         for _ in range(CHORD_STEPS):
             g = trial.gradient[self._free]
@@ -490,63 +625,12 @@ class QuasiStaticSolver:
             cx, ctheta = self._split(step)
             if float(np.linalg.norm(ctheta, axis=1).max(initial=0.0)) > self.options.max_rotation_step:
                 break
-            candidate = moved(point, cx, ctheta)
+            candidate = self._moved(point, moment, cx, ctheta)
             result = assess(candidate)
             if result.potential > trial.potential + ARMIJO_SLOPE * slope:
                 break
             point, trial = candidate, result
         return point, trial
-
-
-@dataclass
-class _Evaluation:
-    pairs: np.ndarray
-    gradient: np.ndarray
-    potential: float
-    internal: float
-    force_residual: float
-    torque_residual: float
-    force_floor: float
-    torque_floor: float
-    penetration: float
-    contact_force: np.ndarray
-
-    def residual(self, energy_change: float) -> Residual:
-        return Residual(self.force_residual, self.torque_residual, energy_change, self.penetration,
-                        self.force_floor, self.torque_floor)
-
-
-@dataclass
-class _Work:
-    """Mutable iterate of a solve: configuration, path-integrated moment work, and the contact
-    pairs with their multipliers (remembered by edge pair across broad-phase queries)."""
-
-    position: np.ndarray
-    quaternion: np.ndarray
-    moment_work: float = 0.0
-    pairs: np.ndarray = field(default_factory=lambda: np.empty((0, 2), dtype=np.int64))
-    multiplier: np.ndarray = field(default_factory=lambda: np.empty(0))
-    stiffness: np.ndarray = field(default_factory=lambda: np.empty(0))
-    contact_force: np.ndarray = field(default_factory=lambda: np.empty(0))
-    known_keys: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
-    known_multipliers: np.ndarray = field(default_factory=lambda: np.empty(0))
-
-    def multipliers_of(self, pairs: np.ndarray, n_edges: int) -> np.ndarray:
-        """Remembered multipliers of ``pairs`` (0 for pairs never updated)."""
-        multiplier = np.zeros(len(pairs))
-        if self.known_keys.size and len(pairs):
-            keys = pairs[:, 0] * n_edges + pairs[:, 1]
-            pos = np.minimum(np.searchsorted(self.known_keys, keys), self.known_keys.size - 1)
-            hit = self.known_keys[pos] == keys
-            multiplier[hit] = self.known_multipliers[pos[hit]]
-        return multiplier
-
-    def remember_multipliers(self, multiplier: np.ndarray, n_edges: int) -> None:
-        """Store ``multiplier`` for the current pairs (forgetting pairs no longer detected)."""
-        keys = self.pairs[:, 0] * n_edges + self.pairs[:, 1]
-        order = np.argsort(keys)
-        self.known_keys = keys[order]
-        self.known_multipliers = multiplier[order]
 
 
 def _rotate_frames(quaternion: np.ndarray, theta: np.ndarray) -> np.ndarray:

@@ -1,0 +1,148 @@
+"""Benchmarks of yarnfit, one section per stage.
+
+    python validation/bench.py engine
+
+prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
+on-disk cache) before anything is timed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numba
+import numpy as np
+
+from yarnfit.engine import (
+    Loads,
+    QuasiStaticSolver,
+    Rod,
+    RodMaterial,
+    RodModel,
+    RodState,
+    straight_points,
+)
+from yarnfit.engine import _kernels
+from yarnfit.engine.xpbd import _color_constraints
+
+# A polyester-like yarn: r = 0.1 mm, E = 3 GPa (docs/design.md §4 fibre table, mid-range).
+YARN = RodMaterial(young_modulus=3e9, poisson_ratio=0.3, density=1380.0)
+YARN_RADIUS = 1e-4
+
+
+def report(name: str, value: float, unit: str) -> None:
+    print(f"{name}: {value:.4g} {unit}", flush=True)
+
+
+# -- engine ---------------------------------------------------------------------------------------
+
+
+def projection_model(n_rods: int = 200, n_edges: int = 500) -> RodModel:
+    """Parallel yarns, gently bent so that every projection does real work."""
+    rods = []
+    for k in range(n_rods):
+        points = straight_points(0.05, n_edges, start=(0.0, 1e-3 * k, 0.0))
+        points[:, 2] = 1e-3 * np.sin(points[:, 0] * 200.0)
+        rods.append(Rod(points, YARN_RADIUS, YARN, straight=True, pinned_nodes=[0]))
+    return RodModel.from_rods(rods)
+
+
+def projections_per_second(model: RodModel, parallel: bool, sweeps: int) -> float:
+    x = np.array(model.node_rest_position)
+    q = np.array(model.edge_rest_quaternion)
+    inv_mass = np.ascontiguousarray(model.node_inv_mass)
+    inv_qmass = 0.25 * np.ascontiguousarray(model.edge_inv_inertia)
+    lam_edge = np.zeros((model.n_edges, 3))
+    lam_joint = np.zeros((model.n_joints, 3))
+    args = (x, q, inv_mass, inv_qmass, model.edge_nodes, model.edge_offset, model.edge_rest_length,
+            model.edge_shear_stiffness, model.edge_stretch_stiffness, model.edge_hardening, model.joint_edges,
+            model.joint_rest_darboux, model.joint_rest_length, model.joint_stiffness, lam_edge, lam_joint, 1e8)
+    coloring = _color_constraints(model)
+
+    def sweep():
+        if parallel:
+            _kernels.project_rods_colored(*args, *coloring)
+        else:
+            _kernels.project_rods_serial(*args)
+
+    sweep()  # compile or load from cache
+    start = time.perf_counter()
+    for _ in range(sweeps):
+        sweep()
+    elapsed = time.perf_counter() - start
+    return sweeps * (model.n_edges + model.n_joints) / elapsed
+
+
+def crossing_bundle(n_per_layer: int = 10, n_edges: int = 100) -> tuple[RodModel, Loads]:
+    """Two layers of ``n_per_layer`` yarns crossing at right angles (``2 n_per_layer n_edges``
+    segments), pinned at their ends, the top layer pressed onto the bottom by a distributed load."""
+    spacing = 1e-3
+    length = (n_per_layer + 1) * spacing
+    rods = []
+    for k in range(n_per_layer):
+        offset = (k + 1) * spacing - length / 2
+        rods.append(Rod(straight_points(length, n_edges, start=(-length / 2, offset, 0.0)), YARN_RADIUS, YARN,
+                        pinned_nodes=[0, -1]))
+    for k in range(n_per_layer):
+        offset = (k + 1) * spacing - length / 2
+        rods.append(Rod(straight_points(length, n_edges, start=(offset, -length / 2, 2.5 * YARN_RADIUS),
+                                        direction=(0.0, 1.0, 0.0)), YARN_RADIUS, YARN, pinned_nodes=[0, -1]))
+    model = RodModel.from_rods(rods)
+    loads = Loads.zeros(model)
+    top = np.arange(model.rod_node_start[n_per_layer], model.n_nodes)
+    loads.node_force[top, 2] = -2e-2 / (n_edges + 1)  # 20 mN per top yarn: most crossings carry load
+    return model, loads
+
+
+def n_per_layer_crossings(model: RodModel, result) -> int:
+    """Number of distinct yarn pairs touching (crossings carrying load)."""
+    rods = model.edge_rod[result.contact_pairs]
+    return len({tuple(sorted(pair)) for pair in rods.tolist()})
+
+
+def bench_engine() -> None:
+    threads = numba.config.NUMBA_NUM_THREADS
+    model = projection_model()
+    report("projection_model_constraints", model.n_edges + model.n_joints, "constraints")
+    report("projections_per_second_1core", projections_per_second(model, parallel=False, sweeps=20), "1/s")
+    # The coloured sweep on one thread separates the effect of the colour ordering from threading.
+    numba.set_num_threads(1)
+    report("projections_per_second_colored_1thread", projections_per_second(model, parallel=True, sweeps=20), "1/s")
+    numba.set_num_threads(threads)
+    report("projections_per_second_allcores", projections_per_second(model, parallel=True, sweeps=20), "1/s")
+    report("threads", threads, "threads")
+
+    small_model, small_loads = crossing_bundle(2, 10)
+    QuasiStaticSolver(small_model).solve(RodState.from_model(small_model), small_loads)  # compile or load
+    model, loads = crossing_bundle()
+    start = time.perf_counter()
+    result = QuasiStaticSolver(model).solve(RodState.from_model(model), loads)
+    elapsed = time.perf_counter() - start
+    report("contact_2000_segments", model.n_edges, "segments")
+    report("contact_2000_seconds", elapsed, "s")
+    report("contact_2000_converged", float(result.converged), "bool")
+    report("contact_2000_iterations", result.iterations, "iterations")
+    report("contact_2000_force_residual", result.residual.force, "relative")
+    report("contact_2000_torque_residual", result.residual.torque, "relative")
+    report("contact_2000_penetration", result.residual.penetration, "relative")
+    report("contact_2000_touching_pairs", len(result.contact_force), "pairs")
+    report("contact_2000_crossings", n_per_layer_crossings(model, result), "crossings")
+
+
+SECTIONS = {"engine": bench_engine}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("sections", nargs="*", choices=sorted(SECTIONS), default=sorted(SECTIONS),
+                        help="sections to run (default: all)")
+    args = parser.parse_args(argv)
+    for name in args.sections:
+        SECTIONS[name]()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
