@@ -9,6 +9,7 @@ on-disk cache) before anything is timed.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 
@@ -24,7 +25,8 @@ from yarnfit.engine import (
     RodState,
     straight_points,
 )
-from yarnfit.engine import _kernels
+from yarnfit.engine import _contact_kernels, _kernels
+from yarnfit.engine.model import CONTACT_EXCLUSION_FACTOR
 from yarnfit.engine.xpbd import _color_constraints
 
 # A polyester-like yarn: r = 0.1 mm, E = 3 GPa (docs/design.md §4 fibre table, mid-range).
@@ -96,6 +98,34 @@ def crossing_bundle(n_per_layer: int = 10, n_edges: int = 100) -> tuple[RodModel
     return model, loads
 
 
+def tiled_bundles(copies: int) -> RodModel:
+    """``copies`` copies of :func:`crossing_bundle` side by side along x, 2 mm apart."""
+    bundle = crossing_bundle()[0]
+    pitch = np.ptp(bundle.node_rest_position[:, 0]) + 2e-3
+    rods = []
+    for k in range(copies):
+        for r in range(bundle.n_rods):
+            nodes = bundle.rod_nodes(r)
+            points = bundle.node_rest_position[nodes] + (k * pitch, 0.0, 0.0)
+            rods.append(Rod(points, YARN_RADIUS, YARN))
+    return RodModel.from_rods(rods)
+
+
+def broad_phase_seconds(model: RodModel, repeats: int = 5) -> tuple[float, int]:
+    """Best time of a static broad-phase query over the model (s) and the pairs it finds."""
+    x = np.array(model.node_rest_position)
+    args = (x, x, model.edge_nodes, model.edge_offset, model.edge_radius, model.edge_rod, model.edge_arc_start,
+            model.edge_rest_length, model.rod_length, model.rod_closed, ~model.node_pinned, YARN_RADIUS,
+            CONTACT_EXCLUSION_FACTOR)
+    pairs = _contact_kernels.broad_phase(*args)
+    best = math.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        _contact_kernels.broad_phase(*args)
+        best = min(best, time.perf_counter() - start)
+    return best, len(pairs)
+
+
 def n_per_layer_crossings(model: RodModel, result) -> int:
     """Number of distinct yarn pairs touching (crossings carrying load)."""
     rods = model.edge_rod[result.contact_pairs]
@@ -113,6 +143,14 @@ def bench_engine() -> None:
     numba.set_num_threads(threads)
     report("projections_per_second_allcores", projections_per_second(model, parallel=True, sweeps=20), "1/s")
     report("threads", threads, "threads")
+
+    # Broad phase on 1, 10 and 100 side-by-side copies of the 2000-segment bundle (constant density):
+    # the time per segment should stay about flat.
+    for copies in (1, 10, 100):
+        model = tiled_bundles(copies)
+        seconds, n_pairs = broad_phase_seconds(model)
+        report(f"broad_phase_{model.n_edges}_segments_seconds", seconds, "s")
+        report(f"broad_phase_{model.n_edges}_segments_pairs", n_pairs, "pairs")
 
     small_model, small_loads = crossing_bundle(2, 10)
     QuasiStaticSolver(small_model).solve(RodState.from_model(small_model), small_loads)  # compile or load

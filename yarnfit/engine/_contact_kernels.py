@@ -378,6 +378,44 @@ def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, multip
 
 
 @njit(cache=True)
+def _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, ea, eb):
+    """Closest points of edges ``ea`` and ``eb`` and how their nodes share a correction there.
+
+    Returns ``(nodes, coef, w, weight, dist, normal)``: the four nodes (a0, a1, b0, b1), their
+    barycentric coefficients signed towards ``normal`` (+ on a, − on b), the coefficient-weighted
+    inverse masses ``w_i coef_i``, the generalised inverse mass ``Σ w_i coef_i²`` of the pair, the
+    centreline distance and the unit normal from b to a.
+    """
+    a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
+    b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
+    s, t, dist, normal = segment_closest_points(a0, a1, b0, b1)
+    nodes = (edge_nodes[ea, 0], edge_nodes[ea, 1], edge_nodes[eb, 0], edge_nodes[eb, 1])
+    coef = (1.0 - s, s, -(1.0 - t), -t)
+    w = (node_inv_mass[nodes[0]] * coef[0], node_inv_mass[nodes[1]] * coef[1],
+         node_inv_mass[nodes[2]] * coef[2], node_inv_mass[nodes[3]] * coef[3])
+    weight = w[0] * coef[0] + w[1] * coef[1] + w[2] * coef[2] + w[3] * coef[3]
+    return nodes, coef, w, weight, dist, normal
+
+
+@njit(cache=True)
+def _relative_motion(field, nodes, coef, normal):
+    """Tangential part of ``Σ coef_i field[node_i]`` (for positions or velocities: a's contact
+    point relative to b's) and its length."""
+    r0 = 0.0
+    r1 = 0.0
+    r2 = 0.0
+    for m in range(4):
+        r0 += coef[m] * field[nodes[m], 0]
+        r1 += coef[m] * field[nodes[m], 1]
+        r2 += coef[m] * field[nodes[m], 2]
+    along = r0 * normal[0] + r1 * normal[1] + r2 * normal[2]
+    r0 -= along * normal[0]
+    r1 -= along * normal[1]
+    r2 -= along * normal[2]
+    return (r0, r1, r2), math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+
+
+@njit(cache=True)
 def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge_radius, pairs, lam_normal,
                      lam_tangent, static_friction):
     """One Gauss–Seidel sweep over the contact pairs (hard unilateral constraints).
@@ -389,40 +427,22 @@ def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge
     for p in range(pairs.shape[0]):
         ea = pairs[p, 0]
         eb = pairs[p, 1]
-        ia0 = edge_nodes[ea, 0]
-        ia1 = edge_nodes[ea, 1]
-        ib0 = edge_nodes[eb, 0]
-        ib1 = edge_nodes[eb, 1]
-        a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
-        b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
-        s, t, dist, n = segment_closest_points(a0, a1, b0, b1)
-        c = dist - (edge_radius[ea] + edge_radius[eb])
-        wa0 = node_inv_mass[ia0] * (1.0 - s)
-        wa1 = node_inv_mass[ia1] * s
-        wb0 = node_inv_mass[ib0] * (1.0 - t)
-        wb1 = node_inv_mass[ib1] * t
-        weight = wa0 * (1.0 - s) + wa1 * s + wb0 * (1.0 - t) + wb1 * t
+        nodes, coef, w, weight, dist, n = _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, ea, eb)
         if weight == 0.0:
             continue
+        c = dist - (edge_radius[ea] + edge_radius[eb])
         if c < 0.0:
             dl = -c / weight
             lam_normal[p] += dl
-            for k in range(3):
-                pos[ia0, k] += wa0 * n[k] * dl
-                pos[ia1, k] += wa1 * n[k] * dl
-                pos[ib0, k] -= wb0 * n[k] * dl
-                pos[ib1, k] -= wb1 * n[k] * dl
+            for m in range(4):
+                for k in range(3):
+                    pos[nodes[m], k] += w[m] * n[k] * dl
         if lam_normal[p] <= 0.0 or static_friction <= 0.0:
             continue
-        # Relative slip of the contact points since the step started, tangential part.
-        slip = np.empty(3)
-        for k in range(3):
-            da = (1.0 - s) * (pos[ia0, k] - prev_pos[ia0, k]) + s * (pos[ia1, k] - prev_pos[ia1, k])
-            db = (1.0 - t) * (pos[ib0, k] - prev_pos[ib0, k]) + t * (pos[ib1, k] - prev_pos[ib1, k])
-            slip[k] = da - db
-        sn = slip[0] * n[0] + slip[1] * n[1] + slip[2] * n[2]
-        for k in range(3):
-            slip[k] -= sn * n[k]
+        # Tangential slip since the step started (the tangential projection is linear).
+        now, _ = _relative_motion(pos, nodes, coef, n)
+        before, _ = _relative_motion(prev_pos, nodes, coef, n)
+        slip = (now[0] - before[0], now[1] - before[1], now[2] - before[2])
         slip_norm = math.sqrt(slip[0] ** 2 + slip[1] ** 2 + slip[2] ** 2)
         if slip_norm == 0.0:
             continue
@@ -430,11 +450,9 @@ def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge
         if lam_tangent[p] + dlt < static_friction * lam_normal[p]:
             lam_tangent[p] += dlt
             f = dlt / slip_norm
-            for k in range(3):
-                pos[ia0, k] -= wa0 * slip[k] * f
-                pos[ia1, k] -= wa1 * slip[k] * f
-                pos[ib0, k] += wb0 * slip[k] * f
-                pos[ib1, k] += wb1 * slip[k] * f
+            for m in range(4):
+                for k in range(3):
+                    pos[nodes[m], k] -= w[m] * slip[k] * f
 
 
 @njit(cache=True)
@@ -444,35 +462,14 @@ def apply_kinetic_friction(pos, vel, node_inv_mass, edge_nodes, edge_offset, pai
     for p in range(pairs.shape[0]):
         if lam_normal[p] <= 0.0:
             continue
-        ea = pairs[p, 0]
-        eb = pairs[p, 1]
-        ia0 = edge_nodes[ea, 0]
-        ia1 = edge_nodes[ea, 1]
-        ib0 = edge_nodes[eb, 0]
-        ib1 = edge_nodes[eb, 1]
-        a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
-        b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
-        s, t, _, n = segment_closest_points(a0, a1, b0, b1)
-        wa0 = node_inv_mass[ia0] * (1.0 - s)
-        wa1 = node_inv_mass[ia1] * s
-        wb0 = node_inv_mass[ib0] * (1.0 - t)
-        wb1 = node_inv_mass[ib1] * t
-        weight = wa0 * (1.0 - s) + wa1 * s + wb0 * (1.0 - t) + wb1 * t
+        nodes, coef, w, weight, _, n = _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, pairs[p, 0], pairs[p, 1])
         if weight == 0.0:
             continue
-        vt = np.empty(3)
-        for k in range(3):
-            vt[k] = ((1.0 - s) * vel[ia0, k] + s * vel[ia1, k]) - ((1.0 - t) * vel[ib0, k] + t * vel[ib1, k])
-        vn = vt[0] * n[0] + vt[1] * n[1] + vt[2] * n[2]
-        for k in range(3):
-            vt[k] -= vn * n[k]
-        speed = math.sqrt(vt[0] ** 2 + vt[1] ** 2 + vt[2] ** 2)
+        vt, speed = _relative_motion(vel, nodes, coef, n)
         if speed == 0.0:
             continue
         dv = min(weight * kinetic_friction * lam_normal[p] / dt, speed)
         impulse = dv / (weight * speed)
-        for k in range(3):
-            vel[ia0, k] -= wa0 * vt[k] * impulse
-            vel[ia1, k] -= wa1 * vt[k] * impulse
-            vel[ib0, k] += wb0 * vt[k] * impulse
-            vel[ib1, k] += wb1 * vt[k] * impulse
+        for m in range(4):
+            for k in range(3):
+                vel[nodes[m], k] -= w[m] * vt[k] * impulse

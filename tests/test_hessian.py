@@ -1,0 +1,82 @@
+"""The Newton solver's Hessian against central differences of the exact gradient.
+
+The Hessian only steers Newton (the equilibrium is defined by the gradient, which the solver
+tests check), so an error here costs iterations, not accuracy; this test keeps it exact.
+"""
+
+import numpy as np
+
+from yarnfit.engine import Loads, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState, straight_points
+from yarnfit.engine import _contact_kernels
+from yarnfit.engine.quasistatic import _Contacts, _rotate_frames, _Work
+
+# Central differences of the analytic gradient at step h carry O(h²) truncation and O(ε/h)
+# round-off: ~1e-10 relative at the steps below; 1e-7 leaves room and still fails on any wrong term.
+HESSIAN_RTOL = 1e-7
+
+
+def test_rod_hessian_matches_differences_of_the_gradient():
+    rng = np.random.default_rng(4)
+    t = np.linspace(0.0, 1.0, 8)
+    curved = np.column_stack([0.05 * np.sin(t), 0.05 * (1 - np.cos(t)), 0.01 * t])
+    mat = RodMaterial(2e6, 0.35, 1000.0, hardening_tension=8e6, hardening_compression=3e6)
+    model = RodModel.from_rods([
+        Rod(curved, 3e-3, mat, pinned_nodes=[0], pinned_frames=[0]),
+        Rod(straight_points(0.05, 5, start=(0.0, 0.02, 0.0)), 2e-3, mat, straight=True),
+    ])
+    state = RodState.from_model(model)
+    position = state.node_position + 2e-3 * rng.standard_normal(state.node_position.shape)
+    quaternion = _rotate_frames(state.edge_quaternion, 0.2 * rng.standard_normal((model.n_edges, 3)))
+    solver = QuasiStaticSolver(model)
+    work = _Work(position, quaternion)
+    hessian = solver._hessian(work).toarray()
+    loads = Loads.zeros(model)
+    node_force, moment = loads.total_node_force(model), loads.edge_moment
+
+    def gradient(step):
+        dx, dtheta = solver._split(step)
+        point = (position + dx, _rotate_frames(quaternion, dtheta), 0.0)
+        return solver._assess(point, _Contacts.none(), node_force, moment).gradient[solver._free]
+
+    h = 1e-7
+    n = hessian.shape[0]
+    differences = np.empty((n, n))
+    for k in range(n):
+        e = np.zeros(n)
+        e[k] = h
+        differences[:, k] = (gradient(e) - gradient(-e)) / (2 * h)
+    # The symmetric part of the derivative of the world torque is the Hessian in the exponential
+    # chart (the antisymmetric rest is the chart's own curvature times the torque).
+    symmetric = 0.5 * (differences + differences.T)
+    assert np.abs(hessian - symmetric).max() <= HESSIAN_RTOL * np.abs(hessian).max()
+
+
+def test_contact_hessian_matches_differences_of_the_gradient():
+    # One crossing pair, active (smooth branch) and penetrating, with a multiplier.
+    points = np.array([[-1e-3, 0.0, 0.0], [1e-3, 1e-4, 0.0], [2e-4, -1e-3, 1.9e-4], [-1e-4, 1e-3, 1.95e-4]])
+    edge_nodes = np.array([[0, 1], [2, 3]])
+    offset = np.zeros((2, 3))
+    radius = np.array([1e-4, 1e-4])
+    pairs = np.array([[0, 1]])
+    multiplier, stiffness, active = np.array([2e-3]), np.array([4.7e5]), np.array([True])
+
+    def gradient(x):
+        g = np.zeros((4, 3))
+        _contact_kernels.contact_energy_gradient(x, edge_nodes, offset, radius, pairs, multiplier, stiffness, active, g,
+                                                 np.zeros(4), np.empty(1), np.empty(1))
+        return g.ravel()
+
+    rows, cols, vals = np.empty(144, np.int64), np.empty(144, np.int64), np.empty(144)
+    count = _contact_kernels.contact_hessian_coo(points, edge_nodes, offset, radius, pairs, multiplier, stiffness,
+                                                 active, 1e-6, rows, cols, vals, 0)
+    hessian = np.zeros((12, 12))
+    np.add.at(hessian, (rows[:count], cols[:count]), vals[:count])
+    h = 1e-9
+    differences = np.empty((12, 12))
+    for k in range(12):
+        x = points.ravel().copy()
+        x[k] += h
+        plus = gradient(x.reshape(4, 3))
+        x[k] -= 2 * h
+        differences[:, k] = (plus - gradient(x.reshape(4, 3))) / (2 * h)
+    assert np.abs(hessian - 0.5 * (differences + differences.T)).max() <= HESSIAN_RTOL * np.abs(hessian).max()
