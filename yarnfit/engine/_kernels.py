@@ -56,6 +56,22 @@ def axial_force(strain, stretch_stiffness, hardening):
 
 
 @njit(cache=True)
+def element_stress(p0, p1, q, rest_length, shear_stiffness, stretch_stiffness, hard_c, hard_t):
+    """Strain and stress of a stretch–shear element.
+
+    Returns ``(c, σ, dN/dε, h)``: the material-frame strain ``c = R(q)ᵀ (p1 − p0) / l0 − e3``, the
+    stress resultant ``σ = (GA c1, GA c2, N(c3))`` (N, material frame), the axial tangent (N) and
+    the axial hardening ``h`` in use (N, tension or compression by the sign of c3).
+    """
+    inv_l0 = 1.0 / rest_length
+    cm = quat_rotate_inv(q, ((p1[0] - p0[0]) * inv_l0, (p1[1] - p0[1]) * inv_l0, (p1[2] - p0[2]) * inv_l0))
+    c3 = cm[2] - 1.0
+    hard = hard_t if c3 > 0.0 else hard_c
+    n3, tangent = axial_force(c3, stretch_stiffness, hard)
+    return (cm[0], cm[1], c3), (shear_stiffness * cm[0], shear_stiffness * cm[1], n3), tangent, hard
+
+
+@njit(cache=True)
 def stretch_shear_element(p0, p1, q, rest_length, shear_stiffness, stretch_stiffness, hard_c, hard_t):
     """Energy and gradient of one stretch–shear element.
 
@@ -70,21 +86,13 @@ def stretch_shear_element(p0, p1, q, rest_length, shear_stiffness, stretch_stiff
         ``(U_stretch, U_shear, n, tau)``: energies (J), ``n = ∂U/∂p1 = −∂U/∂p0`` (N, world) and
         ``tau = ∂U/∂θ`` (N·m, world).
     """
-    ex = p1[0] - p0[0]
-    ey = p1[1] - p0[1]
-    ez = p1[2] - p0[2]
-    inv_l0 = 1.0 / rest_length
-    cm = quat_rotate_inv(q, (ex * inv_l0, ey * inv_l0, ez * inv_l0))
-    c1 = cm[0]
-    c2 = cm[1]
-    c3 = cm[2] - 1.0
-    hard = hard_t if c3 > 0.0 else hard_c
-    n3, _ = axial_force(c3, stretch_stiffness, hard)
-    u_shear = 0.5 * rest_length * shear_stiffness * (c1 * c1 + c2 * c2)
-    a3 = abs(c3)
-    u_stretch = rest_length * (0.5 * stretch_stiffness * c3 * c3 + hard * a3 * a3 * a3 / 6.0)
-    n = quat_rotate(q, (shear_stiffness * c1, shear_stiffness * c2, n3))
-    tau = cross(n, (ex, ey, ez))
+    c, stress, _, hard = element_stress(p0, p1, q, rest_length, shear_stiffness, stretch_stiffness, hard_c, hard_t)
+    a3 = abs(c[2])
+    u_shear = 0.5 * rest_length * shear_stiffness * (c[0] * c[0] + c[1] * c[1])
+    u_stretch = rest_length * (0.5 * stretch_stiffness * c[2] * c[2] + hard * a3 * a3 * a3 / 6.0)
+    # ∂U/∂p1 = (∂c/∂p1)ᵀ l0 σ = R σ;  ∂U/∂θ = (R σ) × (p1 − p0)
+    n = quat_rotate(q, stress)
+    tau = cross(n, (p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]))
     return u_stretch, u_shear, n, tau
 
 
@@ -204,19 +212,19 @@ def rod_energy_gradient(
 
 
 # ---------------------------------------------------------------------------------------------
-# Hessian by central differences of the analytic element gradients
+# Hessian: analytic for stretch–shear, central differences of the analytic gradient for bend–twist
 # ---------------------------------------------------------------------------------------------
 
 
 @njit(cache=True)
-def stretch_shear_hessian(p0, p1, q, rest_length, shear_stiffness, stretch_stiffness, hard_c, hard_t, stress, out):
+def stretch_shear_hessian(p0, p1, q, rest_length, shear_stiffness, axial_tangent, stress, out):
     """Hessian ``(9, 9)`` of a stretch–shear element over (p0, p1, θ), written into ``out``.
 
     ``H = (1/l0) Bᵀ D B + H_geo(n)`` with ``B = [−Rᵀ, Rᵀ, Rᵀ[e]×]`` (so ``∂c/∂(p0, p1, θ) = B / l0``),
     ``D = diag(GA, GA, dN/dε)`` and the geometric part of the stress resultant ``n = R σ``:
     ``H[p0, θ] = [n]×``, ``H[p1, θ] = −[n]×``, ``H[θ, θ] = sym([e]×[n]×)`` (the symmetric part is the
-    Hessian in the exponential chart). ``stress`` is σ in the material frame (N), the element's own
-    ``(GA c1, GA c2, N(c3))`` (see :func:`element_stress`) for the exact Hessian.
+    Hessian in the exponential chart). ``axial_tangent`` (dN/dε, N) and ``stress`` (σ, N, material
+    frame) come from :func:`element_stress`.
     """
     w, x, y, z = q
     # R(q) columns d1, d2, d3
@@ -232,12 +240,9 @@ def stretch_shear_hessian(p0, p1, q, rest_length, shear_stiffness, stretch_stiff
     ex = p1[0] - p0[0]
     ey = p1[1] - p0[1]
     ez = p1[2] - p0[2]
-    c3 = (r02 * ex + r12 * ey + r22 * ez) / rest_length - 1.0
-    hard = hard_t if c3 > 0.0 else hard_c
-    _, tangent = axial_force(c3, stretch_stiffness, hard)
     # Row k of B: (−d_k, d_k, d_k × e), the directors d_k being the rows of Rᵀ.
     d = ((r00, r10, r20), (r01, r11, r21), (r02, r12, r22))
-    stiff = (shear_stiffness, shear_stiffness, tangent)
+    stiff = (shear_stiffness, shear_stiffness, axial_tangent)
     inv_l0 = 1.0 / rest_length
     for i in range(9):
         for j in range(9):
@@ -268,17 +273,6 @@ def stretch_shear_hessian(p0, p1, q, rest_length, shear_stiffness, stretch_stiff
                 en += ex3[i][m] * nx[m][j]
                 ne += nx[i][m] * ex3[m][j]
             out[6 + i, 6 + j] += 0.5 * (en + ne)
-
-
-@njit(cache=True)
-def element_stress(p0, p1, q, rest_length, shear_stiffness, stretch_stiffness, hard_c, hard_t):
-    """Material-frame strain ``c`` and stress ``σ = (GA c1, GA c2, N(c3))`` of a stretch–shear
-    element, and the axial tangent ``dN/dε`` (N)."""
-    cm = quat_rotate_inv(q, ((p1[0] - p0[0]) / rest_length, (p1[1] - p0[1]) / rest_length, (p1[2] - p0[2]) / rest_length))
-    c3 = cm[2] - 1.0
-    hard = hard_t if c3 > 0.0 else hard_c
-    n3, tangent = axial_force(c3, stretch_stiffness, hard)
-    return (cm[0], cm[1], c3), (shear_stiffness * cm[0], shear_stiffness * cm[1], n3), tangent
 
 
 @njit(cache=True)
@@ -364,10 +358,9 @@ def rod_hessian_coo(
         p0 = row3(pos, i0)
         p1 = _edge_end(pos, edge_nodes, edge_offset, e)
         q = row4(quat, e)
-        args = (edge_rest_length[e], edge_shear_stiffness[e], edge_stretch_stiffness[e], edge_hardening[e, 0],
-                edge_hardening[e, 1])
-        _, stress, _ = element_stress(p0, p1, q, *args)
-        stretch_shear_hessian(p0, p1, q, *args, stress, local9)
+        _, stress, tangent, _ = element_stress(p0, p1, q, edge_rest_length[e], edge_shear_stiffness[e],
+                                               edge_stretch_stiffness[e], edge_hardening[e, 0], edge_hardening[e, 1])
+        stretch_shear_hessian(p0, p1, q, edge_rest_length[e], edge_shear_stiffness[e], tangent, stress, local9)
         idx = _write_local(local9, dofs9, idx, rows, cols, vals)
     for j in range(joint_edges.shape[0]):
         a = joint_edges[j, 0]

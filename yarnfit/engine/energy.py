@@ -83,14 +83,14 @@ def internal_forces(model: RodModel, position: np.ndarray, quaternion: np.ndarra
     return InternalForces(terms, node_gradient, edge_gradient, node_scale, edge_scale)
 
 
-def edge_rotation_from_rest(model: RodModel, quaternion: np.ndarray) -> np.ndarray:
-    """Rotation vectors ``log(q q̄_rest)`` of each edge frame from its rest frame, ``(E, 3)`` rad
-    (principal branch, angle ≤ π)."""
-    out = np.empty((model.n_edges, 3))
+def edge_rotation_from_rest(model: RodModel, quaternion: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Rotation vectors ``log(q q̄_rest)`` of the frames of ``edges`` from their rest frames,
+    ``(len(edges), 3)`` rad (principal branch, angle ≤ π)."""
     rest = model.edge_rest_quaternion
-    for e in range(model.n_edges):
+    out = np.empty((len(edges), 3))
+    for k, e in enumerate(edges):
         r = rest[e]
-        out[e] = quat_log(quat_mul(tuple(quaternion[e]), (r[0], -r[1], -r[2], -r[3])))
+        out[k] = quat_log(quat_mul(tuple(quaternion[e]), (r[0], -r[1], -r[2], -r[3])))
     return out
 
 
@@ -106,8 +106,10 @@ def external_potential(model: RodModel, state: RodState, loads: Loads) -> float:
     """
     force = loads.total_node_force(model)
     value = -float(np.sum(force * (state.node_position - model.node_rest_position)))
-    if np.any(loads.edge_moment != 0.0):
-        value -= float(np.sum(loads.edge_moment * edge_rotation_from_rest(model, state.edge_quaternion)))
+    loaded = np.flatnonzero(np.any(loads.edge_moment != 0.0, axis=1))
+    if loaded.size:
+        rotation = edge_rotation_from_rest(model, state.edge_quaternion, loaded)
+        value -= float(np.sum(loads.edge_moment[loaded] * rotation))
     return value
 
 

@@ -6,6 +6,12 @@ multipliers, projects every constraint ``iterations`` times (Gauss–Seidel; con
 in parallel when ``parallel`` is set) and recovers velocities from the position change. This is
 the dynamic engine; for equilibria use :class:`~yarnfit.engine.quasistatic.QuasiStaticSolver`,
 whose answer does not depend on a step size (``docs/design.md`` §5).
+
+Stiffness needs iterations: Gauss–Seidel resolves a stiff rod's bending only with enough
+substeps × iterations, and an under-resolved rod behaves softer than it is (a 0.1 m, r = 1 mm,
+E = 1 GPa rod pinned at both ends sags 200× too far at 4 × 10 per ms; 50 × 2 resolves it). Prefer
+many substeps with one or two iterations each (Macklin et al. 2019, "Small steps in physics
+simulation").
 """
 
 from __future__ import annotations
