@@ -67,13 +67,6 @@ def quat_rotate_inv(q, v):
 
 
 @njit(cache=True)
-def quat_d3(q):
-    """Third director ``R(q) e3`` (the edge tangent of a rod frame)."""
-    w, x, y, z = q
-    return (2.0 * (x * z + w * y), 2.0 * (y * z - w * x), w * w - x * x - y * y + z * z)
-
-
-@njit(cache=True)
 def quat_exp(theta):
     """Unit quaternion of the rotation vector ``theta`` (axis times angle, radians)."""
     angle2 = theta[0] * theta[0] + theta[1] * theta[1] + theta[2] * theta[2]
@@ -143,21 +136,6 @@ def norm(a):
 def normalized(a):
     inv = 1.0 / math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
     return (a[0] * inv, a[1] * inv, a[2] * inv)
-
-
-@njit(cache=True)
-def sub(a, b):
-    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
-
-
-@njit(cache=True)
-def add(a, b):
-    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
-
-
-@njit(cache=True)
-def scale(a, s):
-    return (a[0] * s, a[1] * s, a[2] * s)
 
 
 @njit(cache=True)
