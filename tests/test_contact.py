@@ -17,7 +17,7 @@ from yarnfit.engine import (
     XPBDSolver,
     straight_points,
 )
-from yarnfit.engine import _contact_kernels
+from yarnfit.engine.contact import find_pairs
 from yarnfit.engine.model import CONTACT_EXCLUSION_FACTOR
 
 # Issue acceptance: pressed rods stop at centreline distance ra + rb within 1 %.
@@ -133,12 +133,9 @@ def test_broad_phase_finds_exactly_the_overlapping_pairs():
     model = RodModel.from_rods(rods)
     x = model.node_rest_position
     margin = 1e-3
-    found = _contact_kernels.broad_phase(
-        x, x, model.edge_nodes, model.edge_offset, model.edge_radius, model.edge_rod, model.edge_arc_start,
-        model.edge_rest_length, model.rod_length, model.rod_closed, ~model.node_pinned, margin,
-        CONTACT_EXCLUSION_FACTOR,
-    )
-    found = {tuple(p) for p in found}
+    candidates = find_pairs(model, x, margin)
+    assert not candidates.images.any()  # not periodic: no images
+    found = {tuple(p) for p in candidates.pairs.tolist()}
     assert found == brute_force_pairs(model, x, margin)
     assert len(found) > 100  # a dense tangle, not a trivial case
 
@@ -148,11 +145,7 @@ def test_neighbours_along_a_yarn_never_touch_but_a_folded_yarn_does():
     # into a hairpin (legs 3r apart at the tip, U-turn of radius 1.5r) sees its legs as candidates.
     radius = 1e-3
     straight = RodModel.from_rods([Rod(straight_points(0.02, 40), radius, MATERIAL)])
-    x = straight.node_rest_position
-    args = (straight.edge_nodes, straight.edge_offset, straight.edge_radius, straight.edge_rod,
-            straight.edge_arc_start, straight.edge_rest_length, straight.rod_length, straight.rod_closed,
-            ~straight.node_pinned, radius, CONTACT_EXCLUSION_FACTOR)
-    assert len(_contact_kernels.broad_phase(x, x, *args)) == 0
+    assert len(find_pairs(straight, straight.node_rest_position, radius)) == 0
     turn = np.linspace(0.0, math.pi, 12)
     leg = np.linspace(0.0, 0.01, 21)[1:]
     hairpin = np.concatenate([
@@ -162,10 +155,7 @@ def test_neighbours_along_a_yarn_never_touch_but_a_folded_yarn_does():
     ])
     folded = RodModel.from_rods([Rod(hairpin, radius, MATERIAL)])
     y = folded.node_rest_position
-    args = (folded.edge_nodes, folded.edge_offset, folded.edge_radius, folded.edge_rod, folded.edge_arc_start,
-            folded.edge_rest_length, folded.rod_length, folded.rod_closed, ~folded.node_pinned, radius,
-            CONTACT_EXCLUSION_FACTOR)
-    pairs = _contact_kernels.broad_phase(y, y, *args)
+    pairs = find_pairs(folded, y, radius).pairs.tolist()
     legs = [(a, b) for a, b in pairs if y[folded.edge_nodes[a], 0].min() > 2 * radius and y[folded.edge_nodes[b], 0].min() > 2 * radius]
     assert len(legs) > 10
 

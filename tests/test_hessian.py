@@ -5,6 +5,7 @@ tests check), so an error here costs iterations, not accuracy; this test keeps i
 """
 
 import numpy as np
+import pytest
 
 from yarnfit.engine import Loads, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState, straight_points
 from yarnfit.engine import _contact_kernels
@@ -13,6 +14,11 @@ from yarnfit.engine.quasistatic import _Contacts, _rotate_frames, _Work
 # Central differences of the analytic gradient at step h carry O(h²) truncation and O(ε/h)
 # round-off: ~1e-10 relative at the steps below; 1e-7 leaves room and still fails on any wrong term.
 HESSIAN_RTOL = 1e-7
+# Central differences of the contact energy (~5e-4 J, mostly the constant M(λ) / k) at h = 1e-10 m
+# lose ε E / h ~ 1e-9 N to round-off, and inside the smoothing band the ramp's third derivative
+# k² / 2δ ~ 1e12 J/m³ adds h² f''' / 6 ~ 2e-9 N: both ~1e-6 of the gradient. A wrong term (a
+# missing ½, a sign, the band's offset) errs by O(1).
+ENERGY_DIFFERENCE_RTOL = 1e-5
 
 
 def test_rod_hessian_matches_differences_of_the_gradient():
@@ -51,32 +57,74 @@ def test_rod_hessian_matches_differences_of_the_gradient():
     assert np.abs(hessian - symmetric).max() <= HESSIAN_RTOL * np.abs(hessian).max()
 
 
-def test_contact_hessian_matches_differences_of_the_gradient():
-    # One crossing pair, active (smooth branch) and penetrating, with a multiplier.
-    points = np.array([[-1e-3, 0.0, 0.0], [1e-3, 1e-4, 0.0], [2e-4, -1e-3, 1.9e-4], [-1e-4, 1e-3, 1.95e-4]])
+# Contact pair geometry for the tests below: two crossing segments 2.45e-4 m apart (radii 1e-4).
+CONTACT_POINTS = np.array([[-1e-3, 0.0, 0.0], [1e-3, 1e-4, 0.0], [2e-4, -1e-3, 1.9e-4], [-1e-4, 1e-3, 1.95e-4]])
+CONTACT_STIFFNESS = 4.7e5
+CONTACT_SMOOTHING = 1e-3
+
+
+def _contact_pair_terms(multiplier):
+    """Energy, gradient and Hessian functions of the one-pair contact term."""
     edge_nodes = np.array([[0, 1], [2, 3]])
     offset = np.zeros((2, 3))
     radius = np.array([1e-4, 1e-4])
     pairs = np.array([[0, 1]])
-    multiplier, stiffness, active = np.array([2e-3]), np.array([4.7e5]), np.array([True])
+    shift = np.zeros((1, 3))
+    lam, k = np.array([multiplier]), np.array([CONTACT_STIFFNESS])
 
-    def gradient(x):
+    def energy_gradient(x):
         g = np.zeros((4, 3))
-        _contact_kernels.contact_energy_gradient(x, edge_nodes, offset, radius, pairs, multiplier, stiffness, active, g,
-                                                 np.zeros(4), np.empty(1), np.empty(1))
-        return g.ravel()
+        gap = np.empty(1)
+        energy = _contact_kernels.contact_energy_gradient(x, edge_nodes, offset, radius, pairs, shift, lam, k,
+                                                          CONTACT_SMOOTHING, g, np.zeros(4), gap, np.empty(1))
+        return energy, g.ravel(), gap[0]
 
-    rows, cols, vals = np.empty(144, np.int64), np.empty(144, np.int64), np.empty(144)
-    count = _contact_kernels.contact_hessian_coo(points, edge_nodes, offset, radius, pairs, multiplier, stiffness,
-                                                 active, 1e-6, rows, cols, vals, 0)
-    hessian = np.zeros((12, 12))
-    np.add.at(hessian, (rows[:count], cols[:count]), vals[:count])
+    def hessian(x):
+        rows, cols, vals = np.empty(144, np.int64), np.empty(144, np.int64), np.empty(144)
+        count = _contact_kernels.contact_hessian_coo(x, edge_nodes, offset, radius, pairs, shift, lam, k,
+                                                     CONTACT_SMOOTHING, 1e-6, rows, cols, vals, 0)
+        out = np.zeros((12, 12))
+        np.add.at(out, (rows[:count], cols[:count]), vals[:count])
+        return out
+
+    return energy_gradient, hessian
+
+
+def _contact_multiplier(band_position):
+    """Multiplier that puts ``λ − k g`` at ``band_position`` half-widths of the smoothing band."""
+    gap = _contact_pair_terms(0.0)[0](CONTACT_POINTS)[2]
+    delta = CONTACT_SMOOTHING * CONTACT_STIFFNESS * 2e-4
+    return CONTACT_STIFFNESS * gap + band_position * delta
+
+
+# Above the band (the quadratic branch) and inside it (the parabolic ramp).
+@pytest.mark.parametrize("band_position", [5.0, 0.3])
+def test_contact_hessian_matches_differences_of_the_gradient(band_position):
+    energy_gradient, hessian = _contact_pair_terms(_contact_multiplier(band_position))
     h = 1e-9
     differences = np.empty((12, 12))
     for k in range(12):
-        x = points.ravel().copy()
+        x = CONTACT_POINTS.ravel().copy()
         x[k] += h
-        plus = gradient(x.reshape(4, 3))
+        plus = energy_gradient(x.reshape(4, 3))[1]
         x[k] -= 2 * h
-        differences[:, k] = (plus - gradient(x.reshape(4, 3))) / (2 * h)
-    assert np.abs(hessian - 0.5 * (differences + differences.T)).max() <= HESSIAN_RTOL * np.abs(hessian).max()
+        differences[:, k] = (plus - energy_gradient(x.reshape(4, 3))[1]) / (2 * h)
+    exact = hessian(CONTACT_POINTS)
+    assert np.abs(exact).max() > 0.0
+    assert np.abs(exact - 0.5 * (differences + differences.T)).max() <= HESSIAN_RTOL * np.abs(exact).max()
+
+
+@pytest.mark.parametrize("band_position", [5.0, 0.3, -0.7])
+def test_contact_gradient_matches_differences_of_the_energy(band_position):
+    energy_gradient, _ = _contact_pair_terms(_contact_multiplier(band_position))
+    _, gradient, _ = energy_gradient(CONTACT_POINTS)
+    h = 1e-10
+    differences = np.empty(12)
+    for k in range(12):
+        x = CONTACT_POINTS.ravel().copy()
+        x[k] += h
+        plus = energy_gradient(x.reshape(4, 3))[0]
+        x[k] -= 2 * h
+        differences[k] = (plus - energy_gradient(x.reshape(4, 3))[0]) / (2 * h)
+    assert np.abs(gradient).max() > 0.0
+    assert np.abs(gradient - differences).max() <= ENERGY_DIFFERENCE_RTOL * np.abs(gradient).max()

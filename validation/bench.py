@@ -25,8 +25,8 @@ from yarnfit.engine import (
     RodState,
     straight_points,
 )
-from yarnfit.engine import _contact_kernels, _kernels
-from yarnfit.engine.model import CONTACT_EXCLUSION_FACTOR
+from yarnfit.engine import _kernels
+from yarnfit.engine.contact import find_pairs
 from yarnfit.engine.xpbd import _color_constraints
 
 # A polyester-like yarn: r = 0.1 mm, E = 3 GPa (docs/design.md §4 fibre table, mid-range).
@@ -114,21 +114,18 @@ def tiled_bundles(copies: int) -> RodModel:
 def broad_phase_seconds(model: RodModel, repeats: int = 5) -> tuple[float, int]:
     """Best time of a static broad-phase query over the model (s) and the pairs it finds."""
     x = np.array(model.node_rest_position)
-    args = (x, x, model.edge_nodes, model.edge_offset, model.edge_radius, model.edge_rod, model.edge_arc_start,
-            model.edge_rest_length, model.rod_length, model.rod_closed, ~model.node_pinned, YARN_RADIUS,
-            CONTACT_EXCLUSION_FACTOR)
-    pairs = _contact_kernels.broad_phase(*args)
+    n_pairs = len(find_pairs(model, x, YARN_RADIUS))
     best = math.inf
     for _ in range(repeats):
         start = time.perf_counter()
-        _contact_kernels.broad_phase(*args)
+        find_pairs(model, x, YARN_RADIUS)
         best = min(best, time.perf_counter() - start)
-    return best, len(pairs)
+    return best, n_pairs
 
 
 def n_per_layer_crossings(model: RodModel, result) -> int:
     """Number of distinct yarn pairs touching (crossings carrying load)."""
-    rods = model.edge_rod[result.contact_pairs]
+    rods = model.edge_rod[result.contact_pairs.pairs]
     return len({tuple(sorted(pair)) for pair in rods.tolist()})
 
 
@@ -174,10 +171,14 @@ SECTIONS = {"engine": bench_engine}
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("sections", nargs="*", choices=sorted(SECTIONS), default=sorted(SECTIONS),
-                        help="sections to run (default: all)")
+    # No ``choices`` with ``nargs="*"``: argparse checks a list default against them as one value.
+    parser.add_argument("sections", nargs="*", metavar="section",
+                        help=f"sections to run: {', '.join(sorted(SECTIONS))} (default: all)")
     args = parser.parse_args(argv)
-    for name in args.sections:
+    unknown = sorted(set(args.sections) - set(SECTIONS))
+    if unknown:
+        parser.error(f"unknown section(s) {', '.join(unknown)}; choose from {', '.join(sorted(SECTIONS))}")
+    for name in args.sections or sorted(SECTIONS):
         SECTIONS[name]()
     return 0
 

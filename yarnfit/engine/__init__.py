@@ -12,15 +12,25 @@ Typical use::
 """
 
 from .energy import EnergyTerms, energy, energy_gradient
-from .model import Rod, RodMaterial, RodModel, parallel_transport_frames, straight_points
-from .quasistatic import ConvergenceWarning, QuasiStaticOptions, QuasiStaticResult, QuasiStaticSolver, Residual
+from .model import Rod, RodMaterial, RodModel, aligned_frames, parallel_transport_frames, straight_points
+from .quasistatic import (
+    ConvergenceWarning,
+    LinearConstraints,
+    Progress,
+    QuasiStaticOptions,
+    QuasiStaticResult,
+    QuasiStaticSolver,
+    Residual,
+)
 from .state import Loads, RodState
 from .xpbd import XPBDOptions, XPBDSolver
 
 __all__ = [
     "ConvergenceWarning",
     "EnergyTerms",
+    "LinearConstraints",
     "Loads",
+    "Progress",
     "QuasiStaticOptions",
     "QuasiStaticResult",
     "QuasiStaticSolver",
@@ -31,6 +41,7 @@ __all__ = [
     "RodState",
     "XPBDOptions",
     "XPBDSolver",
+    "aligned_frames",
     "energy",
     "energy_gradient",
     "parallel_transport_frames",

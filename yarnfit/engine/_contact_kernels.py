@@ -78,40 +78,67 @@ def _edge_points(pos, edge_nodes, edge_offset, e):
     return p0, p1
 
 
+@njit(cache=True)
+def _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p):
+    """End points of the two edges of pair ``p``; the second edge moved to its periodic image."""
+    a0, a1 = _edge_points(pos, edge_nodes, edge_offset, pairs[p, 0])
+    b0, b1 = _edge_points(pos, edge_nodes, edge_offset, pairs[p, 1])
+    sx = pair_shift[p, 0]
+    sy = pair_shift[p, 1]
+    sz = pair_shift[p, 2]
+    return a0, a1, (b0[0] + sx, b0[1] + sy, b0[2] + sz), (b1[0] + sx, b1[1] + sy, b1[2] + sz)
+
+
 # ---------------------------------------------------------------------------------------------
 # Broad phase
 # ---------------------------------------------------------------------------------------------
 
 
 @njit(cache=True)
-def _arc_gap(a, b, edge_rod, edge_arc_start, edge_rest_length, rod_length, rod_closed):
-    """Rest arc length between edges ``a`` and ``b`` of one rod (0 when they share a node)."""
+def _pair_excluded(a, b, image_x, image_y, edge_rod, edge_chain_tile, edge_arc_start, edge_rest_length, edge_radius,
+                   rod_length, rod_closed, rod_period, exclusion_factor):
+    """Edges ``a`` and ``b`` (at tile image (image_x, image_y)) are neighbours along one yarn.
+
+    Unroll the yarn into one infinite chain: edge ``e`` sits there moved by its ``edge_chain_tile``
+    C_e, and its copy ``k`` periods on (period P tiles, length L per period) lies ``k L`` further
+    along. Edge b at image I is that copy, seen from edge a, when ``I + C_a − C_b = k P``; any
+    other image is another yarn copy. A closed loop that stays in its tile (P = 0) wraps around
+    instead. Pairs closer than ``exclusion_factor · (ra + rb)`` in rest arc length never make
+    contact.
+    """
+    r = edge_rod[a]
+    if edge_rod[b] != r:
+        return False
+    shift_x = image_x + edge_chain_tile[a, 0] - edge_chain_tile[b, 0]
+    shift_y = image_y + edge_chain_tile[a, 1] - edge_chain_tile[b, 1]
+    px = rod_period[r, 0]
+    py = rod_period[r, 1]
     sa = edge_arc_start[a]
-    sb = edge_arc_start[b]
     la = edge_rest_length[a]
+    sb = edge_arc_start[b]
     lb = edge_rest_length[b]
-    if sa > sb:
-        sa, sb = sb, sa
-        la, lb = lb, la
-    gap = sb - (sa + la)
-    if rod_closed[edge_rod[a]]:
-        gap = min(gap, sa + rod_length[edge_rod[a]] - (sb + lb))
-    return max(gap, 0.0)
+    threshold = exclusion_factor * (edge_radius[a] + edge_radius[b])
+    if px == 0 and py == 0:
+        if shift_x != 0 or shift_y != 0:
+            return False
+        gap = _interval_gap(sa, la, sb, lb)
+        if rod_closed[r]:
+            length = rod_length[r]
+            gap = min(gap, _interval_gap(sa, la, sb + length, lb), _interval_gap(sa, la, sb - length, lb))
+        return gap < threshold
+    # The shift must be a whole number of yarn periods.
+    if shift_x * py != shift_y * px:
+        return False
+    k = (shift_x * px + shift_y * py) // (px * px + py * py)
+    if k * px != shift_x or k * py != shift_y:
+        return False
+    return _interval_gap(sa, la, sb + k * rod_length[r], lb) < threshold
 
 
 @njit(cache=True)
-def _pair_excluded(a, b, edge_nodes, edge_rod, edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, exclusion_factor):
-    if edge_rod[a] != edge_rod[b]:
-        return False
-    if (
-        edge_nodes[a, 0] == edge_nodes[b, 0]
-        or edge_nodes[a, 0] == edge_nodes[b, 1]
-        or edge_nodes[a, 1] == edge_nodes[b, 0]
-        or edge_nodes[a, 1] == edge_nodes[b, 1]
-    ):
-        return True
-    gap = _arc_gap(a, b, edge_rod, edge_arc_start, edge_rest_length, rod_length, rod_closed)
-    return gap < exclusion_factor * (edge_radius[a] + edge_radius[b])
+def _interval_gap(start_a, length_a, start_b, length_b):
+    """Distance between the intervals [start, start + length] (0 when they touch or overlap)."""
+    return max(start_b - (start_a + length_a), start_a - (start_b + length_b), 0.0)
 
 
 @njit(cache=True)
@@ -128,9 +155,74 @@ def edge_boxes(pos, pos_end, edge_nodes, edge_offset, edge_radius, margin, lower
 
 
 @njit(cache=True)
-def _scan_grid(keys, order, entry_edge, entry_cell, lower, upper, cell_size, origin, edge_nodes, edge_rod,
-               edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, exclusion_factor,
-               node_free, out, count_only):
+def _virtual_boxes(lower, upper, lattice, image_range):
+    """Copies of the edge boxes at every tile image within ``image_range`` that can reach the
+    boxes of the home tile. Returns ``(edge, image (M, 2), lower (M, 3), upper (M, 3))``."""
+    n_edges = lower.shape[0]
+    hull_lo = np.empty(3)
+    hull_hi = np.empty(3)
+    for k in range(3):
+        hull_lo[k] = lower[:, k].min()
+        hull_hi[k] = upper[:, k].max()
+    nx = 2 * image_range[0] + 1
+    ny = 2 * image_range[1] + 1
+    count = 0
+    for pass_ in range(2):
+        if pass_ == 1:
+            v_edge = np.empty(count, dtype=np.int64)
+            v_image = np.empty((count, 2), dtype=np.int64)
+            v_lower = np.empty((count, 3))
+            v_upper = np.empty((count, 3))
+            count = 0
+        for ix in range(nx):
+            for iy in range(ny):
+                i = ix - image_range[0]
+                j = iy - image_range[1]
+                shift = (i * lattice[0, 0] + j * lattice[1, 0], i * lattice[0, 1] + j * lattice[1, 1],
+                         i * lattice[0, 2] + j * lattice[1, 2])
+                for e in range(n_edges):
+                    inside = True
+                    for k in range(3):
+                        if lower[e, k] + shift[k] > hull_hi[k] or upper[e, k] + shift[k] < hull_lo[k]:
+                            inside = False
+                            break
+                    if not inside:
+                        continue
+                    if pass_ == 1:
+                        v_edge[count] = e
+                        v_image[count, 0] = i
+                        v_image[count, 1] = j
+                        for k in range(3):
+                            v_lower[count, k] = lower[e, k] + shift[k]
+                            v_upper[count, k] = upper[e, k] + shift[k]
+                    count += 1
+    return v_edge, v_image, v_lower, v_upper
+
+
+@njit(cache=True)
+def _canonical(a, ia, ja, b, ib, jb):
+    """The unique report of a pair of virtual edges: ``(first, second, image of second)`` with the
+    first edge in the home tile, ``first < second`` or, for an edge and its own image, the image
+    positive in (x, then y); ``first = −1`` when this virtual pair is a translate of the report."""
+    if a < b:
+        if ia == 0 and ja == 0:
+            return a, b, ib, jb
+        return -1, -1, 0, 0
+    if b < a:
+        if ib == 0 and jb == 0:
+            return b, a, ia, ja
+        return -1, -1, 0, 0
+    if ia == 0 and ja == 0 and (ib > 0 or (ib == 0 and jb > 0)):
+        return a, a, ib, jb
+    if ib == 0 and jb == 0 and (ia > 0 or (ia == 0 and ja > 0)):
+        return a, a, ia, ja
+    return -1, -1, 0, 0
+
+
+@njit(cache=True)
+def _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes, edge_rod, edge_chain_tile,
+               edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, rod_period, exclusion_factor,
+               node_free, out_pairs, out_images, count_only):
     n_pairs = 0
     n = keys.shape[0]
     start = 0
@@ -140,115 +232,130 @@ def _scan_grid(keys, order, entry_edge, entry_cell, lower, upper, cell_size, ori
         while stop < n and keys[order[stop]] == key:
             stop += 1
         for u in range(start, stop):
-            a = entry_edge[order[u]]
-            for v in range(u + 1, stop):
-                b = entry_edge[order[v]]
-                lo = a if a < b else b
-                hi = b if a < b else a
+            vu = entry_cell[order[u], 3]
+            for w in range(u + 1, stop):
+                vw = entry_cell[order[w], 3]
+                a, b, ix, iy = _canonical(v_edge[vu], v_image[vu, 0], v_image[vu, 1],
+                                          v_edge[vw], v_image[vw, 0], v_image[vw, 1])
+                if a < 0:
+                    continue
                 overlap = True
                 owner = True
                 for k in range(3):
-                    if lower[lo, k] > upper[hi, k] or lower[hi, k] > upper[lo, k]:
+                    if v_lower[vu, k] > v_upper[vw, k] or v_lower[vw, k] > v_upper[vu, k]:
                         overlap = False
                         break
                     # Report the pair only from the lowest cell of the boxes' intersection.
-                    first = math.floor((max(lower[lo, k], lower[hi, k]) - origin[k]) / cell_size)
+                    first = math.floor((max(v_lower[vu, k], v_lower[vw, k]) - origin[k]) / cell_size)
                     if first != entry_cell[order[u], k]:
                         owner = False
                 if not overlap or not owner:
                     continue
-                if not (node_free[edge_nodes[lo, 0]] or node_free[edge_nodes[lo, 1]]
-                        or node_free[edge_nodes[hi, 0]] or node_free[edge_nodes[hi, 1]]):
+                if not (node_free[edge_nodes[a, 0]] or node_free[edge_nodes[a, 1]]
+                        or node_free[edge_nodes[b, 0]] or node_free[edge_nodes[b, 1]]):
                     continue
-                if _pair_excluded(lo, hi, edge_nodes, edge_rod, edge_arc_start, edge_rest_length, edge_radius,
-                                  rod_length, rod_closed, exclusion_factor):
+                if _pair_excluded(a, b, ix, iy, edge_rod, edge_chain_tile, edge_arc_start, edge_rest_length,
+                                  edge_radius, rod_length, rod_closed, rod_period, exclusion_factor):
                     continue
                 if not count_only:
-                    out[n_pairs, 0] = lo
-                    out[n_pairs, 1] = hi
+                    out_pairs[n_pairs, 0] = a
+                    out_pairs[n_pairs, 1] = b
+                    out_images[n_pairs, 0] = ix
+                    out_images[n_pairs, 1] = iy
                 n_pairs += 1
         start = stop
     return n_pairs
 
 
 @njit(cache=True)
-def broad_phase(pos, pos_end, edge_nodes, edge_offset, edge_radius, edge_rod, edge_arc_start, edge_rest_length,
-                rod_length, rod_closed, node_free, margin, exclusion_factor):
-    """Candidate contact pairs ``(P, 2)`` (``a < b``) whose inflated boxes, swept from ``pos`` to
-    ``pos_end`` (pass the same array twice for a static query), overlap.
+def broad_phase(pos, pos_end, edge_nodes, edge_offset, edge_radius, edge_rod, edge_chain_tile, edge_arc_start, edge_rest_length,
+                rod_length, rod_closed, rod_period, lattice, image_range, node_free, margin, exclusion_factor):
+    """Candidate contact pairs whose inflated boxes, swept from ``pos`` to ``pos_end`` (pass the
+    same array twice for a static query), overlap.
 
-    Uniform grid with cell size equal to the largest box, so each box covers at most 2×2×2 cells;
-    entries are sorted by cell key, so the cost is O(E log E) plus the pairs found. Pairs of one rod
-    closer than ``exclusion_factor · (ra + rb)`` in rest arc length (neighbours along the yarn) and
-    pairs whose four nodes are all pinned are left out.
+    Returns ``pairs (P, 2)`` and ``images (P, 2)``: edge ``pairs[p, 1]`` is taken at the tile image
+    ``images[p]`` (moved by ``images[p] @ lattice``); ``image_range (2,)`` bounds the images searched
+    (zero for a non-periodic model). Uniform grid with cell size equal to the largest box, entries
+    sorted by cell key: O(E log E) plus the pairs found. Neighbours along one yarn (see
+    :func:`_pair_excluded`) and pairs whose four nodes are all pinned are left out.
     """
     n_edges = edge_nodes.shape[0]
     lower = np.empty((n_edges, 3))
     upper = np.empty((n_edges, 3))
     edge_boxes(pos, pos_end, edge_nodes, edge_offset, edge_radius, margin, lower, upper)
-    if n_edges < 2:
-        return np.empty((0, 2), dtype=np.int64)
+    v_edge, v_image, v_lower, v_upper = _virtual_boxes(lower, upper, lattice, image_range)
+    n_virtual = v_edge.shape[0]
+    if n_virtual < 2:
+        return np.empty((0, 2), dtype=np.int64), np.empty((0, 2), dtype=np.int64)
     cell_size = 0.0
     origin = np.empty(3)
     extent = np.empty(3, dtype=np.int64)
     for k in range(3):
-        origin[k] = lower[:, k].min()
-    for e in range(n_edges):
+        origin[k] = v_lower[:, k].min()
+    for v in range(n_virtual):
         for k in range(3):
-            cell_size = max(cell_size, upper[e, k] - lower[e, k])
+            cell_size = max(cell_size, v_upper[v, k] - v_lower[v, k])
     for k in range(3):
-        extent[k] = int(math.floor((upper[:, k].max() - origin[k]) / cell_size)) + 1
+        extent[k] = int(math.floor((v_upper[:, k].max() - origin[k]) / cell_size)) + 1
     n_entries = 0
-    for e in range(n_edges):
+    for v in range(n_virtual):
         m = 1
         for k in range(3):
-            m *= int(math.floor((upper[e, k] - origin[k]) / cell_size)) - int(math.floor((lower[e, k] - origin[k]) / cell_size)) + 1
+            m *= (int(math.floor((v_upper[v, k] - origin[k]) / cell_size))
+                  - int(math.floor((v_lower[v, k] - origin[k]) / cell_size)) + 1)
         n_entries += m
     keys = np.empty(n_entries, dtype=np.int64)
-    entry_edge = np.empty(n_entries, dtype=np.int64)
-    entry_cell = np.empty((n_entries, 3), dtype=np.int64)
+    entry_cell = np.empty((n_entries, 4), dtype=np.int64)  # cell (x, y, z) and virtual edge
     u = 0
-    for e in range(n_edges):
-        c0 = np.empty(3, dtype=np.int64)
-        c1 = np.empty(3, dtype=np.int64)
-        for k in range(3):
-            c0[k] = int(math.floor((lower[e, k] - origin[k]) / cell_size))
-            c1[k] = int(math.floor((upper[e, k] - origin[k]) / cell_size))
-        for ix in range(c0[0], c1[0] + 1):
-            for iy in range(c0[1], c1[1] + 1):
-                for iz in range(c0[2], c1[2] + 1):
+    for v in range(n_virtual):
+        c0x = int(math.floor((v_lower[v, 0] - origin[0]) / cell_size))
+        c0y = int(math.floor((v_lower[v, 1] - origin[1]) / cell_size))
+        c0z = int(math.floor((v_lower[v, 2] - origin[2]) / cell_size))
+        c1x = int(math.floor((v_upper[v, 0] - origin[0]) / cell_size))
+        c1y = int(math.floor((v_upper[v, 1] - origin[1]) / cell_size))
+        c1z = int(math.floor((v_upper[v, 2] - origin[2]) / cell_size))
+        for ix in range(c0x, c1x + 1):
+            for iy in range(c0y, c1y + 1):
+                for iz in range(c0z, c1z + 1):
                     keys[u] = ix + extent[0] * (iy + extent[1] * iz)
-                    entry_edge[u] = e
                     entry_cell[u, 0] = ix
                     entry_cell[u, 1] = iy
                     entry_cell[u, 2] = iz
+                    entry_cell[u, 3] = v
                     u += 1
     order = np.argsort(keys, kind="mergesort")
-    dummy = np.empty((0, 2), dtype=np.int64)
-    n_pairs = _scan_grid(keys, order, entry_edge, entry_cell, lower, upper, cell_size, origin, edge_nodes, edge_rod,
-                         edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, exclusion_factor,
-                         node_free, dummy, True)
+    dummy_pairs = np.empty((0, 2), dtype=np.int64)
+    dummy_images = np.empty((0, 2), dtype=np.int64)
+    n_pairs = _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes,
+                         edge_rod, edge_chain_tile, edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, rod_period,
+                         exclusion_factor, node_free, dummy_pairs, dummy_images, True)
     pairs = np.empty((n_pairs, 2), dtype=np.int64)
-    _scan_grid(keys, order, entry_edge, entry_cell, lower, upper, cell_size, origin, edge_nodes, edge_rod,
-               edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, exclusion_factor,
-               node_free, pairs, False)
-    return pairs
+    images = np.empty((n_pairs, 2), dtype=np.int64)
+    _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes, edge_rod, edge_chain_tile,
+               edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, rod_period, exclusion_factor,
+               node_free, pairs, images, False)
+    return pairs, images
 
 
 @njit(cache=True)
-def tunneling_step_limit(pos, dx, edge_nodes, edge_offset, pairs, fraction):
+def pair_distances(pos, edge_nodes, edge_offset, pairs, pair_shift, out):
+    """Centreline distance of every pair into ``out (P,)`` (m)."""
+    for p in range(pairs.shape[0]):
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
+        out[p] = segment_closest_points(a0, a1, b0, b1)[2]
+
+
+@njit(cache=True)
+def tunneling_step_limit(pos, dx, edge_nodes, edge_offset, pairs, pair_shift, fraction):
     """Largest step length ``α ≤ 1`` along node displacements ``dx (N, 3)`` such that no pair's
     centreline distance can reach zero: the distance of two segments changes by at most the sum of
     their largest node moves, so ``α (δa + δb) ≤ fraction · d0`` keeps every pair apart."""
     alpha = 1.0
     for p in range(pairs.shape[0]):
-        ea = pairs[p, 0]
-        eb = pairs[p, 1]
-        a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
-        b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
         _, _, dist, _ = segment_closest_points(a0, a1, b0, b1)
         travel = 0.0
-        for e in (ea, eb):
+        for e in (pairs[p, 0], pairs[p, 1]):
             move = 0.0
             for m in range(2):
                 i = edge_nodes[e, m]
@@ -265,19 +372,31 @@ def tunneling_step_limit(pos, dx, edge_nodes, edge_offset, pairs, fraction):
 
 
 @njit(cache=True)
-def _contact_local_gradient(a0, a1, b0, b1, radius_sum, multiplier, stiffness, active, out):
+def _smooth_ramp(t, delta):
+    """C¹ ramp ``m(t)`` and its integral ``M(t)``: ``m = 0`` below ``−δ``, ``(t + δ)² / 4δ`` within
+    ``±δ``, ``t`` above ``δ`` (so ``M = t² / 2 + δ² / 6`` there)."""
+    if t <= -delta:
+        return 0.0, 0.0
+    if t >= delta:
+        return t, 0.5 * t * t + delta * delta / 6.0
+    u = t + delta
+    return u * u / (4.0 * delta), u * u * u / (12.0 * delta)
+
+
+@njit(cache=True)
+def _contact_local_gradient(a0, a1, b0, b1, radius_sum, multiplier, stiffness, smoothing, out):
     """Gradient (12,) of the augmented-Lagrangian term of one pair; returns (energy, gap, force).
 
-    A pair in the active set uses the smooth term ``((λ − k g)² − λ²) / 2k`` (its force
-    ``λ − k g`` may turn tensile while Newton iterates; the active-set update then releases it);
-    any other pair the one-sided ``(max(0, λ − k g)² − λ²) / 2k``.
+    The term is ``(M(λ − k g) − M(λ)) / k`` with the smoothed ramp of :func:`_smooth_ramp`,
+    ``δ = smoothing · k · (ra + rb)``; its normal force is ``m(λ − k g) ≥ 0``. Above the smoothing
+    band this is the usual ``((λ − k g)² − λ²) / 2k``.
     """
     s, t, dist, n = segment_closest_points(a0, a1, b0, b1)
     gap = dist - radius_sum
-    force = multiplier - stiffness * gap
-    if not active and force < 0.0:
-        force = 0.0
-    energy = (force * force - multiplier * multiplier) / (2.0 * stiffness)
+    delta = smoothing * stiffness * radius_sum
+    force, integral = _smooth_ramp(multiplier - stiffness * gap, delta)
+    _, integral_at_contact = _smooth_ramp(multiplier, delta)
+    energy = (integral - integral_at_contact) / stiffness
     # ∂ψ/∂x = −force ∂g/∂x, ∂g/∂(a0, a1, b0, b1) = ((1 − s) n, s n, −(1 − t) n, −t n)
     for k in range(3):
         out[k] = -force * (1.0 - s) * n[k]
@@ -288,10 +407,9 @@ def _contact_local_gradient(a0, a1, b0, b1, radius_sum, multiplier, stiffness, a
 
 
 @njit(cache=True)
-def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, multiplier, stiffness, active,
-                            node_grad, node_scale, out_gap, out_force):
-    """Augmented-Lagrangian contact energy ``Σ (f² − λ²) / (2k)`` (J) with the pair forces
-    ``f = λ − k g`` for pairs in the active set ``active (P,)`` and ``max(0, λ − k g)`` otherwise.
+def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, pair_shift, multiplier, stiffness,
+                            smoothing, node_grad, node_scale, out_gap, out_force):
+    """Augmented-Lagrangian contact energy (J) of all pairs (see :func:`_contact_local_gradient`).
 
     Adds the gradient into ``node_grad (N, 3)`` and force magnitudes into ``node_scale``; writes
     each pair's gap (m) and normal force (N).
@@ -301,10 +419,9 @@ def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, mu
     for p in range(pairs.shape[0]):
         ea = pairs[p, 0]
         eb = pairs[p, 1]
-        a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
-        b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
         e, gap, force = _contact_local_gradient(a0, a1, b0, b1, edge_radius[ea] + edge_radius[eb],
-                                                multiplier[p], stiffness[p], active[p], local)
+                                                multiplier[p], stiffness[p], smoothing, local)
         energy += e
         out_gap[p] = gap
         out_force[p] = force
@@ -321,9 +438,9 @@ def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, mu
 
 
 @njit(cache=True)
-def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, multiplier, stiffness, active,
-                        fd_relative_step, rows, cols, vals, start):
-    """Hessian of the contact terms as COO triplets (144 per active pair) from ``start``.
+def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, pair_shift, multiplier, stiffness,
+                        smoothing, fd_relative_step, rows, cols, vals, start):
+    """Hessian of the contact terms as COO triplets (144 per pair in reach) from ``start``.
 
     Central differences of the analytic pair gradient (step ``fd_relative_step`` times the sum of
     radii), which include the motion of the closest points. Returns the new entry count.
@@ -335,13 +452,12 @@ def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, multip
     for p in range(pairs.shape[0]):
         ea = pairs[p, 0]
         eb = pairs[p, 1]
-        a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
-        b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
         rsum = edge_radius[ea] + edge_radius[eb]
         h = fd_relative_step * rsum
-        _, gap, force = _contact_local_gradient(a0, a1, b0, b1, rsum, multiplier[p], stiffness[p], active[p], gp)
+        _, gap, force = _contact_local_gradient(a0, a1, b0, b1, rsum, multiplier[p], stiffness[p], smoothing, gp)
         # Separated beyond the reach of the finite-difference stencil: no curvature.
-        if not active[p] and multiplier[p] - stiffness[p] * (gap - 2.0 * h) <= 0.0:
+        if multiplier[p] - stiffness[p] * (gap - 2.0 * h) <= -smoothing * stiffness[p] * rsum:
             continue
         pts = np.empty((4, 3))
         for k in range(3):
@@ -354,10 +470,10 @@ def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, multip
             k = col % 3
             pts[m, k] += h
             _contact_local_gradient(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), rsum, multiplier[p],
-                                    stiffness[p], active[p], gp)
+                                    stiffness[p], smoothing, gp)
             pts[m, k] -= 2.0 * h
             _contact_local_gradient(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), rsum, multiplier[p],
-                                    stiffness[p], active[p], gm)
+                                    stiffness[p], smoothing, gm)
             pts[m, k] += h
             for row in range(12):
                 local[row, col] = (gp[row] - gm[row]) / (2.0 * h)
@@ -378,16 +494,18 @@ def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, multip
 
 
 @njit(cache=True)
-def _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, ea, eb):
-    """Closest points of edges ``ea`` and ``eb`` and how their nodes share a correction there.
+def _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, pairs, pair_shift, p):
+    """Closest points of the edges of pair ``p`` (the second at its image) and how their nodes share
+    a correction there.
 
     Returns ``(nodes, coef, w, weight, dist, normal)``: the four nodes (a0, a1, b0, b1), their
     barycentric coefficients signed towards ``normal`` (+ on a, − on b), the coefficient-weighted
     inverse masses ``w_i coef_i``, the generalised inverse mass ``Σ w_i coef_i²`` of the pair, the
     centreline distance and the unit normal from b to a.
     """
-    a0, a1 = _edge_points(pos, edge_nodes, edge_offset, ea)
-    b0, b1 = _edge_points(pos, edge_nodes, edge_offset, eb)
+    ea = pairs[p, 0]
+    eb = pairs[p, 1]
+    a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
     s, t, dist, normal = segment_closest_points(a0, a1, b0, b1)
     nodes = (edge_nodes[ea, 0], edge_nodes[ea, 1], edge_nodes[eb, 0], edge_nodes[eb, 1])
     coef = (1.0 - s, s, -(1.0 - t), -t)
@@ -416,8 +534,8 @@ def _relative_motion(field, nodes, coef, normal):
 
 
 @njit(cache=True)
-def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge_radius, pairs, lam_normal,
-                     lam_tangent, static_friction):
+def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge_radius, pairs, pair_shift,
+                     lam_normal, lam_tangent, static_friction):
     """One Gauss–Seidel sweep over the contact pairs (hard unilateral constraints).
 
     ``lam_normal (P,)`` and ``lam_tangent (P,)`` accumulate the multipliers of the step (kg·m).
@@ -425,12 +543,10 @@ def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge
     can be cancelled with a multiplier below ``static_friction · λn``, it is cancelled.
     """
     for p in range(pairs.shape[0]):
-        ea = pairs[p, 0]
-        eb = pairs[p, 1]
-        nodes, coef, w, weight, dist, n = _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, ea, eb)
+        nodes, coef, w, weight, dist, n = _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, pairs, pair_shift, p)
         if weight == 0.0:
             continue
-        c = dist - (edge_radius[ea] + edge_radius[eb])
+        c = dist - (edge_radius[pairs[p, 0]] + edge_radius[pairs[p, 1]])
         if c < 0.0:
             dl = -c / weight
             lam_normal[p] += dl
@@ -456,13 +572,14 @@ def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge
 
 
 @njit(cache=True)
-def apply_kinetic_friction(pos, vel, node_inv_mass, edge_nodes, edge_offset, pairs, lam_normal, kinetic_friction, dt):
+def apply_kinetic_friction(pos, vel, node_inv_mass, edge_nodes, edge_offset, pairs, pair_shift, lam_normal,
+                           kinetic_friction, dt):
     """Velocity pass: each touching pair loses up to ``μk |Jn|`` of tangential relative momentum,
     with ``Jn = λn / Δt`` the normal impulse of the step."""
     for p in range(pairs.shape[0]):
         if lam_normal[p] <= 0.0:
             continue
-        nodes, coef, w, weight, _, n = _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, pairs[p, 0], pairs[p, 1])
+        nodes, coef, w, weight, _, n = _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, pairs, pair_shift, p)
         if weight == 0.0:
             continue
         vt, speed = _relative_motion(vel, nodes, coef, n)

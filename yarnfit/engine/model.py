@@ -9,6 +9,11 @@ Layout: rod ``r`` owns nodes ``rod_node_start[r]:rod_node_start[r+1]``, edges
 ``rod_edge_start[r]:...`` and joints ``rod_joint_start[r]:...``. An open rod of ``n`` nodes has
 ``n − 1`` edges and ``n − 2`` joints; a closed loop has ``n`` edges (the last one from the last
 node back to the first) and ``n`` joints.
+
+Periodic structures: a model may carry a ``lattice`` of two tile vectors; an edge with integer
+tile offset ``(i, j)`` runs to its end node moved by ``i L1 + j L2`` (``edge_offset``). A closed rod
+whose offsets add up to a non-zero ``rod_period`` is a yarn that continues through the tiles
+(one period of an infinite yarn); contacts then include every periodic image.
 """
 
 from __future__ import annotations
@@ -92,6 +97,8 @@ class Rod:
             initial configuration (with ``frames``) is the rest shape.
         pinned_nodes: node indices (local to the rod, negative counts from the end) held fixed.
         pinned_frames: edge indices whose frames are held fixed.
+        tile_offsets: ``(E, 2)`` integer tile offsets of the edges (a closed rod of a periodic
+            model: the edge from node k runs to node k + 1 of tile ``tile_offsets[k]``); default 0.
         name: label used in error messages.
     """
 
@@ -104,6 +111,7 @@ class Rod:
     straight: bool = False
     pinned_nodes: Sequence[int] = field(default_factory=tuple)
     pinned_frames: Sequence[int] = field(default_factory=tuple)
+    tile_offsets: np.ndarray | None = None
     name: str = ""
 
 
@@ -114,16 +122,19 @@ def straight_points(length: float, n_edges: int, start=(0.0, 0.0, 0.0), directio
     return np.asarray(start, dtype=np.float64) + np.linspace(0.0, length, n_edges + 1)[:, None] * d
 
 
-def parallel_transport_frames(points: np.ndarray, closed: bool = False) -> np.ndarray:
+def parallel_transport_frames(points: np.ndarray, closed: bool = False, edge_offset: np.ndarray | None = None) -> np.ndarray:
     """Edge frames ``(E, 4)`` with ``d3`` along each edge, transported without twist.
 
     The first frame takes ``e3`` onto the first tangent by the minimal rotation; each next frame
     is the previous one turned by the minimal rotation between consecutive tangents.
+    ``edge_offset (E, 3)`` is added to each edge's end point (periodic rods).
     """
     from ._quat import quat_between, quat_mul
 
     pts = np.asarray(points, dtype=np.float64)
     seg = np.roll(pts, -1, axis=0) - pts if closed else np.diff(pts, axis=0)
+    if edge_offset is not None:
+        seg = seg + edge_offset
     tangents = seg / np.linalg.norm(seg, axis=1, keepdims=True)
     frames = np.empty((len(tangents), 4))
     q = quat_between((0.0, 0.0, 1.0), tuple(tangents[0]))
@@ -133,6 +144,24 @@ def parallel_transport_frames(points: np.ndarray, closed: bool = False) -> np.nd
         q = tuple(np.asarray(q) / np.linalg.norm(q))
         frames[i] = q
     return frames
+
+
+def aligned_frames(model: "RodModel", position: np.ndarray, quaternion: np.ndarray) -> np.ndarray:
+    """Frames ``(E, 4)`` turned by the minimal rotation that puts each ``d3`` along its edge.
+
+    An equilibrium leaves a small shear (``d3`` off the edge by ~force / GA); a rest state needs
+    frames along their edges, and this keeps the material directors as close as possible.
+    """
+    from ._quat import quat_between, quat_mul
+
+    edge = position[model.edge_nodes[:, 1]] + model.edge_offset - position[model.edge_nodes[:, 0]]
+    tangent = edge / np.linalg.norm(edge, axis=1, keepdims=True)
+    d3 = quaternion_d3(quaternion)
+    out = np.empty_like(quaternion)
+    for e in range(len(quaternion)):
+        q = quat_mul(quat_between(tuple(d3[e]), tuple(tangent[e])), tuple(quaternion[e]))
+        out[e] = np.asarray(q) / np.linalg.norm(q)
+    return out
 
 
 def quaternion_d3(q: np.ndarray) -> np.ndarray:
@@ -198,15 +227,20 @@ class RodModel:
     """Frozen rest data of a set of rods. Build with :meth:`from_rods`.
 
     Per node (N): ``node_rest_position (N, 3)`` m, ``node_mass`` kg, ``node_pinned`` bool,
-    ``node_rod``. Per edge (E): ``edge_nodes (E, 2)``, ``edge_offset (E, 3)`` m (added to the end
-    node; zero except for periodic ghost edges), ``edge_rest_length`` m, ``edge_radius`` m,
+    ``node_rod``. Per edge (E): ``edge_nodes (E, 2)``, ``edge_tile (E, 2)`` int and
+    ``edge_offset (E, 3)`` m (``edge_tile @ lattice``, added to the end node; zero except for
+    periodic ghost edges), ``edge_chain_tile (E, 2)`` int (tiles crossed along the rod before the
+    edge: the edge sits at ``edge_chain_tile`` in the rod's unrolled chain), ``edge_rest_length``
+    m, ``edge_radius`` m,
     ``edge_arc_start`` m (rest arc length of the edge's first node along its rod),
     ``edge_rest_quaternion (E, 4)``, ``edge_shear_stiffness`` GA (N), ``edge_stretch_stiffness`` EA
     (N), ``edge_hardening (E, 2)`` = (A k1, A k2) (N), ``edge_inertia`` kg·m² (about a transverse
     axis), ``edge_pinned`` bool, ``edge_rod``. Per joint (J): ``joint_edges (J, 2)``,
     ``joint_rest_darboux (J, 4)``, ``joint_rest_length`` l̄ (m), ``joint_stiffness (J, 3)`` =
     (EI1, EI2, GJ) (N·m²). Per rod (R): ``rod_node_start``, ``rod_edge_start``,
-    ``rod_joint_start`` (R + 1 offsets), ``rod_closed``, ``rod_length`` (m), ``rod_names``.
+    ``rod_joint_start`` (R + 1 offsets), ``rod_closed``, ``rod_length`` (m), ``rod_period (R, 2)``
+    int (tiles a yarn advances per cycle; zero unless periodic), ``rod_names``. ``lattice (2, 3)``
+    m: the tile vectors of a periodic model (zero otherwise).
     """
 
     node_rest_position: np.ndarray
@@ -214,7 +248,9 @@ class RodModel:
     node_pinned: np.ndarray
     node_rod: np.ndarray
     edge_nodes: np.ndarray
+    edge_tile: np.ndarray
     edge_offset: np.ndarray
+    edge_chain_tile: np.ndarray
     edge_rest_length: np.ndarray
     edge_radius: np.ndarray
     edge_arc_start: np.ndarray
@@ -234,7 +270,9 @@ class RodModel:
     rod_joint_start: np.ndarray
     rod_closed: np.ndarray
     rod_length: np.ndarray
+    rod_period: np.ndarray
     rod_names: tuple
+    lattice: np.ndarray
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
@@ -258,6 +296,11 @@ class RodModel:
     @property
     def n_rods(self) -> int:
         return self.rod_closed.shape[0]
+
+    @property
+    def periodic(self) -> bool:
+        """The model has a lattice (periodic images exist)."""
+        return bool(np.any(self.lattice != 0.0))
 
     @property
     def node_inv_mass(self) -> np.ndarray:
@@ -302,11 +345,16 @@ class RodModel:
     # -- construction -----------------------------------------------------------------------
 
     @classmethod
-    def from_rods(cls, rods: Sequence[Rod]) -> "RodModel":
-        """Validate rod descriptions and build the flat model. Raises ``ValueError`` on bad input."""
+    def from_rods(cls, rods: Sequence[Rod], lattice: np.ndarray | None = None) -> "RodModel":
+        """Validate rod descriptions and build the flat model. Raises ``ValueError`` on bad input.
+
+        ``lattice (2, 3)`` (m) makes the model periodic: the tile vectors that the rods'
+        ``tile_offsets`` count.
+        """
         if len(rods) == 0:
             raise ValueError("a rod model needs at least one rod")
-        parts = [_build_rod(i, rod) for i, rod in enumerate(rods)]
+        lattice = _check_lattice(lattice)
+        parts = [_build_rod(i, rod, lattice) for i, rod in enumerate(rods)]
         node_start = np.concatenate([[0], np.cumsum([p["n_nodes"] for p in parts])]).astype(np.int64)
         edge_start = np.concatenate([[0], np.cumsum([p["n_edges"] for p in parts])]).astype(np.int64)
         joint_start = np.concatenate([[0], np.cumsum([p["n_joints"] for p in parts])]).astype(np.int64)
@@ -318,14 +366,16 @@ class RodModel:
         joint_edges = np.concatenate(
             [p["joint_edges"] + edge_start[i] for i, p in enumerate(parts)]
         ).reshape(-1, 2)
-        n_edges = int(edge_start[-1])
+        edge_tile = cat("tiles").reshape(-1, 2)
         return cls(
             node_rest_position=cat("points"),
             node_mass=cat("node_mass"),
             node_pinned=cat("node_pinned"),
             node_rod=np.repeat(np.arange(len(parts)), [p["n_nodes"] for p in parts]).astype(np.int64),
             edge_nodes=np.ascontiguousarray(edge_nodes, dtype=np.int64),
-            edge_offset=np.zeros((n_edges, 3)),
+            edge_tile=edge_tile,
+            edge_offset=np.ascontiguousarray(edge_tile @ lattice),
+            edge_chain_tile=cat("chain_tiles").reshape(-1, 2),
             edge_rest_length=cat("rest_lengths"),
             edge_radius=cat("edge_radius"),
             edge_arc_start=cat("arc_start"),
@@ -345,11 +395,24 @@ class RodModel:
             rod_joint_start=joint_start,
             rod_closed=np.array([bool(r.closed) for r in rods]),
             rod_length=np.array([p["rest_lengths"].sum() for p in parts]),
+            rod_period=np.array([p["tiles"].sum(axis=0) for p in parts], dtype=np.int64).reshape(-1, 2),
             rod_names=tuple(str(r.name) for r in rods),
+            lattice=lattice,
         )
 
 
-def _build_rod(index: int, rod: Rod) -> dict:
+def _check_lattice(lattice) -> np.ndarray:
+    if lattice is None:
+        return np.zeros((2, 3))
+    lattice = np.array(lattice, dtype=np.float64)
+    if lattice.shape != (2, 3) or not np.all(np.isfinite(lattice)):
+        raise ValueError(f"lattice must be a finite (2, 3) array of tile vectors, got shape {lattice.shape}")
+    if np.linalg.norm(np.cross(lattice[0], lattice[1])) <= 0.0:
+        raise ValueError("lattice vectors must be non-zero and not parallel")
+    return lattice
+
+
+def _build_rod(index: int, rod: Rod, lattice: np.ndarray) -> dict:
     label = f"rod {index}" + (f" ({rod.name!r})" if rod.name else "")
     if not isinstance(rod.material, RodMaterial):
         raise ValueError(f"{label}: material must be a RodMaterial, got {type(rod.material).__name__}")
@@ -365,7 +428,20 @@ def _build_rod(index: int, rod: Rod) -> dict:
     n_edges = n_nodes if rod.closed else n_nodes - 1
     n_joints = n_nodes if rod.closed else n_nodes - 2
     edge_nodes = np.stack([np.arange(n_edges), (np.arange(n_edges) + 1) % n_nodes], axis=1)
-    seg = pts[edge_nodes[:, 1]] - pts[edge_nodes[:, 0]]
+    tiles = np.zeros((n_edges, 2), dtype=np.int64)
+    if rod.tile_offsets is not None:
+        given = np.asarray(rod.tile_offsets)
+        if given.shape != (n_edges, 2):
+            raise ValueError(f"{label}: tile_offsets must have shape ({n_edges}, 2), got {given.shape}")
+        if not np.all(np.isfinite(given)) or np.any(given != np.round(given)):
+            raise ValueError(f"{label}: tile_offsets must be integers")
+        tiles = given.astype(np.int64)
+        if np.any(tiles != 0) and not np.any(lattice != 0.0):
+            raise ValueError(f"{label}: tile offsets need a model lattice (RodModel.from_rods(..., lattice=...))")
+        if np.any(tiles != 0) and not rod.closed:
+            raise ValueError(f"{label}: only a closed rod can continue into other tiles")
+    offset = tiles @ lattice
+    seg = pts[edge_nodes[:, 1]] + offset - pts[edge_nodes[:, 0]]
     seg_len = np.linalg.norm(seg, axis=1)
     if np.any(seg_len <= 0.0):
         raise ValueError(f"{label}: edge {int(np.argmin(seg_len))} has zero length (repeated point)")
@@ -380,7 +456,7 @@ def _build_rod(index: int, rod: Rod) -> dict:
             i = int(np.argmax(bad))
             raise ValueError(f"{label}: rest length of edge {i} must be positive and finite, got {rest[i]!r}")
     if rod.frames is None:
-        frames = parallel_transport_frames(pts, rod.closed)
+        frames = parallel_transport_frames(pts, rod.closed, offset)
     else:
         frames = np.array(rod.frames, dtype=np.float64)
         if frames.shape != (n_edges, 4):
@@ -421,6 +497,8 @@ def _build_rod(index: int, rod: Rod) -> dict:
         "node_mass": node_mass,
         "node_pinned": node_pinned,
         "edge_nodes": edge_nodes.astype(np.int64),
+        "tiles": tiles,
+        "chain_tiles": np.cumsum(tiles, axis=0) - tiles,
         "rest_lengths": rest,
         "edge_radius": radius * ones_e,
         "arc_start": arc,

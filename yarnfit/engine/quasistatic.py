@@ -15,23 +15,25 @@ solver here is a damped Newton method on the exact energy of :mod:`yarnfit.engin
 - backtracking (Armijo) line search on the total potential, then a few chord steps with the same
   factorisation; a step never brings two segments closer than a tenth of their distance, so yarns
   cannot pass through each other;
-- contact: the unilateral constraint ``g ≥ 0`` by an augmented Lagrangian with a primal active
-  set. A pair joins the set when it penetrates; inside the set its term
-  ``((λ − k g)² − λ²) / 2k`` is smooth, so Newton converges quadratically (the one-sided
-  ``max(0, λ − k g)²`` has a kink within ~1e-10 m of every resting contact, which Newton's last
-  corrections keep crossing). When the iterate is nearly balanced, multipliers take the contact
-  forces (``λ ← λ − k g``), which drives the penetration to zero, and pairs whose force turned
-  tensile leave the set. Friction does no work in a minimisation; the frictionless minimiser is an
-  equilibrium of the frictional problem too (zero tangential force is inside every Coulomb cone),
-  and it is the reproducible one. Frictional paths are for the dynamic
-  :class:`~yarnfit.engine.xpbd.XPBDSolver`;
+- contact: the unilateral constraint ``g ≥ 0`` by an augmented Lagrangian. Each pair's term is
+  ``(M(λ − k g) − M(λ)) / k`` with ``M`` the integral of a C¹ ramp ``m`` (zero below ``−δ``, a
+  parabola within ``±δ``, the identity above; ``δ`` a thousandth of ``k (ra + rb)``), so the
+  potential is C² and Newton needs no active set: its normal force is ``m(λ − k g) ≥ 0``. With
+  the plain ``max(0, λ − k g)²`` the kink sits within ~1e-10 m of every resting contact, Newton's
+  last corrections keep crossing it, and an active set that releases pairs turning tensile
+  churned for hundreds of iterations on knits. When the iterate is nearly balanced, multipliers
+  take the contact forces (``λ ← m(λ − k g)``), which drives loaded contacts to ``g = 0`` exactly
+  (a pair carrying less than ``δ`` rests up to ``δ / k`` apart). Friction does no work in a
+  minimisation; the frictionless minimiser is an equilibrium of the frictional problem too (zero
+  tangential force is inside every Coulomb cone), and it is the reproducible one. Frictional
+  paths are for the dynamic :class:`~yarnfit.engine.xpbd.XPBDSolver`;
 - slender rods converge more slowly (Newton's quadratic model misses the quartic stretch energy
   of a rotating edge: L/r = 100 takes ~20 iterations for a large-deflection cantilever, L/r = 1000
   ~100); ``load_steps`` splits strongly nonlinear loads.
 
 Convergence is declared only when the force and torque imbalances (relative to the load scale),
-the relative energy change of the last step, the contact penetration and any tensile contact
-force are all below tolerance.
+the relative energy change of the last step, the contact penetration and the gap of any contact
+still carrying force are all below tolerance.
 """
 
 from __future__ import annotations
@@ -42,12 +44,14 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from . import _contact_kernels, _kernels
+from .contact import ContactPairs, find_pairs
 from .energy import EnergyTerms, internal_forces
-from .model import CONTACT_EXCLUSION_FACTOR, RodModel
+from .model import RodModel, quaternion_d3
 from .state import Loads, RodState
 
 # Sufficient-decrease constant of the Armijo line search (the usual 1e-4 of Nocedal & Wright).
@@ -59,8 +63,24 @@ CHORD_STEPS = 3
 # Round-off floor of a residual, in units of one rounding of the largest coordinate times the
 # stiffness: the strain's subtraction and the sums over a node's elements add a few roundings more.
 ROUNDOFF_FACTOR = 10.0
-# Residual below which contact multipliers are updated: late enough that the forces copied into
-# them are close to equilibrium, early enough to spare Newton iterations on a moving target.
+# Contact penalty: each pair starts at EA / (ra + rb) (a yarn under strain ε presses a contact in by
+# ~ε of the diameter before the multipliers take the force over). The multiplier iteration removes
+# the penetration by a factor ~K / (K + k) per update, K the structure's stiffness at the contact:
+# a yarn pressed over a crossing is stiffer than k by ~20 (jersey: 4 % less penetration per
+# update). So, as in Bertsekas' method of multipliers, an update that did not cut the worst
+# penetration to PENETRATION_PROGRESS of its previous value stiffens the pairs still penetrating
+# beyond tolerance tenfold, up to MAX_STIFFENING. Stiffening only at updates, where the iterate is
+# balanced: stiffening on any penetration seen mid-solve ratcheted transient overshoots of new
+# contacts up to the cap, and Newton then crossed the cap's kinks at every step.
+PENETRATION_PROGRESS = 0.25
+MAX_STIFFENING = 1e4
+# Half-width of the contact ramp's smoothing band, in units of k (ra + rb): the band is ±0.1 % of
+# the diameter around λ / k, wide against Newton's last corrections (~1e-10 m) and narrow
+# enough that a lightly loaded contact rests at most 0.1 % of the diameter apart.
+CONTACT_SMOOTHING = 1e-3
+# Residual below which contact multipliers are first updated: late enough that the forces copied
+# into them are close to equilibrium, early enough to spare Newton iterations on a moving target.
+# Each update tightens it tenfold (down to the tolerances).
 MULTIPLIER_UPDATE_RESIDUAL = 1e-3
 # A step cut to less than this fraction of the Newton step (by the rotation or tunneling cap, or by
 # backtracking) marks the Newton model as poor and raises the damping; otherwise it falls, because
@@ -93,8 +113,10 @@ class QuasiStaticOptions:
         load_steps: the loads are applied in this many equal increments, each solved to
             convergence (helps strongly nonlinear problems such as a rod rolled into a ring).
         contact: detect and resolve yarn–yarn contact.
-        contact_stiffness: augmented-Lagrangian penalty (N/m); default ``EA / (ra + rb)`` of the
-            stiffer edge of each pair (a yarn piece one diameter long pressed end on).
+        contact_stiffness: initial augmented-Lagrangian penalty (N/m); default ``EA / (ra + rb)``
+            of the stiffer edge of each pair. Pairs still penetrating beyond tolerance at a
+            multiplier update that made too little progress are stiffened tenfold (up to 1e4
+            times).
         contact_margin: broad-phase margin in units of the smallest radius.
         max_rotation_step: largest frame rotation per iteration (rad).
         fd_relative_step: central-difference step of the bend–twist and contact Hessians
@@ -132,8 +154,8 @@ class QuasiStaticOptions:
 class Residual:
     """Convergence measures of a quasi-static state (all dimensionless).
 
-    ``tension`` is the largest tensile force of a contact still in the active set, over the force
-    scale (zero at a converged state). ``force_floor`` and ``torque_floor`` estimate the smallest
+    ``separation`` is the largest gap, over the sum of radii, of a pair that still carries a force
+    above the smoothing band (its multiplier is not yet up to date; zero at a converged state). ``force_floor`` and ``torque_floor`` estimate the smallest
     imbalance float64 can resolve for this stiffness and load (positions are known to ``ε |x|``,
     so an edge force only to ``ε |x| EA / l0``), relative to the same scales. A tolerance below the
     floor is unreachable; the floor then takes its place and the result says so.
@@ -143,7 +165,7 @@ class Residual:
     torque: float
     energy_change: float
     penetration: float
-    tension: float = 0.0
+    separation: float = 0.0
     force_floor: float = 0.0
     torque_floor: float = 0.0
 
@@ -157,7 +179,7 @@ class Residual:
             self.balanced(options)
             and self.energy_change <= options.energy_tolerance
             and self.penetration <= options.penetration_tolerance
-            and self.tension <= max(options.force_tolerance, self.force_floor)
+            and self.separation <= options.penetration_tolerance
         )
 
     def __str__(self) -> str:
@@ -165,9 +187,50 @@ class Residual:
             f"force {self.force:.2e}, torque {self.torque:.2e}, energy change {self.energy_change:.2e}, "
             f"penetration {self.penetration:.2e}"
         )
-        if self.tension > 0.0:
-            text += f", contact tension {self.tension:.2e}"
+        if self.separation > 0.0:
+            text += f", loaded contact separation {self.separation:.2e}"
         return text + f" (round-off floors: force {self.force_floor:.1e}, torque {self.torque_floor:.1e})"
+
+
+class LinearConstraints:
+    """Linear equality constraints ``A x = A x0`` on node positions, held exactly by every step,
+    and edge frames whose spin about their own tangent is held.
+
+    ``matrix`` is ``(m, 3N)`` over the flattened positions (node i, axis k at column ``3i + k``),
+    dense or scipy sparse, or None. Rows that only involve pinned nodes or that depend linearly on
+    other rows are dropped when the solver uses them. Use them to remove free motions that carry no
+    energy (a periodic yarn sliding along itself, a periodic structure translating), or for the
+    homogenization constraints.
+
+    ``spin_edges`` lists edges whose frame may not turn about its own ``d3`` in any step. A closed
+    or periodic yarn with a straight, isotropic rest shape and no pinned frame can spin all its
+    frames about their tangents at no energy; the Newton step is then undetermined along that
+    spin, Levenberg–Marquardt damping alone gives it huge rotations, and the rotation cap shrinks
+    every step to a fraction (a jersey relaxation took 0.2 of each step and converged linearly).
+    Holding one frame per such yarn fixes the gauge without changing the equilibrium; on a yarn
+    whose energy does depend on the spin it is a real constraint, and the residual (which it does
+    not relax) says so.
+    """
+
+    def __init__(self, matrix=None, spin_edges=()):
+        self.matrix = None if matrix is None else sp.csr_matrix(matrix, dtype=np.float64)
+        if self.matrix is not None and not np.all(np.isfinite(self.matrix.data)):
+            raise ValueError("constraint matrix has non-finite entries")
+        self.spin_edges = np.unique(np.asarray(spin_edges, dtype=np.int64))
+
+    def __len__(self) -> int:
+        return (0 if self.matrix is None else self.matrix.shape[0]) + self.spin_edges.size
+
+
+@dataclass(frozen=True)
+class Progress:
+    """What :meth:`QuasiStaticSolver.solve` reports after each iteration (for progress displays
+    and recordings). ``position`` is the solver's own array: read it, do not keep or modify it."""
+
+    iteration: int
+    residual: Residual
+    position: np.ndarray
+    potential: float
 
 
 @dataclass
@@ -181,7 +244,7 @@ class QuasiStaticResult:
         energy: energy split by term at the returned state (J); ``external`` includes the work of
             edge moments integrated along the solution path.
         residual: the residuals at the returned state.
-        contact_pairs: ``(P, 2)`` edge pairs touching at the end.
+        contact_pairs: the edge pairs touching at the end (with the image of their second edge).
         contact_force: ``(P,)`` their normal forces (N).
         history: the residual of every iteration.
     """
@@ -191,53 +254,68 @@ class QuasiStaticResult:
     iterations: int
     energy: EnergyTerms
     residual: Residual
-    contact_pairs: np.ndarray
+    contact_pairs: ContactPairs
     contact_force: np.ndarray
     history: list = field(default_factory=list)
 
 
 @dataclass
 class _Contacts:
-    """Contact pairs ``(P, 2)`` of one query with their multipliers (N), penalties (N/m) and
-    active-set flags."""
+    """Contact pairs of one query with their multipliers (N) and penalties (N/m: a base value
+    times a remembered stiffening factor)."""
 
-    pairs: np.ndarray
+    pairs: ContactPairs
     multiplier: np.ndarray
-    stiffness: np.ndarray
-    active: np.ndarray
+    base_stiffness: np.ndarray
+    stiffening: np.ndarray
 
     @classmethod
     def none(cls) -> "_Contacts":
-        return cls(np.empty((0, 2), dtype=np.int64), np.empty(0), np.empty(0), np.empty(0, dtype=np.bool_))
+        return cls(ContactPairs.empty(), np.empty(0), np.empty(0), np.empty(0))
+
+    @property
+    def stiffness(self) -> np.ndarray:
+        """Penalty of each pair (N/m)."""
+        return self.base_stiffness * self.stiffening
+
+    def kernel_args(self) -> tuple:
+        """``(pairs, shift, multiplier, stiffness, smoothing)`` as the contact kernels take them."""
+        return self.pairs.pairs, self.pairs.shift, self.multiplier, self.stiffness, CONTACT_SMOOTHING
 
 
 class _ContactMemory:
-    """Multipliers and active flags remembered per edge pair across broad-phase queries."""
+    """Multipliers and penalty factors remembered per edge pair across broad-phase queries."""
 
     def __init__(self, n_edges: int):
         self._n_edges = n_edges
         self._keys = np.empty(0, dtype=np.int64)
         self._multiplier = np.empty(0)
-        self._active = np.empty(0, dtype=np.bool_)
+        self._stiffening = np.empty(0)
+        self._level = 1.0
 
-    def recall(self, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def recall(self, pairs: ContactPairs) -> tuple[np.ndarray, np.ndarray]:
+        """``(multiplier, stiffening)`` of ``pairs``. New pairs start with no multiplier and at the
+        largest stiffening reached so far: the penalty a problem needs is set by its loads, which a
+        pair meeting late carries as well as the early ones (seed stitch: new pairs at 1× under
+        10× neighbours sank 5 % in)."""
         multiplier = np.zeros(len(pairs))
-        active = np.zeros(len(pairs), dtype=np.bool_)
+        stiffening = np.full(len(pairs), self._level)
         if self._keys.size and len(pairs):
-            keys = pairs[:, 0] * self._n_edges + pairs[:, 1]
+            keys = pairs.keys(self._n_edges)
             pos = np.minimum(np.searchsorted(self._keys, keys), self._keys.size - 1)
             hit = self._keys[pos] == keys
             multiplier[hit] = self._multiplier[pos[hit]]
-            active[hit] = self._active[pos[hit]]
-        return multiplier, active
+            stiffening[hit] = self._stiffening[pos[hit]]
+        return multiplier, stiffening
 
     def store(self, contacts: _Contacts) -> None:
         """Remember the state of these pairs (pairs no longer detected are forgotten)."""
-        keys = contacts.pairs[:, 0] * self._n_edges + contacts.pairs[:, 1]
+        keys = contacts.pairs.keys(self._n_edges)
         order = np.argsort(keys)
         self._keys = keys[order]
         self._multiplier = contacts.multiplier[order]
-        self._active = contacts.active[order]
+        self._stiffening = contacts.stiffening[order]
+        self._level = max(self._level, float(contacts.stiffening.max(initial=1.0)))
 
 
 @dataclass
@@ -248,6 +326,7 @@ class _Evaluation:
     potential: float
     internal: float
     contact_force: np.ndarray
+    contact_gap: np.ndarray
     residual: Residual
 
 
@@ -282,9 +361,68 @@ class QuasiStaticSolver:
         self._min_radius = float(model.edge_radius.min())
         # Axial stiffness seen by each node (N/m) and carried by each edge (N), for round-off floors.
         edge_stiffness = np.maximum(model.edge_stretch_stiffness, model.edge_shear_stiffness)
+        self._constraint = None
+        self._constraint_gram = None
+        self._spin_edges = np.empty(0, dtype=np.int64)
         self._node_stiffness = np.zeros(n)
         np.add.at(self._node_stiffness, model.edge_nodes.ravel(), np.repeat(edge_stiffness / model.edge_rest_length, 2))
         self._edge_stiffness = edge_stiffness
+
+    def _set_constraints(self, constraints: LinearConstraints | None) -> None:
+        """Restrict ``constraints`` to the free DOFs (rotations have zero columns), drop empty and
+        dependent rows, and prepare the projection used to measure residuals."""
+        self._constraint = None
+        self._constraint_gram = None
+        self._spin_edges = np.empty(0, dtype=np.int64)
+        if constraints is None:
+            return
+        m = self.model
+        spin = constraints.spin_edges
+        if spin.size and (spin.min() < 0 or spin.max() >= m.n_edges):
+            raise ValueError(f"spin_edges must be edge indices in [0, {m.n_edges}), got {spin.min()}..{spin.max()}")
+        self._spin_edges = spin[~m.edge_pinned[spin]]
+        matrix = constraints.matrix
+        if matrix is None or matrix.shape[0] == 0:
+            return
+        n_nodes = m.n_nodes
+        if matrix.shape[1] != 3 * n_nodes:
+            raise ValueError(f"constraint matrix must have {3 * n_nodes} columns (3 per node), got {matrix.shape[1]}")
+        free_nodes = self._free[self._free < 3 * n_nodes]
+        reduced = sp.lil_matrix((matrix.shape[0], self._free.size))
+        reduced[:, : free_nodes.size] = matrix.tocsc()[:, free_nodes]
+        dense = reduced.toarray()
+        # Keep a maximal independent set of rows (pivoted QR of the transpose).
+        _, r, pivot = scipy.linalg.qr(dense.T, mode="economic", pivoting=True)
+        tolerance = 1e-12 * max(abs(r[0, 0]), 1e-300) if r.size else 0.0
+        rank = int(np.count_nonzero(np.abs(np.diag(r)) > tolerance))
+        if rank == 0:
+            return
+        rows = np.sort(pivot[:rank])
+        self._constraint = sp.csr_matrix(dense[rows])
+        self._constraint_gram = scipy.linalg.cho_factor(dense[rows] @ dense[rows].T)
+
+    def _step_constraints(self, quaternion: np.ndarray) -> sp.csr_matrix | None:
+        """Rows every step must satisfy with zero right-hand side: the position constraints and,
+        for each spin-held edge, ``d3 · θ = 0`` on its rotation at the current frames."""
+        blocks = [] if self._constraint is None else [self._constraint]
+        if self._spin_edges.size:
+            n_spin = self._spin_edges.size
+            d3 = quaternion_d3(quaternion[self._spin_edges])
+            dofs = 3 * self.model.n_nodes + 3 * self._spin_edges[:, None] + np.arange(3)
+            blocks.append(sp.csr_matrix((d3.ravel(), (np.repeat(np.arange(n_spin), 3), self._dof_map[dofs].ravel())),
+                                        shape=(n_spin, self._free.size)))
+        if not blocks:
+            return None
+        return sp.vstack(blocks).tocsr()
+
+    def _project(self, free_gradient: np.ndarray) -> np.ndarray:
+        """The part of a free-DOF gradient the constraints do not balance (``g − Aᵀμ``, μ least
+        squares)."""
+        if self._constraint is None:
+            return free_gradient
+        a = self._constraint
+        mu = scipy.linalg.cho_solve(self._constraint_gram, a @ free_gradient)
+        return free_gradient - a.T @ mu
 
     # -- public -------------------------------------------------------------------------------
 
@@ -292,15 +430,18 @@ class QuasiStaticSolver:
         self,
         state: RodState,
         loads: Loads | None = None,
-        callback: Callable[[int, Residual], None] | None = None,
+        callback: Callable[[Progress], None] | None = None,
+        constraints: LinearConstraints | None = None,
     ) -> QuasiStaticResult:
-        """Equilibrium of ``state`` under ``loads``. Warns :class:`ConvergenceWarning` when the
-        tolerances are not met within the iteration limit; ``callback(iteration, residual)`` is
-        called after every iteration (for progress displays)."""
+        """Equilibrium of ``state`` under ``loads`` (and ``constraints``, which ``state`` must
+        satisfy). Warns :class:`ConvergenceWarning` when the tolerances are not met within the
+        iteration limit; ``callback(progress)`` is called after every iteration with a
+        :class:`Progress`."""
         model, opt = self.model, self.options
         state.check(model)
         loads = loads if loads is not None else Loads.zeros(model)
         loads.check(model)
+        self._set_constraints(constraints)
         work = _Work(
             position=np.array(state.node_position, dtype=np.float64),
             quaternion=np.array(state.edge_quaternion, dtype=np.float64),
@@ -338,7 +479,7 @@ class QuasiStaticSolver:
             iterations=total_iterations,
             energy=terms,
             residual=residual,
-            contact_pairs=work.contacts.pairs[touching],
+            contact_pairs=work.contacts.pairs.subset(touching),
             contact_force=work.contact_force[touching],
             history=history,
         )
@@ -351,19 +492,30 @@ class QuasiStaticSolver:
         moment = np.asarray(loads.edge_moment)
         damping = INITIAL_DAMPING
         energy_change = 0.0
+        # Augmented Lagrangian: multipliers are updated when the inner problem is solved to this
+        # threshold, which tightens tenfold per update, and never twice without a Newton step.
+        update_threshold = MULTIPLIER_UPDATE_RESIDUAL
+        last_violation = math.inf
+        stepped = True
         for it in range(opt.max_iterations + 1):
             ev = self._evaluate(work, memory, node_force, moment, energy_change)
             history.append(ev.residual)
             if callback is not None:
-                callback(iteration_base + it, ev.residual)
+                callback(Progress(iteration_base + it, ev.residual, work.position, ev.potential))
             if ev.residual.within(opt):
                 return True, it
             if it == opt.max_iterations:
                 return False, it
-            if self._multipliers_due(work, ev):
-                self._update_multipliers(work, memory)
+            if stepped and self._multipliers_due(ev, update_threshold):
+                violation = max(ev.residual.penetration, ev.residual.separation)
+                stiffen = violation > PENETRATION_PROGRESS * last_violation
+                last_violation = violation
+                self._update_multipliers(work, memory, ev, stiffen)
+                update_threshold = max(0.1 * update_threshold, opt.force_tolerance, opt.torque_tolerance)
                 energy_change = 0.0
+                stepped = False
                 continue
+            stepped = True
             direction, solve, damping = self._newton_direction(work, ev, damping)
             if direction is None:
                 return False, it
@@ -380,66 +532,49 @@ class QuasiStaticSolver:
 
     def _contacts(self, memory: _ContactMemory, position: np.ndarray, position_end: np.ndarray | None = None) -> _Contacts:
         """Candidate pairs near ``position`` (or anywhere on the way to ``position_end``) with
-        their remembered multipliers and active flags."""
+        their remembered multipliers and penalties."""
         m = self.model
         if not self.options.contact:
             return _Contacts.none()
-        end = position if position_end is None else np.ascontiguousarray(position_end)
-        pairs = _contact_kernels.broad_phase(
-            position, end, m.edge_nodes, m.edge_offset, m.edge_radius, m.edge_rod, m.edge_arc_start,
-            m.edge_rest_length, m.rod_length, m.rod_closed, self._node_free,
-            self.options.contact_margin * self._min_radius, CONTACT_EXCLUSION_FACTOR,
-        )
-        multiplier, active = memory.recall(pairs)
+        pairs = find_pairs(m, position, self.options.contact_margin * self._min_radius, position_end)
+        multiplier, stiffening = memory.recall(pairs)
+        edges = pairs.pairs
         if self.options.contact_stiffness is not None:
             stiffness = np.full(len(pairs), float(self.options.contact_stiffness))
         else:
-            ea = np.maximum(m.edge_stretch_stiffness[pairs[:, 0]], m.edge_stretch_stiffness[pairs[:, 1]])
-            stiffness = ea / (m.edge_radius[pairs[:, 0]] + m.edge_radius[pairs[:, 1]])
-        return _Contacts(pairs, multiplier, stiffness, active)
+            ea = np.maximum(m.edge_stretch_stiffness[edges[:, 0]], m.edge_stretch_stiffness[edges[:, 1]])
+            stiffness = ea / (m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]])
+        return _Contacts(pairs, multiplier, stiffness, stiffening)
 
-    def _multipliers_due(self, work: _Work, ev: _Evaluation) -> bool:
-        """Update multipliers once the iterate is nearly balanced and a contact penetrates too far,
-        pulls, or touches without a multiplier yet."""
+    def _multipliers_due(self, ev: _Evaluation, threshold: float) -> bool:
+        """Update multipliers once the iterate is balanced to ``threshold`` and a contact
+        penetrates too far or carries force while apart."""
         opt = self.options
-        if not ev.residual.balanced(opt, slack=MULTIPLIER_UPDATE_RESIDUAL):
+        if not ev.residual.balanced(opt, slack=threshold):
             return False
-        c = work.contacts
-        unassigned = np.any(c.active & (c.multiplier == 0.0))
-        return bool(unassigned or ev.residual.penetration > opt.penetration_tolerance
-                    or ev.residual.tension > max(opt.force_tolerance, ev.residual.force_floor))
+        return max(ev.residual.penetration, ev.residual.separation) > opt.penetration_tolerance
 
-    def _update_multipliers(self, work: _Work, memory: _ContactMemory) -> None:
-        """λ ← λ − k g for the active set; pairs whose force turned tensile leave it."""
+    def _update_multipliers(self, work: _Work, memory: _ContactMemory, ev: _Evaluation, stiffen: bool) -> None:
+        """λ ← m(λ − k g) for every pair. With ``stiffen``, pairs whose gap is beyond tolerance
+        either way get a tenfold penalty (see PENETRATION_PROGRESS)."""
         c = work.contacts
-        force = work.contact_force
-        keep = c.active & (force > 0.0)
-        c.multiplier = np.where(keep, force, 0.0)
-        c.active = keep
+        c.multiplier = work.contact_force.copy()
+        if stiffen and len(c.pairs):
+            m = self.model
+            edges = c.pairs.pairs
+            rsum = m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]]
+            off = np.abs(ev.contact_gap) > self.options.penetration_tolerance * rsum
+            loaded_or_deep = off & ((ev.contact_gap < 0.0) | (ev.contact_force > 0.0))
+            c.stiffening = np.where(loaded_or_deep, np.minimum(10.0 * c.stiffening, MAX_STIFFENING), c.stiffening)
         memory.store(c)
 
     # -- evaluation ---------------------------------------------------------------------------
 
     def _evaluate(self, work: _Work, memory: _ContactMemory, node_force, moment, energy_change) -> _Evaluation:
-        """Detect contacts at the current iterate, update the active set and assess the iterate.
-
-        Pairs whose force turned tensile leave the set; penetrating pairs join it (their term is
-        the same on both sides of the kink while they penetrate, so the assessment stands).
-        """
+        """Detect contacts at the current iterate and assess it."""
         work.contacts = self._contacts(memory, work.position)
-        c = work.contacts
-        if np.any(c.active):
-            # Pairs pulled apart beyond their multiplier's reach (λ − k g < 0) leave the set first.
-            ev = self._assess(work.point, c, node_force, moment, energy_change)
-            leaving = c.active & (ev.contact_force < 0.0)
-            if np.any(leaving):
-                c.active = c.active & ~leaving
-                c.multiplier = np.where(leaving, 0.0, c.multiplier)
-        ev = self._assess(work.point, c, node_force, moment, energy_change)
+        ev = self._assess(work.point, work.contacts, node_force, moment, energy_change)
         work.contact_force = ev.contact_force
-        joining = ev.contact_force > 0.0
-        c.active = c.active | joining
-        memory.store(c)
         return ev
 
     def _assess(self, point, contacts: _Contacts, node_force, moment, energy_change=0.0) -> _Evaluation:
@@ -457,8 +592,8 @@ class QuasiStaticSolver:
         contact_energy = 0.0
         if n_pairs:
             contact_energy = _contact_kernels.contact_energy_gradient(
-                position, m.edge_nodes, m.edge_offset, m.edge_radius, contacts.pairs, contacts.multiplier,
-                contacts.stiffness, contacts.active, node_gradient, node_scale, gap, contact_force,
+                position, m.edge_nodes, m.edge_offset, m.edge_radius, *contacts.kernel_args(), node_gradient,
+                node_scale, gap, contact_force,
             )
         # A torque τ on an edge is carried by forces τ / l0 on its nodes, and a force F on a node
         # makes torques F l0 on its edges: each scale includes the other's equivalent, so that
@@ -467,13 +602,24 @@ class QuasiStaticSolver:
         node_ends = np.maximum(node_scale[m.edge_nodes[:, 0]], node_scale[m.edge_nodes[:, 1]])
         force_scale = max(float(node_scale.max(initial=0.0)), float((edge_scale / l0).max(initial=0.0)))
         torque_scale = max(float(edge_scale.max(initial=0.0)), float((node_ends * l0).max(initial=0.0)))
-        net_force = float(np.linalg.norm(node_gradient[self._node_free], axis=1).max(initial=0.0))
-        net_torque = float(np.linalg.norm(edge_gradient[~m.edge_pinned], axis=1).max(initial=0.0))
+        gradient = np.concatenate([node_gradient.ravel(), edge_gradient.ravel()])
+        unbalanced = gradient
+        if self._constraint is not None:
+            unbalanced = np.zeros_like(gradient)
+            unbalanced[self._free] = self._project(gradient[self._free])
+        n3 = 3 * m.n_nodes
+        net_node = unbalanced[:n3].reshape(-1, 3)
+        net_edge = unbalanced[n3:].reshape(-1, 3)
+        net_force = float(np.linalg.norm(net_node[self._node_free], axis=1).max(initial=0.0))
+        net_torque = float(np.linalg.norm(net_edge[~m.edge_pinned], axis=1).max(initial=0.0))
         roundoff = ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(position).max(initial=0.0))
-        penetration = 0.0
+        penetration = separation = 0.0
         if n_pairs:
-            rsum = m.edge_radius[contacts.pairs[:, 0]] + m.edge_radius[contacts.pairs[:, 1]]
+            edges = contacts.pairs.pairs
+            rsum = m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]]
             penetration = float(np.max(-gap / rsum, initial=0.0))
+            loaded = contact_force > CONTACT_SMOOTHING * contacts.stiffness * rsum
+            separation = float(np.max(gap[loaded] / rsum[loaded], initial=0.0))
 
         def relative(value: float, scale: float) -> float:
             return value / scale if scale > 0.0 else 0.0
@@ -483,7 +629,7 @@ class QuasiStaticSolver:
             torque=relative(net_torque, torque_scale),
             energy_change=energy_change,
             penetration=penetration,
-            tension=relative(float(np.max(-contact_force, initial=0.0)), force_scale),
+            separation=separation,
             force_floor=relative(roundoff * float(self._node_stiffness.max(initial=0.0)), force_scale),
             torque_floor=relative(roundoff * float(self._edge_stiffness.max(initial=0.0)), torque_scale),
         )
@@ -492,10 +638,11 @@ class QuasiStaticSolver:
             internal + contact_energy - float(np.sum(node_force * (position - m.node_rest_position))) - moment_work
         )
         return _Evaluation(
-            gradient=np.concatenate([node_gradient.ravel(), edge_gradient.ravel()]),
+            gradient=gradient,
             potential=potential,
             internal=internal,
             contact_force=contact_force,
+            contact_gap=gap,
             residual=residual,
         )
 
@@ -516,8 +663,8 @@ class QuasiStaticSolver:
         )
         if len(c.pairs):
             count = _contact_kernels.contact_hessian_coo(
-                work.position, m.edge_nodes, m.edge_offset, m.edge_radius, c.pairs, c.multiplier, c.stiffness,
-                c.active, opt.fd_relative_step, rows, cols, vals, count,
+                work.position, m.edge_nodes, m.edge_offset, m.edge_radius, *c.kernel_args(), opt.fd_relative_step,
+                rows, cols, vals, count,
             )
         r = self._dof_map[rows[:count]]
         col = self._dof_map[cols[:count]]
@@ -532,18 +679,27 @@ class QuasiStaticSolver:
             return None, None, damping
         hessian = self._hessian(work)
         g = ev.gradient[self._free]
+        n = self._free.size
         diag = hessian.diagonal()
         floor = 1e-12 * max(float(np.abs(diag).max(initial=0.0)), 1e-300)
         scale = sp.diags(np.maximum(np.abs(diag), floor))
+        a = self._step_constraints(work.quaternion)
+        rhs = g if a is None else np.concatenate([g, np.zeros(a.shape[0])])
         for _ in range(20):
+            matrix = hessian + damping * scale
+            if a is not None:
+                # KKT system [H Aᵀ; A 0] [d; ν] = [−g; 0]: steps keep A x fixed.
+                matrix = sp.bmat([[matrix, a.T], [a, None]])
             try:
-                lu = spla.splu((hessian + damping * scale).tocsc())
-                d = -lu.solve(g)
+                lu = spla.splu(matrix.tocsc())
+                d = -lu.solve(rhs)[:n]
             except RuntimeError:  # exactly singular: damp harder
                 damping *= 100.0
                 continue
             if np.all(np.isfinite(d)) and float(g @ d) < 0.0:
-                return d, lu.solve, damping
+                if a is None:
+                    return d, lu.solve, damping
+                return d, (lambda b, lu=lu: lu.solve(np.concatenate([b, np.zeros(a.shape[0])]))[:n]), damping
             damping *= 100.0
         return None, None, damping
 
@@ -575,7 +731,8 @@ class QuasiStaticSolver:
             contacts = self._contacts(memory, work.position, work.position + alpha_max * dx)
             if len(contacts.pairs):
                 alpha_max *= _contact_kernels.tunneling_step_limit(
-                    work.position, alpha_max * dx, m.edge_nodes, m.edge_offset, contacts.pairs, TUNNELING_FRACTION
+                    work.position, alpha_max * dx, m.edge_nodes, m.edge_offset, contacts.pairs.pairs,
+                    contacts.pairs.shift, TUNNELING_FRACTION,
                 )
 
         def assess(point):

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _contact_kernels, _kernels
-from .model import CONTACT_EXCLUSION_FACTOR, RodModel
+from .contact import ContactPairs, find_pairs
+from .model import RodModel
 from .state import Loads, RodState
 
 
@@ -84,7 +85,6 @@ class XPBDSolver:
         self._prev_quaternion = np.empty((model.n_edges, 4))
         self._lam_edge = np.zeros((model.n_edges, 3))
         self._lam_joint = np.zeros((model.n_joints, 3))
-        self._node_free = ~model.node_pinned
         self._min_radius = float(model.edge_radius.min())
         self._coloring = _color_constraints(model) if self.options.parallel else None
 
@@ -116,27 +116,22 @@ class XPBDSolver:
                 if len(pairs):
                     _contact_kernels.project_contacts(
                         x, self._prev_position, self._node_inv_mass, model.edge_nodes, model.edge_offset,
-                        model.edge_radius, pairs, lam_normal, lam_tangent, opt.static_friction,
+                        model.edge_radius, pairs.pairs, pairs.shift, lam_normal, lam_tangent, opt.static_friction,
                     )
             _kernels.update_velocities(x, q, v, w, self._node_inv_mass, self._edge_inv_inertia,
                                        self._prev_position, self._prev_quaternion, h, opt.damping)
             if len(pairs) and opt.kinetic_friction > 0.0:
                 _contact_kernels.apply_kinetic_friction(x, v, self._node_inv_mass, model.edge_nodes, model.edge_offset,
-                                                        pairs, lam_normal, opt.kinetic_friction, h)
+                                                        pairs.pairs, pairs.shift, lam_normal, opt.kinetic_friction, h)
             info = StepInfo(len(pairs), int(np.count_nonzero(lam_normal > 0.0)))
         return info
 
     # -- internals ----------------------------------------------------------------------------
 
-    def _detect(self, start: np.ndarray, end: np.ndarray) -> np.ndarray:
-        m = self.model
+    def _detect(self, start: np.ndarray, end: np.ndarray) -> ContactPairs:
         if not self.options.contact:
-            return np.empty((0, 2), dtype=np.int64)
-        return _contact_kernels.broad_phase(
-            start, end, m.edge_nodes, m.edge_offset, m.edge_radius, m.edge_rod, m.edge_arc_start, m.edge_rest_length,
-            m.rod_length, m.rod_closed, self._node_free, self.options.contact_margin * self._min_radius,
-            CONTACT_EXCLUSION_FACTOR,
-        )
+            return ContactPairs.empty()
+        return find_pairs(self.model, start, self.options.contact_margin * self._min_radius, end)
 
     def _project_rods(self, x: np.ndarray, q: np.ndarray, inv_h2: float) -> None:
         m = self.model
