@@ -1,0 +1,340 @@
+"""Fibre materials: the first stage of yarnfit, from a fibre name on a label to rod parameters.
+
+A :class:`FiberMaterial` holds what the yarn model needs from a fibre, in SI units: density
+(kg/m³), the modulus at zero strain ``E_min`` and the tangent modulus at the breaking strain
+``E_max`` (Pa), the breaking strain ``ε_max`` (dimensionless), Poisson's ratio and the
+fibre-on-fibre friction coefficient. :func:`yarnfit.relax.rod_material` turns it into the
+engine's :class:`~yarnfit.engine.RodMaterial` in a later stage.
+
+Nonlinear stretch (paper §4.1, ``docs/design.md`` §4): the tangent modulus grows linearly with
+strain, ``E(ε) = E_min + k |ε|``, with the slope chosen so that it reaches ``E_max`` at
+``ε_max``::
+
+    k = (E_max − E_min) / ε_max        (Pa)
+
+A fibre with a single handbook modulus is linear: ``E_min == E_max`` and ``k = 0``.
+
+:data:`FIBERS` is the built-in database. Wool, cotton and polyester carry the paper's values
+unchanged. The other fibres come from W. E. Morton & J. W. S. Hearle, *Physical Properties of
+Textile Fibres*, 4th ed., Woodhead 2008 ("M&H"): densities at 65 % r.h. from Table 5.1, breaking
+extensions and initial moduli at 65 % r.h., 20 °C from Tables 13.1 (Meredith's data) and 13.2.
+M&H give moduli as specific moduli in N/tex; ``E = specific modulus × ρ``
+(1 N/tex = 10⁶ N·m/kg). Every entry's ``source`` names the origin of each value and says
+plainly which values are assumptions: no fibre-level Poisson's ratio was found for any fibre but
+cotton and polyester, nor a friction coefficient for silk, linen and acrylic. Users with better
+data supply their own fibre as JSON (:func:`load_fiber_file`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+
+__all__ = ["FIBERS", "FiberMaterial", "UnknownFiberError", "get_fiber", "load_fiber_file"]
+
+# Largest accepted breaking strain: textile fibres break below ~0.7 (wool, nylon 6 staple); 1.5
+# leaves room for textured or partly elastomeric user fibres but rejects percentages typed as
+# fractions (e.g. 30 for 30 %).
+MAX_BREAKING_STRAIN = 1.5
+# Largest accepted friction coefficient: fibre-on-fibre values lie in 0.1–0.8; above 2 is a typo.
+MAX_FRICTION = 2.0
+
+
+@dataclass(frozen=True)
+class FiberMaterial:
+    """Mechanical data of one textile fibre (SI units).
+
+    Attributes:
+        name: fibre name, the key used by :func:`get_fiber` (lower case for built-in fibres).
+        density_kg_m3: ρ (kg/m³).
+        young_min_pa: E_min (Pa), the modulus at zero strain.
+        young_max_pa: E_max (Pa), the tangent modulus reached at the breaking strain;
+            equal to ``young_min_pa`` for a linear fibre.
+        breaking_strain: ε_max (dimensionless), e.g. 0.1 for 10 % extension at break.
+        poisson: Poisson's ratio ν, in (−1, 0.5); gives the shear modulus G = E / (2 (1 + ν)).
+        friction: fibre-on-fibre friction coefficient μ, in [0, 2].
+        source: citation for the values.
+    """
+
+    name: str
+    density_kg_m3: float
+    young_min_pa: float
+    young_max_pa: float
+    breaking_strain: float
+    poisson: float
+    friction: float
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
+        # Store plain floats so that ints from JSON or literals compare and print like floats.
+        for field_name in ("density_kg_m3", "young_min_pa", "young_max_pa", "breaking_strain", "poisson", "friction"):
+            object.__setattr__(self, field_name, _finite_number(getattr(self, field_name), field_name))
+
+        if self.density_kg_m3 <= 0.0:
+            raise ValueError(f"density_kg_m3 must be > 0, got {self.density_kg_m3!r}")
+        if self.young_min_pa <= 0.0:
+            raise ValueError(f"young_min_pa must be > 0, got {self.young_min_pa!r}")
+        if self.young_min_pa > self.young_max_pa:
+            raise ValueError(
+                f"young_min_pa ({self.young_min_pa!r}) must not exceed young_max_pa ({self.young_max_pa!r})"
+            )
+        if not 0.0 < self.breaking_strain <= MAX_BREAKING_STRAIN:
+            raise ValueError(
+                f"breaking_strain must lie in (0, {MAX_BREAKING_STRAIN}] (a fraction, not a percentage), "
+                f"got {self.breaking_strain!r}"
+            )
+        if not -1.0 < self.poisson < 0.5:
+            raise ValueError(f"poisson must lie in (-1, 0.5), got {self.poisson!r}")
+        if not 0.0 <= self.friction <= MAX_FRICTION:
+            raise ValueError(f"friction must lie in [0, {MAX_FRICTION}], got {self.friction!r}")
+
+    @property
+    def hardening_pa(self) -> float:
+        """Stretch hardening slope ``k = (E_max − E_min) / ε_max`` (Pa); 0 for a linear fibre."""
+        return (self.young_max_pa - self.young_min_pa) / self.breaking_strain
+
+    def describe(self) -> str:
+        """One line for ``yarnfit materials``: name, ρ, E range, ε_max, ν, μ and the source's first clause."""
+        e_min, e_max = self.young_min_pa / 1e9, self.young_max_pa / 1e9
+        modulus = f"{e_min:.1f} GPa" if self.young_min_pa == self.young_max_pa else f"{e_min:.1f}–{e_max:.1f} GPa"
+        short_source = self.source.split(";")[0].strip() or "no source"
+        return (
+            f"{self.name:<10} {self.density_kg_m3:5.0f} kg/m³  E {modulus:<13} ε_max {self.breaking_strain:.2f}  "
+            f"ν {self.poisson:.2f}  μ {self.friction:.2f}  ({short_source})"
+        )
+
+
+def _finite_number(value: object, field_name: str) -> float:
+    """``value`` as a float, or ValueError naming the field if it is not a finite real number."""
+    # bool is an int subclass: `true` in a JSON file must not read as 1.
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{field_name} must be a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{field_name} must be finite, got {value!r}")
+    return value
+
+
+def _modulus_from_specific(n_per_tex: float, density_kg_m3: float) -> float:
+    """Young's modulus (Pa) from a specific modulus (N/tex): 1 N/tex = 10⁶ N·m/kg, times ρ (kg/m³)."""
+    return n_per_tex * 1e6 * density_kg_m3
+
+
+_PAPER = "Zhang et al., Estimating Cloth Elasticity Parameters From Homogenized Yarn-Level Models, supplementary fibre table (after Serra et al. 2019)"
+# The only fibre-on-fibre table found lists static/kinetic pairs (rayon 0.35/0.26, nylon
+# 0.47/0.40, polyester 0.15/0.12, cotton 0.51/0.26, wool with/against scale 0.13/0.11 and
+# 0.61/0.38). Kinetic values are used: yarns slide at the contacts that friction acts on.
+_FRICTION_NOTES = "lecture notes '3.1 Frictional Properties' (Scribd 764285656), primary source not given"
+# Friction for fibres with no value found: the median of the five kinetic values sourced above
+# (0.12, 0.245, 0.26, 0.26, 0.40).
+_UNSOURCED_FRICTION = 0.26
+_UNSOURCED_FRICTION_NOTE = f"μ {_UNSOURCED_FRICTION} unverified: no value found, median of the sourced μk"
+# Poisson's ratio for fibres with no value found: one of the paper's two values, polyester's for
+# the melt/solution-spun synthetics, cotton's for cellulose fibres and (lacking any protein-fibre
+# value) for wool and silk. It enters only through G = E/(2(1 + ν)): shear and twist stiffness.
+_NU_COTTON = "ν 0.36 assumed (cotton's value from the paper's notes, none found for this fibre)"
+_NU_POLYESTER = "ν 0.25 assumed (polyester's value from the paper's notes, none found for this fibre)"
+
+_LINEN_DENSITY = 1500.0
+_NYLON_DENSITY = 1140.0
+_SILK_DENSITY = 1340.0
+_VISCOSE_DENSITY = 1490.0
+_ACRYLIC_DENSITY = 1190.0
+
+FIBERS: dict[str, FiberMaterial] = {
+    fiber.name: fiber
+    for fiber in (
+        FiberMaterial(
+            name="wool",
+            density_kg_m3=1310.0,
+            young_min_pa=2.3e9,
+            young_max_pa=3.4e9,
+            breaking_strain=0.3,
+            poisson=0.36,
+            friction=0.245,
+            source=(
+                f"{_PAPER}; ρ, E, ε_max from that table; {_NU_COTTON}; "
+                f"μk 0.245 = mean of with-scale 0.11 and against-scale 0.38, {_FRICTION_NOTES}"
+            ),
+        ),
+        FiberMaterial(
+            name="cotton",
+            density_kg_m3=1520.0,
+            young_min_pa=5.3e9,
+            young_max_pa=6.2e9,
+            breaking_strain=0.1,
+            poisson=0.36,
+            friction=0.26,
+            source=f"{_PAPER}; ρ, E, ε_max from that table; ν from the paper's notes; μk {_FRICTION_NOTES}",
+        ),
+        FiberMaterial(
+            name="polyester",
+            density_kg_m3=1380.0,
+            young_min_pa=1.5e9,
+            young_max_pa=10.6e9,
+            breaking_strain=0.4,
+            poisson=0.25,
+            friction=0.12,
+            source=f"{_PAPER}; ρ, E, ε_max from that table; ν from the paper's notes; μk {_FRICTION_NOTES}",
+        ),
+        FiberMaterial(
+            name="nylon",
+            density_kg_m3=_NYLON_DENSITY,
+            young_min_pa=_modulus_from_specific(3.0, _NYLON_DENSITY),
+            young_max_pa=_modulus_from_specific(3.0, _NYLON_DENSITY),
+            breaking_strain=0.20,
+            poisson=0.25,
+            friction=0.40,
+            source=(
+                "Morton & Hearle 2008, Tables 5.1, 13.2; ρ at 65 % r.h.; nylon 6.6 medium-tenacity: "
+                f"3.0 N/tex, ε_max 0.20; {_NU_POLYESTER}; μk {_FRICTION_NOTES}"
+            ),
+        ),
+        FiberMaterial(
+            name="silk",
+            density_kg_m3=_SILK_DENSITY,
+            young_min_pa=_modulus_from_specific(7.3, _SILK_DENSITY),
+            young_max_pa=_modulus_from_specific(7.3, _SILK_DENSITY),
+            breaking_strain=0.234,
+            poisson=0.36,
+            friction=_UNSOURCED_FRICTION,
+            source=(
+                "Morton & Hearle 2008, Tables 5.1, 13.1; ρ at 65 % r.h.; silk: 7.3 N/tex, ε_max 0.234; "
+                f"{_NU_COTTON}; {_UNSOURCED_FRICTION_NOTE}"
+            ),
+        ),
+        FiberMaterial(
+            name="viscose",
+            density_kg_m3=_VISCOSE_DENSITY,
+            # Handbook spread over variants (regular filament 4.8 N/tex to high-tenacity
+            # 8.8 N/tex) read as E_min–E_max, as the paper does with its own ranges.
+            young_min_pa=_modulus_from_specific(4.8, _VISCOSE_DENSITY),
+            young_max_pa=_modulus_from_specific(8.8, _VISCOSE_DENSITY),
+            breaking_strain=0.157,
+            poisson=0.36,
+            friction=0.26,
+            source=(
+                "Morton & Hearle 2008, Tables 5.1, 13.1, 13.2; ρ at 65 % r.h.; E from 4.8 N/tex (regular "
+                "filament, Table 13.1) to 8.8 N/tex (high-tenacity, Table 13.2); ε_max 0.157 of Fibro regular "
+                f"staple (Table 13.1); {_NU_COTTON}; μk rayon on rayon, {_FRICTION_NOTES}"
+            ),
+        ),
+        FiberMaterial(
+            name="linen",
+            density_kg_m3=_LINEN_DENSITY,
+            young_min_pa=_modulus_from_specific(18.0, _LINEN_DENSITY),
+            young_max_pa=_modulus_from_specific(18.0, _LINEN_DENSITY),
+            breaking_strain=0.030,
+            poisson=0.36,
+            friction=_UNSOURCED_FRICTION,
+            source=(
+                "Morton & Hearle 2008, Table 13.1; flax: 18.0 N/tex, ε_max 0.030; ρ 1500 unverified, not "
+                "read from a table (Bunsell 2018, Table 1.1 gives 1.53 g/cm³; M&H Table 5.1 puts cellulose "
+                f"fibres 0.03 lower at 65 % r.h.); {_NU_COTTON}; {_UNSOURCED_FRICTION_NOTE}"
+            ),
+        ),
+        FiberMaterial(
+            name="acrylic",
+            density_kg_m3=_ACRYLIC_DENSITY,
+            young_min_pa=_modulus_from_specific(6.2, _ACRYLIC_DENSITY),
+            young_max_pa=_modulus_from_specific(6.2, _ACRYLIC_DENSITY),
+            breaking_strain=0.25,
+            poisson=0.25,
+            friction=_UNSOURCED_FRICTION,
+            source=(
+                "Morton & Hearle 2008, Tables 5.1, 13.2; ρ at 65 % r.h.; acrylic staple: 6.2 N/tex, "
+                f"ε_max 0.25; {_NU_POLYESTER}; {_UNSOURCED_FRICTION_NOTE}"
+            ),
+        ),
+    )
+}
+
+
+class UnknownFiberError(ValueError):
+    """A fibre name that is not in :data:`FIBERS`; the message lists the known names."""
+
+
+def get_fiber(name: str) -> FiberMaterial:
+    """The built-in fibre called ``name`` (case-insensitive, surrounding blanks ignored).
+
+    Raises:
+        UnknownFiberError: ``name`` is not a built-in fibre.
+    """
+    key = name.strip().lower() if isinstance(name, str) else None
+    if key not in FIBERS:
+        raise UnknownFiberError(f"unknown fibre {name!r}; known fibres: {', '.join(sorted(FIBERS))}")
+    return FIBERS[key]
+
+
+_NUMERIC_KEYS = ("density_kg_m3", "young_min_pa", "young_max_pa", "breaking_strain", "poisson", "friction")
+_REQUIRED_KEYS = ("name",) + _NUMERIC_KEYS
+_ALLOWED_KEYS = _REQUIRED_KEYS + ("source",)
+
+
+def load_fiber_file(path: str | os.PathLike) -> FiberMaterial:
+    """A user fibre from a JSON file.
+
+    The file holds one object with exactly the keys ``name``, ``density_kg_m3``,
+    ``young_min_pa``, ``young_max_pa``, ``breaking_strain``, ``poisson``, ``friction`` (SI units,
+    as in :class:`FiberMaterial`) and optionally ``source``. ``young_min_pa == young_max_pa``
+    makes a linear fibre. Example::
+
+        {"name": "hemp", "density_kg_m3": 1480, "young_min_pa": 3.2e10, "young_max_pa": 3.2e10,
+         "breaking_strain": 0.022, "poisson": 0.36, "friction": 0.3, "source": "my tests"}
+
+    Raises:
+        ValueError: a one-line message starting with the file name: the file is missing or
+            unreadable, is not valid JSON (with line and column), lacks keys or has unknown ones
+            (all listed), has a non-numeric value, or fails :class:`FiberMaterial` validation.
+    """
+    where = os.fspath(path)
+    try:
+        with open(where, encoding="utf-8") as f:
+            text = f.read()
+    except FileNotFoundError:
+        raise ValueError(f"{where}: no such fibre file") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{where}: cannot read fibre file: not UTF-8 text ({exc.reason})") from None
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read fibre file: {exc.strerror or exc}") from None
+
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{where}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+    if not isinstance(data, dict):
+        kind = type(data).__name__
+        raise ValueError(f"{where}: expected a JSON object with keys {', '.join(_REQUIRED_KEYS)}, got a {kind}")
+
+    # Report missing and unknown keys together: a misspelt key shows up as one of each.
+    problems = []
+    missing = [key for key in _REQUIRED_KEYS if key not in data]
+    unknown = sorted(key for key in data if key not in _ALLOWED_KEYS)
+    if missing:
+        problems.append(f"missing keys: {', '.join(missing)}")
+    if unknown:
+        problems.append(f"unknown keys: {', '.join(unknown)} (allowed: {', '.join(_ALLOWED_KEYS)})")
+    if problems:
+        raise ValueError(f"{where}: {'; '.join(problems)}")
+
+    non_numeric = [
+        f"{key}={data[key]!r}"
+        for key in _NUMERIC_KEYS
+        if isinstance(data[key], bool) or not isinstance(data[key], (int, float))
+    ]
+    if non_numeric:
+        raise ValueError(f"{where}: non-numeric values: {', '.join(non_numeric)}")
+    for key in ("name", "source"):
+        if key in data and not isinstance(data[key], str):
+            raise ValueError(f"{where}: {key} must be a string, got {data[key]!r}")
+
+    fields = dict(data)
+    fields.setdefault("source", f"user fibre file {where}")
+    try:
+        return FiberMaterial(**fields)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
