@@ -19,6 +19,9 @@ HESSIAN_RTOL = 1e-7
 # k² / 2δ ~ 1e12 J/m³ adds h² f''' / 6 ~ 2e-9 N: both ~1e-6 of the gradient. A wrong term (a
 # missing ½, a sign, the band's offset) errs by O(1).
 ENERGY_DIFFERENCE_RTOL = 1e-5
+# Tilting a parallel contact by ±1e-6 rad changes its gaps by ~1e-10 m of 1e-5 m penetration: the
+# gradient moves by ~1e-5 of itself; a kink would move it by O(1).
+PARALLEL_CONTINUITY = 1e-3
 
 
 def test_rod_hessian_matches_differences_of_the_gradient():
@@ -57,32 +60,38 @@ def test_rod_hessian_matches_differences_of_the_gradient():
     assert np.abs(hessian - symmetric).max() <= HESSIAN_RTOL * np.abs(hessian).max()
 
 
-# Contact pair geometry for the tests below: two crossing segments 2.45e-4 m apart (radii 1e-4).
+# Contact pair geometry for the tests below: two crossing segments 2.45e-4 m apart (radii 1e-4),
+# sampled by 7 and 9 points (nodes included).
 CONTACT_POINTS = np.array([[-1e-3, 0.0, 0.0], [1e-3, 1e-4, 0.0], [2e-4, -1e-3, 1.9e-4], [-1e-4, 1e-3, 1.95e-4]])
+CONTACT_SAMPLES = np.array([7, 9])
 CONTACT_STIFFNESS = 4.7e5
 CONTACT_SMOOTHING = 1e-3
 
 
 def _contact_pair_terms(multiplier):
-    """Energy, gradient and Hessian functions of the one-pair contact term."""
+    """Energy, gradient and Hessian functions of the one-pair contact term (``multiplier`` per
+    sampled constraint)."""
     edge_nodes = np.array([[0, 1], [2, 3]])
     offset = np.zeros((2, 3))
     radius = np.array([1e-4, 1e-4])
     pairs = np.array([[0, 1]])
     shift = np.zeros((1, 3))
-    lam, k = np.array([multiplier]), np.array([CONTACT_STIFFNESS])
+    n = int(CONTACT_SAMPLES.sum())
+    start = np.array([0, n])
+    lam, k = np.asarray(multiplier, dtype=float), np.array([CONTACT_STIFFNESS])
 
     def energy_gradient(x):
         g = np.zeros((4, 3))
-        gap = np.empty(1)
-        energy = _contact_kernels.contact_energy_gradient(x, edge_nodes, offset, radius, pairs, shift, lam, k,
-                                                          CONTACT_SMOOTHING, g, np.zeros(4), gap, np.empty(1))
-        return energy, g.ravel(), gap[0]
+        gap = np.empty(n)
+        energy = _contact_kernels.contact_energy_gradient(x, edge_nodes, offset, radius, CONTACT_SAMPLES, pairs, shift,
+                                                          start, lam, k, CONTACT_SMOOTHING, g, np.zeros(4), gap,
+                                                          np.empty(n))
+        return energy, g.ravel(), gap
 
     def hessian(x):
         rows, cols, vals = np.empty(144, np.int64), np.empty(144, np.int64), np.empty(144)
-        count = _contact_kernels.contact_hessian_coo(x, edge_nodes, offset, radius, pairs, shift, lam, k,
-                                                     CONTACT_SMOOTHING, 1e-6, rows, cols, vals, 0)
+        count = _contact_kernels.contact_hessian_coo(x, edge_nodes, offset, radius, CONTACT_SAMPLES, pairs, shift,
+                                                     start, lam, k, CONTACT_SMOOTHING, 1e-6, rows, cols, vals, 0)
         out = np.zeros((12, 12))
         np.add.at(out, (rows[:count], cols[:count]), vals[:count])
         return out
@@ -91,10 +100,14 @@ def _contact_pair_terms(multiplier):
 
 
 def _contact_multiplier(band_position):
-    """Multiplier that puts ``λ − k g`` at ``band_position`` half-widths of the smoothing band."""
-    gap = _contact_pair_terms(0.0)[0](CONTACT_POINTS)[2]
+    """Multipliers that put ``λ − k g`` at ``band_position`` half-widths of the smoothing band for
+    the constraints near contact (gap below 1e-4 m), zero for the others (separated samples: their
+    terms vanish, as they would in a solve)."""
+    gap = _contact_pair_terms(np.zeros(int(CONTACT_SAMPLES.sum())))[0](CONTACT_POINTS)[2]
     delta = CONTACT_SMOOTHING * CONTACT_STIFFNESS * 2e-4
-    return CONTACT_STIFFNESS * gap + band_position * delta
+    near = gap < 1e-4
+    assert near.sum() >= 2
+    return np.where(near, np.maximum(CONTACT_STIFFNESS * gap + band_position * delta, 0.0), 0.0)
 
 
 # Above the band (the quadratic branch) and inside it (the parabolic ramp).
@@ -128,3 +141,19 @@ def test_contact_gradient_matches_differences_of_the_energy(band_position):
         differences[k] = (plus - energy_gradient(x.reshape(4, 3))[0]) / (2 * h)
     assert np.abs(gradient).max() > 0.0
     assert np.abs(gradient - differences).max() <= ENERGY_DIFFERENCE_RTOL * np.abs(gradient).max()
+
+
+def test_parallel_contact_gradient_is_continuous():
+    # Two parallel segments pressed together, one tilted by ±1e-6 rad about the contact normal's
+    # perpendicular: the sampled contact's gradient changes by O(tilt), where the closest-point
+    # gap's would flip its moment arm from one end to the other.
+    def points(tilt):
+        a = np.array([[0.0, 0.0, 0.0], [1e-4, 0.0, 0.0]])
+        b = np.array([[0.0, 0.0, 1.9e-4], [1e-4, 0.0, 1.9e-4 + tilt * 1e-4]])
+        return np.vstack([a, b])
+
+    n = int(CONTACT_SAMPLES.sum())
+    energy_gradient, _ = _contact_pair_terms(np.zeros(n))
+    plus, minus = energy_gradient(points(1e-6))[1], energy_gradient(points(-1e-6))[1]
+    assert np.abs(plus).max() > 0.0
+    assert np.abs(plus - minus).max() <= PARALLEL_CONTINUITY * np.abs(plus).max()

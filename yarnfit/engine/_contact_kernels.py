@@ -5,7 +5,11 @@ position-based friction.
 Only ``@njit`` code lives here. A contact is a pair of edges ``(a, b)``; its gap is
 ``g = |xa(s) − xb(t)| − (ra + rb)`` at the closest points ``xa(s) = (1 − s) a0 + s a1`` and
 ``xb(t) = (1 − t) b0 + t b1``; the constraint is unilateral, ``g ≥ 0`` (minimum centreline
-distance ``ra + rb``, i.e. ``2r`` for equal yarns).
+distance ``ra + rb``, i.e. ``2r`` for equal yarns). The XPBD projection uses that gap. The
+quasi-static terms sample it instead: points along each edge keep ``ra + rb`` from the other
+segment. The closest-point gap of two parallel segments has a kink (tilting either way moves the
+closest points to opposite ends), so a yarn resting along another made Newton stall with residuals
+near 1e-3; point-to-segment distances are C¹, and a line contact spreads over the samples.
 """
 
 import math
@@ -384,35 +388,79 @@ def _smooth_ramp(t, delta):
 
 
 @njit(cache=True)
-def _contact_local_gradient(a0, a1, b0, b1, radius_sum, multiplier, stiffness, smoothing, out):
-    """Gradient (12,) of the augmented-Lagrangian term of one pair; returns (energy, gap, force).
-
-    The term is ``(M(λ − k g) − M(λ)) / k`` with the smoothed ramp of :func:`_smooth_ramp`,
-    ``δ = smoothing · k · (ra + rb)``; its normal force is ``m(λ − k g) ≥ 0``. Above the smoothing
-    band this is the usual ``((λ − k g)² − λ²) / 2k``.
-    """
-    s, t, dist, n = segment_closest_points(a0, a1, b0, b1)
-    gap = dist - radius_sum
-    delta = smoothing * stiffness * radius_sum
-    force, integral = _smooth_ramp(multiplier - stiffness * gap, delta)
-    _, integral_at_contact = _smooth_ramp(multiplier, delta)
-    energy = (integral - integral_at_contact) / stiffness
-    # ∂ψ/∂x = −force ∂g/∂x, ∂g/∂(a0, a1, b0, b1) = ((1 − s) n, s n, −(1 − t) n, −t n)
-    for k in range(3):
-        out[k] = -force * (1.0 - s) * n[k]
-        out[3 + k] = -force * s * n[k]
-        out[6 + k] = force * (1.0 - t) * n[k]
-        out[9 + k] = force * t * n[k]
-    return energy, gap, force
+def _point_segment(p, b0, b1):
+    """Closest point parameter ``t`` on segment ``b0b1`` to ``p``, the distance and the unit normal
+    from the segment to ``p`` (any perpendicular when ``p`` lies on the segment)."""
+    d = (b1[0] - b0[0], b1[1] - b0[1], b1[2] - b0[2])
+    dd = dot(d, d)
+    t = 0.0
+    if dd > 0.0:
+        t = _clamp01(((p[0] - b0[0]) * d[0] + (p[1] - b0[1]) * d[1] + (p[2] - b0[2]) * d[2]) / dd)
+    diff = (p[0] - b0[0] - t * d[0], p[1] - b0[1] - t * d[1], p[2] - b0[2] - t * d[2])
+    dist = norm(diff)
+    if dist > 0.0:
+        return t, dist, (diff[0] / dist, diff[1] / dist, diff[2] / dist)
+    nrm = cross(d, (1.0, 0.0, 0.0)) if abs(d[0]) < 0.9 * math.sqrt(dd) else cross(d, (0.0, 1.0, 0.0))
+    nn = norm(nrm)
+    return t, dist, (nrm[0] / nn, nrm[1] / nn, nrm[2] / nn)
 
 
 @njit(cache=True)
-def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, pair_shift, multiplier, stiffness,
-                            smoothing, node_grad, node_scale, out_gap, out_force):
-    """Augmented-Lagrangian contact energy (J) of all pairs (see :func:`_contact_local_gradient`).
+def _pair_sample_terms(a0, a1, b0, b1, samples_a, samples_b, radius_sum, multiplier, first, stiffness, smoothing,
+                       out_grad, out_gap, out_force):
+    """Augmented-Lagrangian terms of the sampled constraints of one edge pair.
+
+    Each edge carries ``samples ≥ 2`` points at ``s = i / (samples − 1)``, its nodes included (two
+    bent yarns touch at their corners: samples only between the nodes would see a corner contact
+    from ``h / 2`` away, where the gap has grown linearly with the bend); every point of a keeps
+    ``ra + rb`` from segment b and every point of b from segment a (constraint ``c`` of the pair
+    has multiplier ``multiplier[first + c]``). Each term is ``(M(λ − k g) − M(λ)) / k`` with the
+    smoothed ramp of :func:`_smooth_ramp`, ``δ = smoothing · k · (ra + rb)``. Sets the pair's
+    gradient ``out_grad (12,)`` over (a0, a1, b0, b1), writes each constraint's gap (m) and force
+    (N) from ``first``; returns the energy (J).
+    """
+    for k in range(12):
+        out_grad[k] = 0.0
+    delta = smoothing * stiffness * radius_sum
+    energy = 0.0
+    n_samples = samples_a + samples_b
+    for c in range(n_samples):
+        if c < samples_a:
+            s = c / (samples_a - 1)
+            point = (a0[0] + s * (a1[0] - a0[0]), a0[1] + s * (a1[1] - a0[1]), a0[2] + s * (a1[2] - a0[2]))
+            t, dist, n = _point_segment(point, b0, b1)
+        else:
+            t = (c - samples_a) / (samples_b - 1)
+            point = (b0[0] + t * (b1[0] - b0[0]), b0[1] + t * (b1[1] - b0[1]), b0[2] + t * (b1[2] - b0[2]))
+            s, dist, n_ab = _point_segment(point, a0, a1)
+            n = (-n_ab[0], -n_ab[1], -n_ab[2])  # from b's point towards a
+        gap = dist - radius_sum
+        lam = multiplier[first + c]
+        force, integral = _smooth_ramp(lam - stiffness * gap, delta)
+        _, integral_at_contact = _smooth_ramp(lam, delta)
+        energy += (integral - integral_at_contact) / stiffness
+        out_gap[first + c] = gap
+        out_force[first + c] = force
+        if force == 0.0:
+            continue
+        # ∂ψ/∂x = −force ∂g/∂x, ∂g/∂(a0, a1, b0, b1) = ((1 − s) n, s n, −(1 − t) n, −t n)
+        for k in range(3):
+            out_grad[k] -= force * (1.0 - s) * n[k]
+            out_grad[3 + k] -= force * s * n[k]
+            out_grad[6 + k] += force * (1.0 - t) * n[k]
+            out_grad[9 + k] += force * t * n[k]
+    return energy
+
+
+@njit(cache=True)
+def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, edge_samples, pairs, pair_shift,
+                            constraint_start, multiplier, stiffness, smoothing, node_grad, node_scale, out_gap,
+                            out_force):
+    """Augmented-Lagrangian contact energy (J) of all pairs' sampled constraints (see
+    :func:`_pair_sample_terms`; pair ``p`` owns constraints ``constraint_start[p]:[p + 1]``).
 
     Adds the gradient into ``node_grad (N, 3)`` and force magnitudes into ``node_scale``; writes
-    each pair's gap (m) and normal force (N).
+    each constraint's gap (m) and normal force (N).
     """
     local = np.empty(12)
     energy = 0.0
@@ -420,13 +468,9 @@ def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, pa
         ea = pairs[p, 0]
         eb = pairs[p, 1]
         a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
-        e, gap, force = _contact_local_gradient(a0, a1, b0, b1, edge_radius[ea] + edge_radius[eb],
-                                                multiplier[p], stiffness[p], smoothing, local)
-        energy += e
-        out_gap[p] = gap
-        out_force[p] = force
-        if force == 0.0:
-            continue
+        energy += _pair_sample_terms(a0, a1, b0, b1, edge_samples[ea], edge_samples[eb],
+                                     edge_radius[ea] + edge_radius[eb], multiplier, constraint_start[p],
+                                     stiffness[p], smoothing, local, out_gap, out_force)
         nodes = (edge_nodes[ea, 0], edge_nodes[ea, 1], edge_nodes[eb, 0], edge_nodes[eb, 1])
         for m in range(4):
             mag = 0.0
@@ -438,26 +482,36 @@ def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, pairs, pa
 
 
 @njit(cache=True)
-def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, pair_shift, multiplier, stiffness,
-                        smoothing, fd_relative_step, rows, cols, vals, start):
+def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, edge_samples, pairs, pair_shift, constraint_start,
+                        multiplier, stiffness, smoothing, fd_relative_step, rows, cols, vals, start):
     """Hessian of the contact terms as COO triplets (144 per pair in reach) from ``start``.
 
-    Central differences of the analytic pair gradient (step ``fd_relative_step`` times the sum of
+    Central differences of the pair's analytic gradient (step ``fd_relative_step`` times the sum of
     radii), which include the motion of the closest points. Returns the new entry count.
     """
     local = np.empty((12, 12))
     gp = np.empty(12)
     gm = np.empty(12)
+    gap = np.empty(multiplier.shape[0])
+    force = np.empty(multiplier.shape[0])
     idx = start
     for p in range(pairs.shape[0]):
         ea = pairs[p, 0]
         eb = pairs[p, 1]
+        sa = edge_samples[ea]
+        sb = edge_samples[eb]
+        first = constraint_start[p]
         a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
         rsum = edge_radius[ea] + edge_radius[eb]
         h = fd_relative_step * rsum
-        _, gap, force = _contact_local_gradient(a0, a1, b0, b1, rsum, multiplier[p], stiffness[p], smoothing, gp)
-        # Separated beyond the reach of the finite-difference stencil: no curvature.
-        if multiplier[p] - stiffness[p] * (gap - 2.0 * h) <= -smoothing * stiffness[p] * rsum:
+        _pair_sample_terms(a0, a1, b0, b1, sa, sb, rsum, multiplier, first, stiffness[p], smoothing, gp, gap, force)
+        # Every constraint separated beyond the reach of the finite-difference stencil: no curvature.
+        reach = False
+        for c in range(first, first + sa + sb):
+            if multiplier[c] - stiffness[p] * (gap[c] - 2.0 * h) > -smoothing * stiffness[p] * rsum:
+                reach = True
+                break
+        if not reach:
             continue
         pts = np.empty((4, 3))
         for k in range(3):
@@ -469,11 +523,11 @@ def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, pairs, pair_s
             m = col // 3
             k = col % 3
             pts[m, k] += h
-            _contact_local_gradient(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), rsum, multiplier[p],
-                                    stiffness[p], smoothing, gp)
+            _pair_sample_terms(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), sa, sb, rsum, multiplier,
+                               first, stiffness[p], smoothing, gp, gap, force)
             pts[m, k] -= 2.0 * h
-            _contact_local_gradient(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), rsum, multiplier[p],
-                                    stiffness[p], smoothing, gm)
+            _pair_sample_terms(row3(pts, 0), row3(pts, 1), row3(pts, 2), row3(pts, 3), sa, sb, rsum, multiplier,
+                               first, stiffness[p], smoothing, gm, gap, force)
             pts[m, k] += h
             for row in range(12):
                 local[row, col] = (gp[row] - gm[row]) / (2.0 * h)

@@ -15,18 +15,23 @@ solver here is a damped Newton method on the exact energy of :mod:`yarnfit.engin
 - backtracking (Armijo) line search on the total potential, then a few chord steps with the same
   factorisation; a step never brings two segments closer than a tenth of their distance, so yarns
   cannot pass through each other;
-- contact: the unilateral constraint ``g ≥ 0`` by an augmented Lagrangian. Each pair's term is
+- contact: the unilateral constraint ``g ≥ 0`` by an augmented Lagrangian, sampled: points along
+  each edge of a pair (nodes included, at most a quarter radius apart) keep ``ra + rb`` from the
+  other segment. The closest-point gap of two segments has a kink where they are parallel, and a
+  yarn resting along another then stalled Newton at residuals near 1e-3; point-to-segment
+  distances are C¹ and spread a line contact over its samples. Each constraint's term is
   ``(M(λ − k g) − M(λ)) / k`` with ``M`` the integral of a C¹ ramp ``m`` (zero below ``−δ``, a
   parabola within ``±δ``, the identity above; ``δ`` a thousandth of ``k (ra + rb)``), so the
-  potential is C² and Newton needs no active set: its normal force is ``m(λ − k g) ≥ 0``. With
-  the plain ``max(0, λ − k g)²`` the kink sits within ~1e-10 m of every resting contact, Newton's
-  last corrections keep crossing it, and an active set that releases pairs turning tensile
-  churned for hundreds of iterations on knits. When the iterate is nearly balanced, multipliers
-  take the contact forces (``λ ← m(λ − k g)``), which drives loaded contacts to ``g = 0`` exactly
-  (a pair carrying less than ``δ`` rests up to ``δ / k`` apart). Friction does no work in a
-  minimisation; the frictionless minimiser is an equilibrium of the frictional problem too (zero
-  tangential force is inside every Coulomb cone), and it is the reproducible one. Frictional
-  paths are for the dynamic :class:`~yarnfit.engine.xpbd.XPBDSolver`;
+  potential is C¹ with a Lipschitz gradient and Newton needs no active set: the normal force is
+  ``m(λ − k g) ≥ 0``. With the plain ``max(0, λ − k g)²`` the kink sits within ~1e-10 m of every
+  resting contact, Newton's last corrections keep crossing it, and an active set that releases
+  pairs turning tensile churned for hundreds of iterations on knits. When the iterate is nearly
+  balanced, multipliers take the contact forces (``λ ← m(λ − k g)``), which drives loaded
+  contacts to ``g = 0`` exactly (a constraint carrying less than ``δ`` rests up to ``δ / k``
+  apart). Friction does no work in a minimisation; the frictionless minimiser is an equilibrium
+  of the frictional problem too (zero tangential force is inside every Coulomb cone), and it is
+  the reproducible one. Frictional paths are for the dynamic
+  :class:`~yarnfit.engine.xpbd.XPBDSolver`;
 - slender rods converge more slowly (Newton's quadratic model misses the quartic stretch energy
   of a rotating edge: L/r = 100 takes ~20 iterations for a large-deflection cantilever, L/r = 1000
   ~100); ``load_steps`` splits strongly nonlinear loads.
@@ -78,6 +83,9 @@ MAX_STIFFENING = 1e4
 # the diameter around λ / k, wide against Newton's last corrections (~1e-10 m) and narrow
 # enough that a lightly loaded contact rests at most 0.1 % of the diameter apart.
 CONTACT_SMOOTHING = 1e-3
+# Spacing of the contact sample points along an edge, in radii. A crossing between samples is
+# seen up to h / 2 off its closest point, which hides h² / (32 r²) of the diameter: 0.2 % here.
+CONTACT_SAMPLE_SPACING = 0.25
 # Residual below which contact multipliers are first updated: late enough that the forces copied
 # into them are close to equilibrium, early enough to spare Newton iterations on a moving target.
 # Each update tightens it tenfold (down to the tolerances).
@@ -245,7 +253,7 @@ class QuasiStaticResult:
             edge moments integrated along the solution path.
         residual: the residuals at the returned state.
         contact_pairs: the edge pairs touching at the end (with the image of their second edge).
-        contact_force: ``(P,)`` their normal forces (N).
+        contact_force: ``(P,)`` their normal forces (N, summed over each pair's samples).
         history: the residual of every iteration.
     """
 
@@ -261,66 +269,100 @@ class QuasiStaticResult:
 
 @dataclass
 class _Contacts:
-    """Contact pairs of one query with their multipliers (N) and penalties (N/m: a base value
-    times a remembered stiffening factor)."""
+    """Contact pairs of one query with their sampled constraints: pair ``p`` owns constraints
+    ``start[p]:start[p + 1]`` (``edge_samples`` points on each of its edges), each with a
+    multiplier (N); penalties (N/m: a base value times a remembered stiffening factor) are per
+    pair."""
 
     pairs: ContactPairs
+    start: np.ndarray
     multiplier: np.ndarray
     base_stiffness: np.ndarray
     stiffening: np.ndarray
 
     @classmethod
     def none(cls) -> "_Contacts":
-        return cls(ContactPairs.empty(), np.empty(0), np.empty(0), np.empty(0))
+        return cls(ContactPairs.empty(), np.zeros(1, dtype=np.int64), np.empty(0), np.empty(0), np.empty(0))
 
     @property
     def stiffness(self) -> np.ndarray:
         """Penalty of each pair (N/m)."""
         return self.base_stiffness * self.stiffening
 
+    @property
+    def counts(self) -> np.ndarray:
+        """Constraints per pair."""
+        return np.diff(self.start)
+
+    def per_constraint(self, values: np.ndarray) -> np.ndarray:
+        """A per-pair array repeated over each pair's constraints."""
+        return np.repeat(values, self.counts)
+
+    def per_pair_any(self, flags: np.ndarray) -> np.ndarray:
+        """Pairs with any constraint flagged."""
+        if len(self.pairs) == 0:
+            return np.zeros(0, dtype=np.bool_)
+        return np.add.reduceat(flags.astype(np.int64), self.start[:-1]) > 0
+
+    def per_pair_sum(self, values: np.ndarray) -> np.ndarray:
+        if len(self.pairs) == 0:
+            return np.zeros(0)
+        return np.add.reduceat(values, self.start[:-1])
+
     def kernel_args(self) -> tuple:
-        """``(pairs, shift, multiplier, stiffness, smoothing)`` as the contact kernels take them."""
-        return self.pairs.pairs, self.pairs.shift, self.multiplier, self.stiffness, CONTACT_SMOOTHING
+        """``(pairs, shift, start, multiplier, stiffness, smoothing)`` as the contact kernels take
+        them (after the model's edge arrays and sample counts)."""
+        return self.pairs.pairs, self.pairs.shift, self.start, self.multiplier, self.stiffness, CONTACT_SMOOTHING
 
 
 class _ContactMemory:
-    """Multipliers and penalty factors remembered per edge pair across broad-phase queries."""
+    """Multipliers and penalty factors remembered per edge pair across broad-phase queries (a
+    pair's constraint count depends only on its edges, so its multipliers keep their layout)."""
 
     def __init__(self, n_edges: int):
         self._n_edges = n_edges
         self._keys = np.empty(0, dtype=np.int64)
+        self._start = np.zeros(1, dtype=np.int64)
         self._multiplier = np.empty(0)
         self._stiffening = np.empty(0)
         self._level = 1.0
 
-    def recall(self, pairs: ContactPairs) -> tuple[np.ndarray, np.ndarray]:
-        """``(multiplier, stiffening)`` of ``pairs``. New pairs start with no multiplier and at the
-        largest stiffening reached so far: the penalty a problem needs is set by its loads, which a
-        pair meeting late carries as well as the early ones (seed stitch: new pairs at 1× under
-        10× neighbours sank 5 % in)."""
-        multiplier = np.zeros(len(pairs))
+    def recall(self, pairs: ContactPairs, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(multiplier per constraint, stiffening per pair)`` of ``pairs`` laid out by ``start``.
+        New pairs start with no multipliers and at the largest stiffening reached so far: the
+        penalty a problem needs is set by its loads, which a pair meeting late carries as well as
+        the early ones (seed stitch: new pairs at 1× under 10× neighbours sank 5 % in)."""
+        multiplier = np.zeros(start[-1])
         stiffening = np.full(len(pairs), self._level)
         if self._keys.size and len(pairs):
             keys = pairs.keys(self._n_edges)
             pos = np.minimum(np.searchsorted(self._keys, keys), self._keys.size - 1)
-            hit = self._keys[pos] == keys
-            multiplier[hit] = self._multiplier[pos[hit]]
+            hit = np.flatnonzero(self._keys[pos] == keys)
             stiffening[hit] = self._stiffening[pos[hit]]
+            counts = start[hit + 1] - start[hit]
+            offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+            multiplier[np.repeat(start[hit], counts) + offsets] = self._multiplier[
+                np.repeat(self._start[pos[hit]], counts) + offsets]
         return multiplier, stiffening
 
     def store(self, contacts: _Contacts) -> None:
         """Remember the state of these pairs (pairs no longer detected are forgotten)."""
         keys = contacts.pairs.keys(self._n_edges)
         order = np.argsort(keys)
+        counts = contacts.counts[order]
         self._keys = keys[order]
-        self._multiplier = contacts.multiplier[order]
+        self._start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        source = np.repeat(contacts.start[:-1][order], counts) + (
+            np.arange(counts.sum()) - np.repeat(self._start[:-1], counts))
+        self._multiplier = contacts.multiplier[source]
         self._stiffening = contacts.stiffening[order]
         self._level = max(self._level, float(contacts.stiffening.max(initial=1.0)))
 
 
 @dataclass
 class _Evaluation:
-    """Potential, gradient (full DOF vector) and residual measures of one configuration."""
+    """Potential, gradient (full DOF vector) and residual measures of one configuration; contact
+    forces (N) and gaps (m) per sampled constraint."""
 
     gradient: np.ndarray
     potential: float
@@ -364,6 +406,9 @@ class QuasiStaticSolver:
         self._constraint = None
         self._constraint_gram = None
         self._spin_edges = np.empty(0, dtype=np.int64)
+        # Contact sample points per edge, both nodes included, CONTACT_SAMPLE_SPACING radii apart at most.
+        self._edge_samples = 1 + np.maximum(
+            1, np.ceil(model.edge_rest_length / (CONTACT_SAMPLE_SPACING * model.edge_radius))).astype(np.int64)
         self._node_stiffness = np.zeros(n)
         np.add.at(self._node_stiffness, model.edge_nodes.ravel(), np.repeat(edge_stiffness / model.edge_rest_length, 2))
         self._edge_stiffness = edge_stiffness
@@ -467,7 +512,8 @@ class QuasiStaticSolver:
                 ConvergenceWarning,
                 stacklevel=2,
             )
-        touching = work.contact_force > 0.0
+        pair_force = work.contacts.per_pair_sum(work.contact_force)
+        touching = pair_force > 0.0
         return QuasiStaticResult(
             state=RodState(
                 node_position=work.position,
@@ -480,7 +526,7 @@ class QuasiStaticSolver:
             energy=terms,
             residual=residual,
             contact_pairs=work.contacts.pairs.subset(touching),
-            contact_force=work.contact_force[touching],
+            contact_force=pair_force[touching],
             history=history,
         )
 
@@ -537,14 +583,16 @@ class QuasiStaticSolver:
         if not self.options.contact:
             return _Contacts.none()
         pairs = find_pairs(m, position, self.options.contact_margin * self._min_radius, position_end)
-        multiplier, stiffening = memory.recall(pairs)
+        counts = self._edge_samples[pairs.pairs].sum(axis=1) if len(pairs) else np.zeros(0, dtype=np.int64)
+        start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        multiplier, stiffening = memory.recall(pairs, start)
         edges = pairs.pairs
         if self.options.contact_stiffness is not None:
             stiffness = np.full(len(pairs), float(self.options.contact_stiffness))
         else:
             ea = np.maximum(m.edge_stretch_stiffness[edges[:, 0]], m.edge_stretch_stiffness[edges[:, 1]])
             stiffness = ea / (m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]])
-        return _Contacts(pairs, multiplier, stiffness, stiffening)
+        return _Contacts(pairs, start, multiplier, stiffness, stiffening)
 
     def _multipliers_due(self, ev: _Evaluation, threshold: float) -> bool:
         """Update multipliers once the iterate is balanced to ``threshold`` and a contact
@@ -562,9 +610,9 @@ class QuasiStaticSolver:
         if stiffen and len(c.pairs):
             m = self.model
             edges = c.pairs.pairs
-            rsum = m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]]
+            rsum = c.per_constraint(m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]])
             off = np.abs(ev.contact_gap) > self.options.penetration_tolerance * rsum
-            loaded_or_deep = off & ((ev.contact_gap < 0.0) | (ev.contact_force > 0.0))
+            loaded_or_deep = c.per_pair_any(off & ((ev.contact_gap < 0.0) | (ev.contact_force > 0.0)))
             c.stiffening = np.where(loaded_or_deep, np.minimum(10.0 * c.stiffening, MAX_STIFFENING), c.stiffening)
         memory.store(c)
 
@@ -587,13 +635,13 @@ class QuasiStaticSolver:
         node_scale = forces.node_scale + np.linalg.norm(node_force, axis=1)
         edge_scale = forces.edge_scale + np.linalg.norm(moment, axis=1)
         n_pairs = len(contacts.pairs)
-        gap = np.empty(n_pairs)
-        contact_force = np.empty(n_pairs)
+        gap = np.empty(contacts.start[-1])
+        contact_force = np.empty(contacts.start[-1])
         contact_energy = 0.0
         if n_pairs:
             contact_energy = _contact_kernels.contact_energy_gradient(
-                position, m.edge_nodes, m.edge_offset, m.edge_radius, *contacts.kernel_args(), node_gradient,
-                node_scale, gap, contact_force,
+                position, m.edge_nodes, m.edge_offset, m.edge_radius, self._edge_samples, *contacts.kernel_args(),
+                node_gradient, node_scale, gap, contact_force,
             )
         # A torque τ on an edge is carried by forces τ / l0 on its nodes, and a force F on a node
         # makes torques F l0 on its edges: each scale includes the other's equivalent, so that
@@ -616,9 +664,9 @@ class QuasiStaticSolver:
         penetration = separation = 0.0
         if n_pairs:
             edges = contacts.pairs.pairs
-            rsum = m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]]
+            rsum = contacts.per_constraint(m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]])
             penetration = float(np.max(-gap / rsum, initial=0.0))
-            loaded = contact_force > CONTACT_SMOOTHING * contacts.stiffness * rsum
+            loaded = contact_force > CONTACT_SMOOTHING * contacts.per_constraint(contacts.stiffness) * rsum
             separation = float(np.max(gap[loaded] / rsum[loaded], initial=0.0))
 
         def relative(value: float, scale: float) -> float:
@@ -663,7 +711,8 @@ class QuasiStaticSolver:
         )
         if len(c.pairs):
             count = _contact_kernels.contact_hessian_coo(
-                work.position, m.edge_nodes, m.edge_offset, m.edge_radius, *c.kernel_args(), opt.fd_relative_step,
+                work.position, m.edge_nodes, m.edge_offset, m.edge_radius, self._edge_samples, *c.kernel_args(),
+                opt.fd_relative_step,
                 rows, cols, vals, count,
             )
         r = self._dof_map[rows[:count]]
