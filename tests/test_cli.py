@@ -1,10 +1,16 @@
-"""The ``yarnfit`` console script exists from day one."""
+"""The ``yarnfit`` console script: listings, one-line errors for bad input, and a relaxation that
+prints its summary and writes the recording the README documents."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+import rerun as rr
+
 import yarnfit
+from yarnfit.patterns import read_pyp
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
@@ -24,3 +30,104 @@ def test_help():
     assert out.returncode == 0
     assert "usage: yarnfit" in out.stdout
     assert "fabric" in out.stdout
+
+
+# -- listings -------------------------------------------------------------------------------------
+
+
+def test_materials_lists_fibres_and_presets_one_line_each():
+    from yarnfit.fabric import PRESETS
+    from yarnfit.materials import FIBERS
+
+    out = run("materials")
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    for name in list(FIBERS) + list(PRESETS):
+        assert sum(line.split()[0] == name for line in lines if line.strip()) == 1, name
+
+
+def test_patterns_lists_every_named_structure_one_line_each():
+    from yarnfit.fabric import named_patterns
+
+    out = run("patterns")
+    assert out.returncode == 0, out.stderr
+    first_words = [line.split()[0] for line in out.stdout.splitlines() if line.strip()]
+    for name in named_patterns():
+        assert first_words.count(name) == 1, name
+
+
+# -- bad input: one line on stderr, exit status 2 -------------------------------------------------
+
+
+def dangling_pyp(tmp_path) -> Path:
+    """stocktiny.pyp with the edge leaving node 5 removed: node 5 is a dangling yarn end."""
+    text = (Path(__file__).parent / "data" / "hylc" / "stocktiny.pyp").read_text().splitlines()
+    edges = text.index("*E # edges: v0 v1 dx dy")
+    kept = [line for k, line in enumerate(text) if not (k > edges and line.startswith("5 6 "))]
+    assert len(kept) == len(text) - 1
+    path = tmp_path / "dangling.pyp"
+    path.write_text("\n".join(kept) + "\n")
+    return path
+
+
+BAD_INPUTS = {
+    "unknown fibre": (["relax", "--fiber", "kevlarish", "--pattern", "plain", "--gsm", "150"],
+                      ["kevlarish", "cotton", "wool", "polyester"]),
+    "unknown pattern": (["relax", "--fiber", "cotton", "--pattern", "tartan", "--gsm", "150"],
+                        ["tartan", "plain", "jersey", "satin-5"]),
+    "unknown preset": (["relax", "linen-canvas"], ["linen-canvas", "cotton-jersey"]),
+    "zero gsm": (["relax", "--fiber", "cotton", "--pattern", "plain", "--gsm", "0"], ["--gsm"]),
+    "negative gsm": (["relax", "--fiber", "cotton", "--pattern", "plain", "--gsm", "-20"], ["--gsm"]),
+    "overlapping counts": (["relax", "--fiber", "cotton", "--pattern", "plain", "--gsm", "400", "--counts", "80x80"],
+                           ["80 ends/cm"]),
+    "malformed counts": (["relax", "--fiber", "cotton", "--pattern", "plain", "--gsm", "150", "--counts", "30"],
+                         ["--counts"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_INPUTS))
+def test_bad_input_is_one_line_and_exit_status_2(case, tmp_path):
+    args, mentions = BAD_INPUTS[case]
+    out = run(*args, "--rerun", str(tmp_path / "x.rrd"))
+    assert out.returncode == 2, (out.stdout, out.stderr)
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+    for word in mentions:
+        assert word in lines[0], (word, lines[0])
+    assert not (tmp_path / "x.rrd").exists()
+
+
+def test_a_pyp_with_a_dangling_yarn_end_is_one_line_and_exit_status_2(tmp_path):
+    out = run("relax", "--fiber", "polyester", "--pattern-file", str(dangling_pyp(tmp_path)))
+    assert out.returncode == 2, (out.stdout, out.stderr)
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in out.stderr
+    assert "dangling yarn end: vertex 5" in lines[0] and "dangling.pyp" in lines[0]
+
+
+# -- a relaxation ---------------------------------------------------------------------------------
+
+
+def readme_entity_paths() -> set[str]:
+    """Entity paths the README documents for ``yarnfit relax`` recordings."""
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    section = readme.split("<!-- rerun-paths:begin -->")[1].split("<!-- rerun-paths:end -->")[0]
+    return set(re.findall(r"`(relax(?:/\w+)*)`", section))
+
+
+def test_relax_prints_a_summary_and_writes_the_documented_recording(tmp_path):
+    recording, output = tmp_path / "plain.rrd", tmp_path / "plain.pyp"
+    out = run("relax", "--fiber", "cotton", "--pattern", "plain", "--gsm", "150", "--counts", "30x25",
+              "--rerun", str(recording), "-o", str(output))
+    assert out.returncode == 0, out.stderr
+    for field in ("repeat", "yarn radius", "yarn per area", "residual", "worst overlap", "time", "converged"):
+        assert field in out.stdout, field
+    assert "converged         yes" in out.stdout
+
+    documented = readme_entity_paths()
+    assert {"relax/repeat/yarns", "relax/tiling/yarns", "relax/residual/force", "relax/energy/potential"} <= documented
+    recorded = {chunk.entity_path.lstrip("/") for chunk in rr.chunk.RrdReader(recording).stream()}
+    assert recorded - {"__properties"} == documented
+
+    relaxed = read_pyp(output)
+    assert relaxed.family == "woven" and len(relaxed.yarns()) == 4

@@ -211,8 +211,17 @@ def test_missing_required_block():
 
 def test_row_count_differs_from_header():
     text = stocktiny_text()
+    rl = line_of(text, "*RL # rest lengths")
+    lines = text.splitlines()
+    message = parse_error("\n".join(lines[:rl] + lines[rl + 1:]) + "\n")  # drop the first rest length
+    assert message == f"stocktiny.pyp:{rl}: block *RL has 12 rows, header says 13"
+
+
+def test_a_missing_edge_is_a_dangling_yarn_end():
+    text = stocktiny_text()
     message = parse_error(text.replace("12 0 0 1\n", ""))
-    assert message == f"stocktiny.pyp:{line_of(text, '*E # edges: v0 v1 dx dy')}: block *E has 12 rows, header says 13"
+    assert message == (f"stocktiny.pyp:{line_of(text, '*E # edges: v0 v1 dx dy')}: dangling yarn end: "
+                       "vertex 12 starts no edge (block *E has 12 rows for 13 vertices)")
 
 
 def test_unknown_block():

@@ -1,6 +1,6 @@
 """Benchmarks of yarnfit, one section per stage.
 
-    python validation/bench.py engine
+    python validation/bench.py [engine] [relax]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -166,7 +166,34 @@ def bench_engine() -> None:
     report("contact_2000_crossings", n_per_layer_crossings(model, result), "crossings")
 
 
-SECTIONS = {"engine": bench_engine}
+# -- relax ----------------------------------------------------------------------------------------
+
+
+def bench_relax() -> None:
+    """Phase-1 relaxation of the five presets: wall time (including the radius fixed point's extra
+    relaxations) and the quality of the result. The first preset is relaxed once untimed so that
+    every kernel is compiled."""
+    import warnings
+
+    from yarnfit.fabric import PRESETS, Fabric
+    from yarnfit.relax import relax
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        relax(Fabric.preset(next(iter(PRESETS))))
+        for name in PRESETS:
+            result = relax(Fabric.preset(name))
+            key = "relax_" + name.replace("-", "_")
+            report(f"{key}_seconds", result.seconds, "s")
+            report(f"{key}_nodes", result.model.n_nodes, "nodes")
+            report(f"{key}_relaxations", result.relaxations, "relaxations")
+            report(f"{key}_iterations", result.iterations, "iterations (last relaxation)")
+            report(f"{key}_converged", int(result.converged), "bool")
+            report(f"{key}_force_residual", result.residual.force, "relative")
+            report(f"{key}_worst_overlap", result.penetration, "of the diameter")
+
+
+SECTIONS = {"engine": bench_engine, "relax": bench_relax}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -164,6 +164,12 @@ def aligned_frames(model: "RodModel", position: np.ndarray, quaternion: np.ndarr
     return out
 
 
+def quaternion_d1(q: np.ndarray) -> np.ndarray:
+    """First directors ``R(q) e1`` of quaternions ``(..., 4)`` → ``(..., 3)``."""
+    w, x, y, z = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
+    return np.stack([w * w + x * x - y * y - z * z, 2 * (x * y + w * z), 2 * (x * z - w * y)], axis=-1)
+
+
 def quaternion_d3(q: np.ndarray) -> np.ndarray:
     """Third directors ``R(q) e3`` of quaternions ``(..., 4)`` → ``(..., 3)``."""
     w, x, y, z = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)

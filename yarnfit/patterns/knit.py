@@ -12,7 +12,8 @@ on the right side, the head of loop (k, j) lies at depth ``2 d s[k + 1, j]`` and
 ``2 d s[k, j]``, with the legs in the mid-plane; between them the depth follows ``cos² t`` (for
 jersey, all +1, this is Crane's ``d (1 + cos 2t)``; for garter it is ``∓2d cos t``). Where
 neighbouring wales differ (rib, seed) the sinker crosses the mid-plane at the wale boundary (see
-:func:`_loop`). ``d = 2r`` (Crane's depth equals his yarn diameter). The result is the initial geometry; relaxation settles the loops.
+:func:`_loop`). ``d = 2r`` (Crane's depth equals his yarn diameter). The result is the initial
+geometry (loops start up to a quarter of a diameter too close); relaxation settles them.
 """
 
 from __future__ import annotations

@@ -152,6 +152,12 @@ def parse_pyp(text: str, name: str, source: str = "<string>") -> YarnPattern:
             raise reader.error(line, f"{what} must be positive, got {value!r}")
     if n < 1:
         raise reader.error(line, f"num_vertedges must be at least 1, got {n}")
+    if "E" in blocks and len(blocks["E"].rows) < n:
+        # Fewer edges than vertices: name the yarn end that goes nowhere.
+        listed = _edges(blocks["E"], n, reader)
+        free = sorted(set(range(n)) - set(listed[:, 0].tolist()))
+        raise reader.error(blocks["E"].line, f"dangling yarn end: vertex {free[0]} starts no edge "
+                                             f"(block *E has {_count(len(listed), 'row')} for {n} vertices)")
     for block in blocks.values():
         if block.name != "pattern" and len(block.rows) != n:
             raise reader.error(block.line, f"block *{block.name} has {_count(len(block.rows), 'row')}, header says {n}")

@@ -100,8 +100,11 @@ def crossing_separation(radius: float, end_spacing: float, pick_spacing: float) 
             break
         low, high = high, 2.0 * high
     else:
-        raise PatternError(f"yarns {2e6 * radius:.1f} µm thick cannot interlace at {end_spacing * 1e6:.1f} µm "
-                           f"between ends and {pick_spacing * 1e6:.1f} µm between picks")
+        raise PatternError(
+            f"yarns {2e6 * radius:.1f} µm thick cannot interlace at {0.01 / end_spacing:.4g} ends/cm × "
+            f"{0.01 / pick_spacing:.4g} picks/cm ({end_spacing * 1e6:.1f} µm and {pick_spacing * 1e6:.1f} µm apart): "
+            "fewer threads per cm or a lighter fabric"
+        )
     for _ in range(BISECTION_STEPS):
         middle = 0.5 * (low + high)
         low, high = (low, middle) if clears(middle) else (middle, high)

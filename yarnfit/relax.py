@@ -1,0 +1,278 @@
+"""Phase 1 (paper §4.5): relax a periodic yarn repeat into the rest state homogenization starts from.
+
+Every yarn of the pattern becomes a closed periodic rod (its closing edge runs into the
+neighbouring tile); rest lengths are the pattern's rest lengths (the initial edge lengths of a
+generated geometry) times the shrink factor (0.8 knits, 0.9 wovens; 1 for a ``.pyp`` file used as
+written, whose rest lengths are already relaxed ones) and the rest shape is straight and
+untwisted. The quasi-static solver finds the
+equilibrium with contacts between all yarns and all their periodic images, the repeat keeping its
+size. The relaxed configuration then becomes the rest state: rest lengths and curvatures of the
+relaxed yarns (frames turned onto their edges, removing the tiny equilibrium shear).
+
+For a fabric given by areal density, the yarn radius is the fixed point of
+``r = sqrt(ρ_fabric p_x p_y / (ρ_yarn L π))`` with ``L`` the *relaxed* yarn length, so the relaxed
+repeat carries the stated g/m² (a relaxation or two more than the first).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from .engine import (
+    EnergyTerms,
+    LinearConstraints,
+    Progress,
+    QuasiStaticOptions,
+    QuasiStaticSolver,
+    Residual,
+    Rod,
+    RodMaterial,
+    RodModel,
+    RodState,
+    aligned_frames,
+    energy,
+)
+from .engine.contact import max_penetration
+from .engine.model import quaternion_d1
+from .fabric import SHRINK, Fabric, radius_from_areal_density
+from .materials import FiberMaterial
+from .patterns import YarnPattern
+
+# The radius fixed point stops when r changes by less than this; the areal density then matches
+# to about twice as much (it goes as r²), well inside the 0.5 % the relaxed repeat is checked to.
+RADIUS_TOLERANCE = 1e-3
+RADIUS_RELAXATIONS = 6
+
+
+def rod_material(fiber: FiberMaterial) -> RodMaterial:
+    """Engine material of a yarn of ``fiber``: ``E_min``, ν, ρ and the stretch hardening
+    ``k = (E_max − E_min) / ε_max`` in tension and compression (the paper derives its slopes from
+    tensile tests only, so compression uses the tension slope)."""
+    k = fiber.hardening_pa
+    return RodMaterial(young_modulus=fiber.young_min_pa, poisson_ratio=fiber.poisson, density=fiber.density_kg_m3,
+                       hardening_tension=k, hardening_compression=k)
+
+
+def pattern_rods(pattern: YarnPattern, material: RodMaterial, shrink: float) -> list[Rod]:
+    """One closed periodic rod per yarn, in the order of ``pattern.yarns()``: straight rest shape,
+    rest lengths ``shrink`` × the edge lengths, nothing pinned (see :func:`free_motion_constraints`)."""
+    return [
+        Rod(points=pattern.node_position[yarn.nodes], radius=pattern.radius, material=material, closed=True,
+            tile_offsets=yarn.tiles, rest_lengths=rest, straight=True, name=f"yarn {k}")
+        for k, (yarn, rest) in enumerate(zip(pattern.yarns(), _rest_lengths(pattern, shrink)))
+    ]
+
+
+def _rest_lengths(pattern: YarnPattern, shrink: float) -> list[np.ndarray]:
+    """Per yarn, ``shrink`` times the pattern's rest lengths (its edge lengths, for a generated
+    pattern or a rescaled file)."""
+    return [shrink * pattern.rest_length[yarn.nodes] for yarn in pattern.yarns()]
+
+
+def free_motion_constraints(model: RodModel) -> LinearConstraints:
+    """Constraints of the phase-1 relaxation: the free motions of a periodic repeat, and the yarn
+    spacing the label gives.
+
+    - Per yarn, the mean of its nodes along its own direction: a periodic yarn can slide along
+      itself (its material points move along the curve, which maps the yarn onto itself), so this
+      mean only labels which material sits where.
+    - Per yarn, the mean of its nodes across it in the fabric plane: the thread counts set the
+      spacing of the yarns. Without friction nothing else holds a yarn in its place (a 2/1 twill's
+      wefts slide along the crimp of the warps until they jam); real fabrics hold it by friction,
+      which the quasi-static solve does not model.
+    - The mean of all nodes along the normal (the repeat may translate out of plane), and, along a
+      tile vector that every yarn runs along (x in a weft knit, where the geometry could translate
+      while the yarns slide back), one node's coordinate.
+    - Per yarn, the spin of its first frame about its tangent: with a straight, isotropic rest
+      shape, turning all of a closed yarn's frames about their tangents costs nothing.
+    """
+    n = model.n_nodes
+    normal = np.cross(model.lattice[0], model.lattice[1])
+    normal /= np.linalg.norm(normal)
+    rows = []
+
+    def mean_row(direction: np.ndarray, rods) -> np.ndarray:
+        row = np.zeros((n, 3))
+        nodes = np.concatenate([np.arange(model.rod_node_start[r], model.rod_node_start[r + 1]) for r in rods])
+        row[nodes] = direction / len(nodes)
+        return row.ravel()
+
+    axes = []
+    for r in range(model.n_rods):
+        direction = model.rod_period[r] @ model.lattice
+        if not np.any(direction):
+            continue
+        axis = direction / np.linalg.norm(direction)
+        axes.append(axis)
+        rows.append(mean_row(axis, [r]))
+        rows.append(mean_row(np.cross(normal, axis), [r]))
+    rows.append(mean_row(normal, range(model.n_rods)))
+    for tile_vector in model.lattice:
+        e = tile_vector / np.linalg.norm(tile_vector)
+        if all(abs(a @ e) > 0.5 for a in axes):
+            row = np.zeros((n, 3))
+            row[0] = e
+            rows.append(row.ravel())
+    return LinearConstraints(np.array(rows), spin_edges=model.rod_edge_start[:-1])
+
+
+@dataclass(frozen=True)
+class RelaxedRepeat:
+    """A relaxed periodic repeat (phase 1 result).
+
+    Attributes:
+        name: label.
+        fiber: the fibre.
+        pattern: the unrelaxed input pattern (at the relaxation's radius and repeat size).
+        model: the rod model whose rest state is the relaxed configuration (rest lengths and
+            curvatures of the relaxed yarns; nothing pinned, see :func:`free_motion_constraints`).
+        relaxation_model: the model that was relaxed (straight rest shape, shrunk rest lengths);
+            ``state`` is its equilibrium.
+        state: the relaxed configuration (positions ``(N, 3)`` m, frames ``(E, 4)``).
+        shrink: the rest-length factor used.
+        converged: the solve met every tolerance.
+        iterations: Newton iterations of the last relaxation.
+        residual: its final residuals.
+        energy: phase-1 energy at equilibrium (J), before the rest state was reset.
+        penetration: worst overlap of two yarns, relative to the diameter.
+        seconds: wall time of all relaxations (s).
+        relaxations: relaxations run (more than one when the radius follows the relaxed length).
+    """
+
+    name: str
+    fiber: FiberMaterial
+    pattern: YarnPattern
+    model: RodModel
+    relaxation_model: RodModel
+    state: RodState
+    shrink: float
+    converged: bool
+    iterations: int
+    residual: Residual
+    energy: EnergyTerms
+    penetration: float
+    seconds: float
+    relaxations: int = 1
+
+    @property
+    def radius(self) -> float:
+        return self.pattern.radius
+
+    @property
+    def repeat_size(self) -> np.ndarray:
+        return self.pattern.repeat_size
+
+    @property
+    def yarn_length(self) -> float:
+        """Relaxed yarn length in one repeat (m)."""
+        return float(self.model.edge_rest_length.sum())
+
+    @property
+    def yarn_length_per_area(self) -> float:
+        """Relaxed yarn length per fabric area (m/m²)."""
+        return self.yarn_length / float(np.prod(self.repeat_size))
+
+    @property
+    def areal_density(self) -> float:
+        """Areal density of the relaxed repeat, ``ρ_yarn π r² L / (p_x p_y)`` (kg/m²)."""
+        return self.fiber.density_kg_m3 * np.pi * self.radius**2 * self.yarn_length_per_area
+
+    def relaxed_pattern(self) -> YarnPattern:
+        """The relaxed repeat as a :class:`YarnPattern`, e.g. to write a ``.pyp`` file: relaxed
+        positions, the rest lengths they balance (the shrunk ones) and the relaxed frames' ``d1``
+        as reference directors. Relaxing it again as written (shrink 1) reproduces the same
+        equilibrium."""
+        m = self.relaxation_model
+        position = np.empty_like(self.pattern.node_position)
+        rest_length = np.empty(self.pattern.n_nodes)
+        director = np.empty((self.pattern.n_nodes, 3))
+        d1 = quaternion_d1(self.state.edge_quaternion)
+        for r, nodes in enumerate(_rod_nodes(self.pattern)):
+            position[nodes] = self.state.node_position[m.rod_nodes(r)]
+            rest_length[nodes] = m.edge_rest_length[m.rod_edges(r)]
+            director[nodes] = d1[m.rod_edges(r)]
+        return replace(self.pattern, node_position=position, rest_length=rest_length, reference_director=director,
+                       node_twist=np.zeros(self.pattern.n_nodes))
+
+
+def relax_pattern(
+    pattern: YarnPattern,
+    fiber: FiberMaterial,
+    shrink: float | None = None,
+    options: QuasiStaticOptions | None = None,
+    progress: Callable[[Progress], None] | None = None,
+    name: str | None = None,
+) -> RelaxedRepeat:
+    """Relax ``pattern`` made of ``fiber`` yarns (phase 1). ``shrink`` defaults to the pattern
+    family's (0.8 knits, 0.9 wovens); ``progress`` receives the solver's :class:`Progress` after
+    every iteration (node positions in the order of ``pattern.yarns()``)."""
+    shrink = SHRINK[pattern.family] if shrink is None else float(shrink)
+    if not 0.0 < shrink <= 1.0:
+        raise ValueError(f"shrink factor must lie in (0, 1], got {shrink!r}")
+    start = time.perf_counter()
+    rods = pattern_rods(pattern, rod_material(fiber), shrink)
+    phase1 = RodModel.from_rods(rods, lattice=pattern.lattice)
+    result = QuasiStaticSolver(phase1, options).solve(RodState.from_model(phase1), callback=progress,
+                                                       constraints=free_motion_constraints(phase1))
+    frames = aligned_frames(phase1, result.state.node_position, result.state.edge_quaternion)
+    rods = [replace(rod, points=result.state.node_position[phase1.rod_nodes(r)], frames=frames[phase1.rod_edges(r)])
+            for r, rod in enumerate(rods)]
+    # The relaxed configuration (frames turned onto their edges) becomes the rest state.
+    rest_rods = [replace(rod, rest_lengths=None, straight=False) for rod in rods]
+    model = RodModel.from_rods(rest_rods, lattice=pattern.lattice)
+    state = RodState.from_model(model)
+    return RelaxedRepeat(
+        name=name or pattern.name,
+        fiber=fiber,
+        pattern=pattern,
+        model=model,
+        relaxation_model=phase1,
+        state=state,
+        shrink=shrink,
+        converged=result.converged,
+        iterations=result.iterations,
+        residual=result.residual,
+        energy=result.energy,
+        penetration=max_penetration(model, state.node_position),
+        seconds=time.perf_counter() - start,
+    )
+
+
+def relax(
+    fabric: Fabric,
+    options: QuasiStaticOptions | None = None,
+    progress: Callable[[Progress], None] | None = None,
+    on_start: Callable[[YarnPattern], None] | None = None,
+) -> RelaxedRepeat:
+    """Relax the repeat of ``fabric``, with the radius that gives its areal density in the relaxed
+    state (see the module docstring). ``on_start(pattern)`` is called before each relaxation (the
+    radius changes between them), ``progress`` after every solver iteration."""
+    start = time.perf_counter()
+    length = None
+    for attempt in range(1, RADIUS_RELAXATIONS + 1):
+        pattern = fabric.pattern(length_override=length)
+        if on_start is not None:
+            on_start(pattern)
+        result = relax_pattern(pattern, fabric.fiber, fabric.shrink, options, progress, name=fabric.name)
+        # An unconverged length says nothing about the radius: stop, and report the relaxation.
+        if fabric.areal_density is None or not result.converged:
+            break
+        radius = radius_from_areal_density(fabric.areal_density, fabric.fiber.density_kg_m3, pattern.repeat_size,
+                                           result.yarn_length)
+        if abs(radius / pattern.radius - 1.0) < RADIUS_TOLERANCE:
+            break
+        length = result.yarn_length
+    return replace(result, seconds=time.perf_counter() - start, relaxations=attempt)
+
+
+def relaxed_energy(relaxed: RelaxedRepeat) -> EnergyTerms:
+    """Energy of the relaxed state in its own rest model (zero up to round-off)."""
+    return energy(relaxed.model, relaxed.state)
+
+
+def _rod_nodes(pattern: YarnPattern) -> list[np.ndarray]:
+    return [yarn.nodes for yarn in pattern.yarns()]
