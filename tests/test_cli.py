@@ -128,6 +128,10 @@ def test_relax_prints_a_summary_and_writes_the_documented_recording(tmp_path):
     assert {"relax/repeat/yarns", "relax/tiling/yarns", "relax/residual/force", "relax/energy/potential"} <= documented
     recorded = {chunk.entity_path.lstrip("/") for chunk in rr.chunk.RrdReader(recording).stream()}
     assert recorded - {"__properties"} == documented
+    # Rerun's own tool (installed with rerun-sdk) reads the file back without error.
+    rerun = Path(sys.executable).parent / "rerun"
+    verify = subprocess.run([str(rerun), "rrd", "verify", str(recording)], capture_output=True, text=True, timeout=120)
+    assert verify.returncode == 0, verify.stderr
 
     relaxed = read_pyp(output)
     assert relaxed.family == "woven" and len(relaxed.yarns()) == 4

@@ -165,7 +165,7 @@ class ProgressLine:
     def start_relaxation(self, pattern) -> None:
         self.relaxation += 1
         self._write(f"relaxation {self.relaxation}: radius {pattern.radius * 1e6:.2f} µm, "
-                    f"{pattern.n_nodes} nodes, {len(pattern.yarns())} yarns", force=True)
+                    f"{pattern.n_nodes} nodes, {_plural(len(pattern.yarns()), 'yarn')}", force=True)
 
     def __call__(self, progress) -> None:
         r = progress.residual
@@ -225,7 +225,7 @@ def cmd_relax(args: argparse.Namespace) -> int:
 def relax_summary(result, fabric, recording_path, output) -> str:
     px, py = result.repeat_size
     lines = [
-        f"{result.name}: {fabric.fiber.name}, {result.pattern.family}, {len(result.pattern.yarns())} yarns, "
+        f"{result.name}: {fabric.fiber.name}, {result.pattern.family}, {_plural(len(result.pattern.yarns()), 'yarn')}, "
         f"{result.model.n_nodes} nodes",
         f"  repeat            {px * 1e3:.4g} mm × {py * 1e3:.4g} mm",
         f"  yarn radius       {result.radius * 1e6:.4g} µm",
@@ -235,13 +235,17 @@ def relax_summary(result, fabric, recording_path, output) -> str:
         f"energy change {result.residual.energy_change:.2e}",
         f"  worst overlap     {result.penetration * 100:.3g} % of the diameter",
         f"  converged         {'yes' if result.converged else 'NO'} ({result.iterations} iterations, "
-        f"{result.relaxations} relaxation{'s' if result.relaxations > 1 else ''})",
+        f"{_plural(result.relaxations, 'relaxation')})",
         f"  time              {result.seconds:.2f} s",
         f"  recording         {recording_path}",
     ]
     if output:
         lines.append(f"  relaxed repeat    {output}")
     return "\n".join(lines)
+
+
+def _plural(count: int, noun: str) -> str:
+    return f"{count} {noun}{'' if count == 1 else 's'}"
 
 
 COMMANDS = {"materials": cmd_materials, "patterns": cmd_patterns, "relax": cmd_relax}

@@ -224,9 +224,9 @@ def _canonical(a, ia, ja, b, ib, jb):
 
 
 @njit(cache=True)
-def _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes, edge_rod, edge_chain_tile,
-               edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, rod_period, exclusion_factor,
-               node_free, out_pairs, out_images, count_only):
+def _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes, edge_rod,
+               edge_chain_tile, edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, rod_period,
+               exclusion_factor, node_free, out_pairs, out_images, count_only):
     n_pairs = 0
     n = keys.shape[0]
     start = 0
@@ -272,8 +272,9 @@ def _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_
 
 
 @njit(cache=True)
-def broad_phase(pos, pos_end, edge_nodes, edge_offset, edge_radius, edge_rod, edge_chain_tile, edge_arc_start, edge_rest_length,
-                rod_length, rod_closed, rod_period, lattice, image_range, node_free, margin, exclusion_factor):
+def broad_phase(pos, pos_end, edge_nodes, edge_offset, edge_radius, edge_rod, edge_chain_tile, edge_arc_start,
+                edge_rest_length, rod_length, rod_closed, rod_period, lattice, image_range, node_free, margin,
+                exclusion_factor):
     """Candidate contact pairs whose inflated boxes, swept from ``pos`` to ``pos_end`` (pass the
     same array twice for a static query), overlap.
 
@@ -331,13 +332,13 @@ def broad_phase(pos, pos_end, edge_nodes, edge_offset, edge_radius, edge_rod, ed
     dummy_pairs = np.empty((0, 2), dtype=np.int64)
     dummy_images = np.empty((0, 2), dtype=np.int64)
     n_pairs = _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes,
-                         edge_rod, edge_chain_tile, edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, rod_period,
-                         exclusion_factor, node_free, dummy_pairs, dummy_images, True)
+                         edge_rod, edge_chain_tile, edge_arc_start, edge_rest_length, edge_radius, rod_length,
+                         rod_closed, rod_period, exclusion_factor, node_free, dummy_pairs, dummy_images, True)
     pairs = np.empty((n_pairs, 2), dtype=np.int64)
     images = np.empty((n_pairs, 2), dtype=np.int64)
-    _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes, edge_rod, edge_chain_tile,
-               edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, rod_period, exclusion_factor,
-               node_free, pairs, images, False)
+    _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes, edge_rod,
+               edge_chain_tile, edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, rod_period,
+               exclusion_factor, node_free, pairs, images, False)
     return pairs, images
 
 

@@ -65,8 +65,8 @@ def find_pairs(model: RodModel, position: np.ndarray, margin: float, position_en
     images_searched = image_range(m, position, reach)
     pairs, images = _contact_kernels.broad_phase(
         position, end, m.edge_nodes, m.edge_offset, m.edge_radius, m.edge_rod, m.edge_chain_tile, m.edge_arc_start,
-        m.edge_rest_length, m.rod_length, m.rod_closed, m.rod_period, m.lattice, images_searched, ~m.node_pinned, margin,
-        CONTACT_EXCLUSION_FACTOR,
+        m.edge_rest_length, m.rod_length, m.rod_closed, m.rod_period, m.lattice, images_searched, ~m.node_pinned,
+        margin, CONTACT_EXCLUSION_FACTOR,
     )
     return ContactPairs(pairs, images, np.ascontiguousarray(images @ m.lattice))
 

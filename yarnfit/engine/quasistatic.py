@@ -162,9 +162,10 @@ class QuasiStaticOptions:
 class Residual:
     """Convergence measures of a quasi-static state (all dimensionless).
 
-    ``separation`` is the largest gap, over the sum of radii, of a pair that still carries a force
-    above the smoothing band (its multiplier is not yet up to date; zero at a converged state). ``force_floor`` and ``torque_floor`` estimate the smallest
-    imbalance float64 can resolve for this stiffness and load (positions are known to ``ε |x|``,
+    ``separation`` is the largest gap, over the sum of radii, of a contact constraint that still
+    carries a force above the smoothing band (its multiplier is not yet up to date; zero at a
+    converged state). ``force_floor`` and ``torque_floor`` estimate the smallest imbalance float64
+    can resolve for this stiffness and load (positions are known to ``ε |x|``,
     so an edge force only to ``ε |x| EA / l0``), relative to the same scales. A tolerance below the
     floor is unreachable; the floor then takes its place and the result says so.
     """
