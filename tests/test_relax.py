@@ -15,13 +15,14 @@ import pytest
 from yarnfit.fabric import Fabric, named_patterns
 from yarnfit.materials import FiberMaterial, get_fiber
 from yarnfit.patterns import DRAFTS
-from yarnfit.relax import relax, relax_pattern, relaxed_energy, rod_material
+from yarnfit.relax import OVERLAP_TOLERANCE, relax, relax_pattern, relaxed_energy, rod_material
 
 HYLC = Path(__file__).parent / "data" / "hylc"
 # The acceptance bound on overlaps after relaxation: 1 % of the diameter. (The solver's own
 # penetration tolerance is 1e-5 on its sampled constraints; between samples a crossing hides at
 # most 0.2 %.)
 MAX_OVERLAP = 0.01
+assert OVERLAP_TOLERANCE <= MAX_OVERLAP
 # The radius fixed point stops at 1e-3 relative change of r: the areal density (∝ r²) is then
 # within ~2e-3; the acceptance asks for 0.5 %.
 AREAL_DENSITY_RTOL = 0.005
@@ -49,14 +50,14 @@ def relaxed_file(name: str):
 def test_every_named_structure_relaxes(structure):
     result = relaxed_named(structure)
     assert result.converged, result.residual
-    assert result.penetration < MAX_OVERLAP
+    assert result.penetration < MAX_OVERLAP and result.valid
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in HYLC.glob("*.pyp")))
 def test_every_hylc_pattern_relaxes(name):
     result = relaxed_file(name)
     assert result.converged, result.residual
-    assert result.penetration < MAX_OVERLAP
+    assert result.penetration < MAX_OVERLAP and result.valid
 
 
 def relaxed_centreline_length(result) -> np.ndarray:
@@ -147,3 +148,12 @@ def test_progress_reports_positions_in_yarn_order():
     relax_pattern(pattern, fabric.fiber, progress=lambda p: seen.append(p.position.copy()))
     expected = np.concatenate([pattern.node_position[y.nodes] for y in pattern.yarns()])
     np.testing.assert_array_equal(seen[0], expected)
+
+
+def test_a_relaxation_that_leaves_overlaps_is_not_valid():
+    import dataclasses
+
+    result = relaxed_named("plain")
+    assert result.valid
+    assert not dataclasses.replace(result, penetration=2 * OVERLAP_TOLERANCE).valid
+    assert not dataclasses.replace(result, converged=False).valid

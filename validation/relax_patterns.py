@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             r = relax(fabric)
-        ok = r.converged and r.penetration < MAX_OVERLAP
+        ok = r.valid and r.penetration < MAX_OVERLAP
         failed += not ok
         print(f"{fabric.name:<24}{r.model.n_nodes:>6}{r.seconds:>8.2f}{r.relaxations:>7}{r.iterations:>6}"
               f"{r.residual.force:>10.1e}{r.residual.torque:>10.1e}{100 * r.penetration:>11.3f}  "

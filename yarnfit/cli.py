@@ -192,7 +192,7 @@ class ProgressLine:
 def cmd_relax(args: argparse.Namespace) -> int:
     from .patterns import write_pyp
     from .record import RelaxRecording
-    from .relax import relax
+    from .relax import OVERLAP_TOLERANCE, relax
 
     fabric = fabric_from_arguments(args)
     path = Path(args.rerun) if args.rerun else Path("logs") / f"{fabric.name}.rrd"
@@ -218,6 +218,10 @@ def cmd_relax(args: argparse.Namespace) -> int:
     print(relax_summary(result, fabric, path, args.output))
     if not result.converged:
         print(f"yarnfit: the relaxation did not converge: {result.residual}", file=sys.stderr)
+        return EXIT_FAILED
+    if not result.valid:
+        print(f"yarnfit: yarns overlap by {100 * result.penetration:.3g} % of the diameter after relaxation "
+              f"(tolerance {100 * OVERLAP_TOLERANCE:g} %)", file=sys.stderr)
         return EXIT_FAILED
     return 0
 

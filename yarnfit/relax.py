@@ -46,6 +46,10 @@ from .patterns import YarnPattern
 # to about twice as much (it goes as r²), well inside the 0.5 % the relaxed repeat is checked to.
 RADIUS_TOLERANCE = 1e-3
 RADIUS_RELAXATIONS = 6
+# Largest overlap of two yarns (fraction of the diameter, true segment distances) a relaxed repeat
+# may keep. The solver drives its sampled contact gaps to 1e-5; between samples a crossing hides
+# at most 0.2 %, so a valid relaxation stays far below this.
+OVERLAP_TOLERANCE = 0.01
 
 
 def rod_material(fiber: FiberMaterial) -> RodMaterial:
@@ -161,6 +165,11 @@ class RelaxedRepeat:
     @property
     def radius(self) -> float:
         return self.pattern.radius
+
+    @property
+    def valid(self) -> bool:
+        """Converged, and no two yarns overlap by more than OVERLAP_TOLERANCE of the diameter."""
+        return self.converged and self.penetration <= OVERLAP_TOLERANCE
 
     @property
     def repeat_size(self) -> np.ndarray:
