@@ -6,6 +6,7 @@ tests check), so an error here costs iterations, not accuracy; this test keeps i
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from yarnfit.engine import Loads, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState, straight_points
 from yarnfit.engine import _contact_kernels
@@ -24,17 +25,30 @@ ENERGY_DIFFERENCE_RTOL = 1e-5
 PARALLEL_CONTINUITY = 1e-3
 
 
-def test_rod_hessian_matches_differences_of_the_gradient():
-    rng = np.random.default_rng(4)
+def _two_rods():
     t = np.linspace(0.0, 1.0, 8)
     curved = np.column_stack([0.05 * np.sin(t), 0.05 * (1 - np.cos(t)), 0.01 * t])
     mat = RodMaterial(2e6, 0.35, 1000.0, hardening_tension=8e6, hardening_compression=3e6)
-    model = RodModel.from_rods([
+    return RodModel.from_rods([
         Rod(curved, 3e-3, mat, pinned_nodes=[0], pinned_frames=[0]),
         Rod(straight_points(0.05, 5, start=(0.0, 0.02, 0.0)), 2e-3, mat, straight=True),
-    ])
+    ]), 2e-3
+
+
+def _curved_tiling():
+    from curved_tiling import curved_model
+
+    return curved_model(), 1e-4
+
+
+# Two open rods, and a periodic model on a curved tiling (ghost-edge ends rotated, frames turned
+# across tile borders).
+@pytest.mark.parametrize("build", [_two_rods, _curved_tiling], ids=["two rods", "curved tiling"])
+def test_rod_hessian_matches_differences_of_the_gradient(build):
+    rng = np.random.default_rng(4)
+    model, jitter = build()
     state = RodState.from_model(model)
-    position = state.node_position + 2e-3 * rng.standard_normal(state.node_position.shape)
+    position = state.node_position + jitter * rng.standard_normal(state.node_position.shape)
     quaternion = _rotate_frames(state.edge_quaternion, 0.2 * rng.standard_normal((model.n_edges, 3)))
     solver = QuasiStaticSolver(model)
     work = _Work(position, quaternion)
@@ -57,7 +71,15 @@ def test_rod_hessian_matches_differences_of_the_gradient():
     # The symmetric part of the derivative of the world torque is the Hessian in the exponential
     # chart (the antisymmetric rest is the chart's own curvature times the torque).
     symmetric = 0.5 * (differences + differences.T)
-    assert np.abs(hessian - symmetric).max() <= HESSIAN_RTOL * np.abs(hessian).max()
+    # Block by block (positions, rotations): the rotation block is ~1e7 times smaller than the
+    # stretch block, so one scale for the whole matrix would hide errors in it.
+    free_nodes = int(np.count_nonzero(solver._free < 3 * model.n_nodes))
+    blocks = (slice(0, free_nodes), slice(free_nodes, n))
+    for rows in blocks:
+        for cols in blocks:
+            scale = np.abs(hessian[rows, cols]).max()
+            assert scale > 0.0
+            assert np.abs(hessian[rows, cols] - symmetric[rows, cols]).max() <= HESSIAN_RTOL * scale, (rows, cols)
 
 
 # Contact pair geometry for the tests below: two crossing segments 2.45e-4 m apart (radii 1e-4),
@@ -68,14 +90,23 @@ CONTACT_STIFFNESS = 4.7e5
 CONTACT_SMOOTHING = 1e-3
 
 
-def _contact_pair_terms(multiplier):
+# A rigid map placing the second edge's nodes (a curved tiling's image): 0.7 rad about a skew axis.
+IMAGE_ROTATION = Rotation.from_rotvec(0.7 * np.array([0.3, -0.5, 0.81]) / np.linalg.norm([0.3, -0.5, 0.81])).as_matrix()
+IMAGE_TRANSLATION = np.array([2e-3, -1e-3, 5e-4])
+
+
+def _contact_pair_terms(multiplier, mapped=False):
     """Energy, gradient and Hessian functions of the one-pair contact term (``multiplier`` per
-    sampled constraint)."""
+    sampled constraint) over node positions ``(4, 3)``. With ``mapped``, the second edge's nodes are
+    placed by IMAGE_ROTATION and IMAGE_TRANSLATION (as a periodic image on a curved surface)."""
     edge_nodes = np.array([[0, 1], [2, 3]])
-    offset = np.zeros((2, 3))
     radius = np.array([1e-4, 1e-4])
     pairs = np.array([[0, 1]])
-    shift = np.zeros((1, 3))
+    rotation = np.broadcast_to(np.eye(3), (1, 4, 3, 3)).copy()
+    translation = np.zeros((1, 4, 3))
+    if mapped:
+        rotation[0, 2:] = IMAGE_ROTATION
+        translation[0, 2:] = IMAGE_TRANSLATION
     n = int(CONTACT_SAMPLES.sum())
     start = np.array([0, n])
     lam, k = np.asarray(multiplier, dtype=float), np.array([CONTACT_STIFFNESS])
@@ -83,20 +114,29 @@ def _contact_pair_terms(multiplier):
     def energy_gradient(x):
         g = np.zeros((4, 3))
         gap = np.empty(n)
-        energy = _contact_kernels.contact_energy_gradient(x, edge_nodes, offset, radius, CONTACT_SAMPLES, pairs, shift,
-                                                          start, lam, k, CONTACT_SMOOTHING, g, np.zeros(4), gap,
-                                                          np.empty(n))
+        energy = _contact_kernels.contact_energy_gradient(x, edge_nodes, radius, CONTACT_SAMPLES, pairs, rotation,
+                                                          translation, start, lam, k, CONTACT_SMOOTHING, g,
+                                                          np.zeros(4), gap, np.empty(n))
         return energy, g.ravel(), gap
 
     def hessian(x):
         rows, cols, vals = np.empty(144, np.int64), np.empty(144, np.int64), np.empty(144)
-        count = _contact_kernels.contact_hessian_coo(x, edge_nodes, offset, radius, CONTACT_SAMPLES, pairs, shift,
-                                                     start, lam, k, CONTACT_SMOOTHING, 1e-6, rows, cols, vals, 0)
+        count = _contact_kernels.contact_hessian_coo(x, edge_nodes, radius, CONTACT_SAMPLES, pairs, rotation,
+                                                     translation, start, lam, k, CONTACT_SMOOTHING, 1e-6, rows, cols,
+                                                     vals, 0)
         out = np.zeros((12, 12))
         np.add.at(out, (rows[:count], cols[:count]), vals[:count])
         return out
 
     return energy_gradient, hessian
+
+
+def _contact_nodes(mapped):
+    """Node positions whose (mapped) points are CONTACT_POINTS."""
+    nodes = CONTACT_POINTS.copy()
+    if mapped:
+        nodes[2:] = (CONTACT_POINTS[2:] - IMAGE_TRANSLATION) @ IMAGE_ROTATION  # Rᵀ (p − t), row-wise
+    return nodes
 
 
 def _contact_multiplier(band_position):
@@ -110,31 +150,36 @@ def _contact_multiplier(band_position):
     return np.where(near, np.maximum(CONTACT_STIFFNESS * gap + band_position * delta, 0.0), 0.0)
 
 
-# Above the band (the quadratic branch) and inside it (the parabolic ramp).
+# Above the band (the quadratic branch) and inside it (the parabolic ramp); the second edge as
+# itself or as a rotated image.
+@pytest.mark.parametrize("mapped", [False, True])
 @pytest.mark.parametrize("band_position", [5.0, 0.3])
-def test_contact_hessian_matches_differences_of_the_gradient(band_position):
-    energy_gradient, hessian = _contact_pair_terms(_contact_multiplier(band_position))
+def test_contact_hessian_matches_differences_of_the_gradient(band_position, mapped):
+    energy_gradient, hessian = _contact_pair_terms(_contact_multiplier(band_position), mapped)
+    nodes = _contact_nodes(mapped)
     h = 1e-9
     differences = np.empty((12, 12))
     for k in range(12):
-        x = CONTACT_POINTS.ravel().copy()
+        x = nodes.ravel().copy()
         x[k] += h
         plus = energy_gradient(x.reshape(4, 3))[1]
         x[k] -= 2 * h
         differences[:, k] = (plus - energy_gradient(x.reshape(4, 3))[1]) / (2 * h)
-    exact = hessian(CONTACT_POINTS)
+    exact = hessian(nodes)
     assert np.abs(exact).max() > 0.0
     assert np.abs(exact - 0.5 * (differences + differences.T)).max() <= HESSIAN_RTOL * np.abs(exact).max()
 
 
+@pytest.mark.parametrize("mapped", [False, True])
 @pytest.mark.parametrize("band_position", [5.0, 0.3, -0.7])
-def test_contact_gradient_matches_differences_of_the_energy(band_position):
-    energy_gradient, _ = _contact_pair_terms(_contact_multiplier(band_position))
-    _, gradient, _ = energy_gradient(CONTACT_POINTS)
+def test_contact_gradient_matches_differences_of_the_energy(band_position, mapped):
+    energy_gradient, _ = _contact_pair_terms(_contact_multiplier(band_position), mapped)
+    nodes = _contact_nodes(mapped)
+    _, gradient, _ = energy_gradient(nodes)
     h = 1e-10
     differences = np.empty(12)
     for k in range(12):
-        x = CONTACT_POINTS.ravel().copy()
+        x = nodes.ravel().copy()
         x[k] += h
         plus = energy_gradient(x.reshape(4, 3))[0]
         x[k] -= 2 * h

@@ -13,6 +13,8 @@ import pytest
 
 from yarnfit.engine import Rod, RodMaterial, RodModel
 from yarnfit.engine.contact import find_pairs, pair_distances
+from yarnfit.engine.tiling import node_maps
+from curved_tiling import curved_model
 from yarnfit.patterns import DRAFTS, STITCHES, knit, read_pyp, weave
 
 HYLC = Path(__file__).parent / "data" / "hylc"
@@ -28,9 +30,16 @@ def periodic_model(pattern) -> RodModel:
     return RodModel.from_rods(rods, lattice=pattern.lattice)
 
 
-def edge_segments(model: RodModel, shift) -> np.ndarray:
+def edge_segments(model: RodModel, image) -> np.ndarray:
+    """Every edge's end points ``(E, 2, 3)`` in tile ``image``: each node placed by its own map
+    (a translation by the lattice on a flat tiling), the end node one edge tile further."""
     x = model.node_rest_position
-    return np.stack([x[model.edge_nodes[:, 0]], x[model.edge_nodes[:, 1]] + model.edge_offset], axis=1) + shift
+    tile = np.broadcast_to(np.asarray(image), (model.n_edges, 2))
+    r0, t0 = node_maps(model, model.edge_nodes[:, 0], tile)
+    r1, t1 = node_maps(model, model.edge_nodes[:, 1], tile + model.edge_tile)
+    start = np.einsum("eij,ej->ei", r0, x[model.edge_nodes[:, 0]]) + t0
+    end = np.einsum("eij,ej->ei", r1, x[model.edge_nodes[:, 1]]) + t1
+    return np.stack([start, end], axis=1)
 
 
 def segment_distance(p, q, n=400):
@@ -45,10 +54,16 @@ def segment_distance(p, q, n=400):
     # A yarn that crosses tile borders mid-way (HYLC's stockinette): its neighbours along the yarn
     # sit in other tiles than its own.
     read_pyp(HYLC / "stocktiny.pyp"),
-], ids=["twill-2/1", "rib-1x1", "stocktiny.pyp"])
+    # Every node reaching its images by its own random rigid map (a repeat on a curved surface).
+    "curved",
+], ids=["twill-2/1", "rib-1x1", "stocktiny.pyp", "curved tiling"])
 def test_periodic_pairs_match_an_explicit_tiling(pattern):
-    model = periodic_model(pattern)
-    margin = pattern.radius
+    if pattern == "curved":
+        model = curved_model(reach=3, turn=0.05, jitter=5e-5)
+        radius = float(model.edge_radius.max())
+    else:
+        model, radius = periodic_model(pattern), pattern.radius
+    margin = radius
     found = find_pairs(model, model.node_rest_position, margin)
     distances = pair_distances(model, model.node_rest_position, found)
     periodic = {}
@@ -57,12 +72,12 @@ def test_periodic_pairs_match_an_explicit_tiling(pattern):
         assert key not in periodic, f"pair {key} reported twice"
         periodic[key] = d
     # Brute force: centre edges against every edge of the 5×5 neighbourhood of copies.
-    centre = edge_segments(model, np.zeros(3))
-    reach = 2.0 * pattern.radius + margin
+    centre = edge_segments(model, (0, 0))
+    reach = 2.0 * radius + margin
     expected = {}
     for i in range(-2, 3):
         for j in range(-2, 3):
-            other = edge_segments(model, i * model.lattice[0] + j * model.lattice[1])
+            other = edge_segments(model, (i, j))
             for a in range(model.n_edges):
                 for b in range(model.n_edges):
                     if (i, j) == (0, 0) and b <= a:

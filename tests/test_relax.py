@@ -63,7 +63,7 @@ def test_every_hylc_pattern_relaxes(name):
 def relaxed_centreline_length(result) -> np.ndarray:
     """Per yarn, the length of its relaxed centreline (edges into neighbouring tiles included)."""
     m, x = result.model, result.state.node_position
-    vectors = x[m.edge_nodes[:, 1]] + m.edge_offset - x[m.edge_nodes[:, 0]]
+    vectors = x[m.edge_nodes[:, 1]] + m.edge_offset - x[m.edge_nodes[:, 0]]  # flat tiling: translations
     lengths = np.linalg.norm(vectors, axis=1)
     return np.array([lengths[m.rod_edges(r)].sum() for r in range(m.n_rods)])
 

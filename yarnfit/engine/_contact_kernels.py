@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._quat import cross, dot, norm, row3
+from ._quat import cross, dot, mat_t_vec, mat_vec, norm, pull_back_block, row3
 
 # Relative size of a·e − b² below which two segments are treated as parallel (their closest
 # points are then not unique and the middle of the overlap is used, a continuous choice).
@@ -74,23 +74,36 @@ def segment_closest_points(a0, a1, b0, b1):
 
 
 @njit(cache=True)
-def _edge_points(pos, edge_nodes, edge_offset, e):
-    i0 = edge_nodes[e, 0]
-    i1 = edge_nodes[e, 1]
-    p0 = row3(pos, i0)
-    p1 = (pos[i1, 0] + edge_offset[e, 0], pos[i1, 1] + edge_offset[e, 1], pos[i1, 2] + edge_offset[e, 2])
+def _map(rotation, translation, v):
+    """``rotation v + translation`` (3×3 and 3-vector rows)."""
+    r = mat_vec(rotation, v)
+    return (r[0] + translation[0], r[1] + translation[1], r[2] + translation[2])
+
+
+@njit(cache=True)
+def _edge_points(pos, edge_nodes, edge_end_rotation, edge_offset, e):
+    """End points of edge ``e`` in its home tile (its end node mapped into the edge's tile)."""
+    p0 = row3(pos, edge_nodes[e, 0])
+    p1 = _map(edge_end_rotation[e], edge_offset[e], row3(pos, edge_nodes[e, 1]))
     return p0, p1
 
 
 @njit(cache=True)
-def _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p):
-    """End points of the two edges of pair ``p``; the second edge moved to its periodic image."""
-    a0, a1 = _edge_points(pos, edge_nodes, edge_offset, pairs[p, 0])
-    b0, b1 = _edge_points(pos, edge_nodes, edge_offset, pairs[p, 1])
-    sx = pair_shift[p, 0]
-    sy = pair_shift[p, 1]
-    sz = pair_shift[p, 2]
-    return a0, a1, (b0[0] + sx, b0[1] + sy, b0[2] + sz), (b1[0] + sx, b1[1] + sy, b1[2] + sz)
+def _pair_nodes(edge_nodes, pairs, p):
+    """The four nodes ``(a0, a1, b0, b1)`` of pair ``p``."""
+    return (edge_nodes[pairs[p, 0], 0], edge_nodes[pairs[p, 0], 1], edge_nodes[pairs[p, 1], 0],
+            edge_nodes[pairs[p, 1], 1])
+
+
+@njit(cache=True)
+def _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p):
+    """End points ``(a0, a1, b0, b1)`` of pair ``p``: node ``m`` of the pair mapped by
+    ``pair_rotation[p, m] x + pair_translation[p, m]`` (its tile image)."""
+    nodes = _pair_nodes(edge_nodes, pairs, p)
+    return (_map(pair_rotation[p, 0], pair_translation[p, 0], row3(pos, nodes[0])),
+            _map(pair_rotation[p, 1], pair_translation[p, 1], row3(pos, nodes[1])),
+            _map(pair_rotation[p, 2], pair_translation[p, 2], row3(pos, nodes[2])),
+            _map(pair_rotation[p, 3], pair_translation[p, 3], row3(pos, nodes[3])))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -146,12 +159,12 @@ def _interval_gap(start_a, length_a, start_b, length_b):
 
 
 @njit(cache=True)
-def edge_boxes(pos, pos_end, edge_nodes, edge_offset, edge_radius, margin, lower, upper):
+def edge_boxes(pos, pos_end, edge_nodes, edge_end_rotation, edge_offset, edge_radius, margin, lower, upper):
     """Axis-aligned boxes ``(E, 3)`` of the edges swept from ``pos`` to ``pos_end``, inflated by
     ``radius + margin / 2``."""
     for e in range(edge_nodes.shape[0]):
-        p0, p1 = _edge_points(pos, edge_nodes, edge_offset, e)
-        q0, q1 = _edge_points(pos_end, edge_nodes, edge_offset, e)
+        p0, p1 = _edge_points(pos, edge_nodes, edge_end_rotation, edge_offset, e)
+        q0, q1 = _edge_points(pos_end, edge_nodes, edge_end_rotation, edge_offset, e)
         pad = edge_radius[e] + 0.5 * margin
         for k in range(3):
             lower[e, k] = min(min(p0[k], p1[k]), min(q0[k], q1[k])) - pad
@@ -272,23 +285,38 @@ def _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_
 
 
 @njit(cache=True)
-def broad_phase(pos, pos_end, edge_nodes, edge_offset, edge_radius, edge_rod, edge_chain_tile, edge_arc_start,
-                edge_rest_length, rod_length, rod_closed, rod_period, lattice, image_range, node_free, margin,
-                exclusion_factor):
+def broad_phase(pos, pos_end, edge_nodes, edge_end_rotation, edge_offset, edge_radius, edge_rod, edge_chain_tile,
+                edge_arc_start, edge_rest_length, rod_length, rod_closed, rod_period, lattice, image_range, node_free,
+                margin, exclusion_factor):
     """Candidate contact pairs whose inflated boxes, swept from ``pos`` to ``pos_end`` (pass the
-    same array twice for a static query), overlap.
+    same array twice for a static query), overlap, for a flat tiling (images are lattice
+    translations; see :func:`pairs_of_boxes`).
 
     Returns ``pairs (P, 2)`` and ``images (P, 2)``: edge ``pairs[p, 1]`` is taken at the tile image
     ``images[p]`` (moved by ``images[p] @ lattice``); ``image_range (2,)`` bounds the images searched
-    (zero for a non-periodic model). Uniform grid with cell size equal to the largest box, entries
-    sorted by cell key: O(E log E) plus the pairs found. Neighbours along one yarn (see
-    :func:`_pair_excluded`) and pairs whose four nodes are all pinned are left out.
+    (zero for a non-periodic model).
     """
     n_edges = edge_nodes.shape[0]
     lower = np.empty((n_edges, 3))
     upper = np.empty((n_edges, 3))
-    edge_boxes(pos, pos_end, edge_nodes, edge_offset, edge_radius, margin, lower, upper)
+    edge_boxes(pos, pos_end, edge_nodes, edge_end_rotation, edge_offset, edge_radius, margin, lower, upper)
     v_edge, v_image, v_lower, v_upper = _virtual_boxes(lower, upper, lattice, image_range)
+    return pairs_of_boxes(v_edge, v_image, v_lower, v_upper, edge_nodes, edge_rod, edge_chain_tile, edge_arc_start,
+                          edge_rest_length, edge_radius, rod_length, rod_closed, rod_period, node_free,
+                          exclusion_factor)
+
+
+@njit(cache=True)
+def pairs_of_boxes(v_edge, v_image, v_lower, v_upper, edge_nodes, edge_rod, edge_chain_tile, edge_arc_start,
+                   edge_rest_length, edge_radius, rod_length, rod_closed, rod_period, node_free, exclusion_factor):
+    """Pairs of virtual edges (edge ``v_edge`` at tile image ``v_image`` with box ``v_lower``,
+    ``v_upper``) whose boxes overlap, each physical pair reported once with its first edge in the
+    home tile (see :func:`_canonical`).
+
+    Uniform grid with cell size equal to the largest box, entries sorted by cell key: O(E log E)
+    plus the pairs found. Neighbours along one yarn (see :func:`_pair_excluded`) and pairs whose
+    four nodes are all pinned are left out.
+    """
     n_virtual = v_edge.shape[0]
     if n_virtual < 2:
         return np.empty((0, 2), dtype=np.int64), np.empty((0, 2), dtype=np.int64)
@@ -343,21 +371,22 @@ def broad_phase(pos, pos_end, edge_nodes, edge_offset, edge_radius, edge_rod, ed
 
 
 @njit(cache=True)
-def pair_distances(pos, edge_nodes, edge_offset, pairs, pair_shift, out):
+def pair_distances(pos, edge_nodes, pairs, pair_rotation, pair_translation, out):
     """Centreline distance of every pair into ``out (P,)`` (m)."""
     for p in range(pairs.shape[0]):
-        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
         out[p] = segment_closest_points(a0, a1, b0, b1)[2]
 
 
 @njit(cache=True)
-def tunneling_step_limit(pos, dx, edge_nodes, edge_offset, pairs, pair_shift, fraction):
+def tunneling_step_limit(pos, dx, edge_nodes, pairs, pair_rotation, pair_translation, fraction):
     """Largest step length ``α ≤ 1`` along node displacements ``dx (N, 3)`` such that no pair's
     centreline distance can reach zero: the distance of two segments changes by at most the sum of
-    their largest node moves, so ``α (δa + δb) ≤ fraction · d0`` keeps every pair apart."""
+    their largest node moves (a rigid map does not change a move's length), so
+    ``α (δa + δb) ≤ fraction · d0`` keeps every pair apart."""
     alpha = 1.0
     for p in range(pairs.shape[0]):
-        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
         _, _, dist, _ = segment_closest_points(a0, a1, b0, b1)
         travel = 0.0
         for e in (pairs[p, 0], pairs[p, 1]):
@@ -454,7 +483,7 @@ def _pair_sample_terms(a0, a1, b0, b1, samples_a, samples_b, radius_sum, multipl
 
 
 @njit(cache=True)
-def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, edge_samples, pairs, pair_shift,
+def contact_energy_gradient(pos, edge_nodes, edge_radius, edge_samples, pairs, pair_rotation, pair_translation,
                             constraint_start, multiplier, stiffness, smoothing, node_grad, node_scale, out_gap,
                             out_force):
     """Augmented-Lagrangian contact energy (J) of all pairs' sampled constraints (see
@@ -468,23 +497,22 @@ def contact_energy_gradient(pos, edge_nodes, edge_offset, edge_radius, edge_samp
     for p in range(pairs.shape[0]):
         ea = pairs[p, 0]
         eb = pairs[p, 1]
-        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
         energy += _pair_sample_terms(a0, a1, b0, b1, edge_samples[ea], edge_samples[eb],
                                      edge_radius[ea] + edge_radius[eb], multiplier, constraint_start[p],
                                      stiffness[p], smoothing, local, out_gap, out_force)
-        nodes = (edge_nodes[ea, 0], edge_nodes[ea, 1], edge_nodes[eb, 0], edge_nodes[eb, 1])
+        nodes = _pair_nodes(edge_nodes, pairs, p)
         for m in range(4):
-            mag = 0.0
+            g = mat_t_vec(pair_rotation[p, m], (local[3 * m], local[3 * m + 1], local[3 * m + 2]))
             for k in range(3):
-                node_grad[nodes[m], k] += local[3 * m + k]
-                mag += local[3 * m + k] ** 2
-            node_scale[nodes[m]] += math.sqrt(mag)
+                node_grad[nodes[m], k] += g[k]
+            node_scale[nodes[m]] += math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
     return energy
 
 
 @njit(cache=True)
-def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, edge_samples, pairs, pair_shift, constraint_start,
-                        multiplier, stiffness, smoothing, fd_relative_step, rows, cols, vals, start):
+def contact_hessian_coo(pos, edge_nodes, edge_radius, edge_samples, pairs, pair_rotation, pair_translation,
+                        constraint_start, multiplier, stiffness, smoothing, fd_relative_step, rows, cols, vals, start):
     """Hessian of the contact terms as COO triplets (144 per pair in reach) from ``start``.
 
     Central differences of the pair's analytic gradient (step ``fd_relative_step`` times the sum of
@@ -502,7 +530,7 @@ def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, edge_samples,
         sa = edge_samples[ea]
         sb = edge_samples[eb]
         first = constraint_start[p]
-        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
         rsum = edge_radius[ea] + edge_radius[eb]
         h = fd_relative_step * rsum
         _pair_sample_terms(a0, a1, b0, b1, sa, sb, rsum, multiplier, first, stiffness[p], smoothing, gp, gap, force)
@@ -532,7 +560,9 @@ def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, edge_samples,
             pts[m, k] += h
             for row in range(12):
                 local[row, col] = (gp[row] - gm[row]) / (2.0 * h)
-        nodes = (edge_nodes[ea, 0], edge_nodes[ea, 1], edge_nodes[eb, 0], edge_nodes[eb, 1])
+        for m in range(4):
+            pull_back_block(local, 3 * m, pair_rotation[p, m])
+        nodes = _pair_nodes(edge_nodes, pairs, p)
         for i in range(12):
             for j in range(12):
                 rows[idx] = 3 * nodes[i // 3] + i % 3
@@ -549,20 +579,18 @@ def contact_hessian_coo(pos, edge_nodes, edge_offset, edge_radius, edge_samples,
 
 
 @njit(cache=True)
-def _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, pairs, pair_shift, p):
+def _pair_frame(pos, node_inv_mass, edge_nodes, pairs, pair_rotation, pair_translation, p):
     """Closest points of the edges of pair ``p`` (the second at its image) and how their nodes share
     a correction there.
 
     Returns ``(nodes, coef, w, weight, dist, normal)``: the four nodes (a0, a1, b0, b1), their
     barycentric coefficients signed towards ``normal`` (+ on a, − on b), the coefficient-weighted
     inverse masses ``w_i coef_i``, the generalised inverse mass ``Σ w_i coef_i²`` of the pair, the
-    centreline distance and the unit normal from b to a.
+    centreline distance and the unit normal from b to a (in the mapped, world frame).
     """
-    ea = pairs[p, 0]
-    eb = pairs[p, 1]
-    a0, a1, b0, b1 = _pair_points(pos, edge_nodes, edge_offset, pair_shift, pairs, p)
+    a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
     s, t, dist, normal = segment_closest_points(a0, a1, b0, b1)
-    nodes = (edge_nodes[ea, 0], edge_nodes[ea, 1], edge_nodes[eb, 0], edge_nodes[eb, 1])
+    nodes = _pair_nodes(edge_nodes, pairs, p)
     coef = (1.0 - s, s, -(1.0 - t), -t)
     w = (node_inv_mass[nodes[0]] * coef[0], node_inv_mass[nodes[1]] * coef[1],
          node_inv_mass[nodes[2]] * coef[2], node_inv_mass[nodes[3]] * coef[3])
@@ -571,16 +599,17 @@ def _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, pairs, pair_shift, 
 
 
 @njit(cache=True)
-def _relative_motion(field, nodes, coef, normal):
-    """Tangential part of ``Σ coef_i field[node_i]`` (for positions or velocities: a's contact
-    point relative to b's) and its length."""
+def _relative_motion(field, nodes, coef, rotation, normal):
+    """Tangential part of ``Σ coef_i R_i field[node_i]`` (for positions or velocities: a's contact
+    point relative to b's, each node's vector turned into its image) and its length."""
     r0 = 0.0
     r1 = 0.0
     r2 = 0.0
     for m in range(4):
-        r0 += coef[m] * field[nodes[m], 0]
-        r1 += coef[m] * field[nodes[m], 1]
-        r2 += coef[m] * field[nodes[m], 2]
+        v = mat_vec(rotation[m], row3(field, nodes[m]))
+        r0 += coef[m] * v[0]
+        r1 += coef[m] * v[1]
+        r2 += coef[m] * v[2]
     along = r0 * normal[0] + r1 * normal[1] + r2 * normal[2]
     r0 -= along * normal[0]
     r1 -= along * normal[1]
@@ -589,7 +618,17 @@ def _relative_motion(field, nodes, coef, normal):
 
 
 @njit(cache=True)
-def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge_radius, pairs, pair_shift,
+def _move_nodes(field, nodes, rotation, w, direction, amount):
+    """``field[node_m] += w_m R_mᵀ direction · amount``: a correction at the mapped points applied
+    to the nodes."""
+    for m in range(4):
+        d = mat_t_vec(rotation[m], direction)
+        for k in range(3):
+            field[nodes[m], k] += w[m] * d[k] * amount
+
+
+@njit(cache=True)
+def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_radius, pairs, pair_rotation, pair_translation,
                      lam_normal, lam_tangent, static_friction):
     """One Gauss–Seidel sweep over the contact pairs (hard unilateral constraints).
 
@@ -598,21 +637,21 @@ def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge
     can be cancelled with a multiplier below ``static_friction · λn``, it is cancelled.
     """
     for p in range(pairs.shape[0]):
-        nodes, coef, w, weight, dist, n = _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, pairs, pair_shift, p)
+        rotation = pair_rotation[p]
+        nodes, coef, w, weight, dist, n = _pair_frame(pos, node_inv_mass, edge_nodes, pairs, pair_rotation,
+                                                      pair_translation, p)
         if weight == 0.0:
             continue
         c = dist - (edge_radius[pairs[p, 0]] + edge_radius[pairs[p, 1]])
         if c < 0.0:
             dl = -c / weight
             lam_normal[p] += dl
-            for m in range(4):
-                for k in range(3):
-                    pos[nodes[m], k] += w[m] * n[k] * dl
+            _move_nodes(pos, nodes, rotation, w, n, dl)
         if lam_normal[p] <= 0.0 or static_friction <= 0.0:
             continue
         # Tangential slip since the step started (the tangential projection is linear).
-        now, _ = _relative_motion(pos, nodes, coef, n)
-        before, _ = _relative_motion(prev_pos, nodes, coef, n)
+        now, _ = _relative_motion(pos, nodes, coef, rotation, n)
+        before, _ = _relative_motion(prev_pos, nodes, coef, rotation, n)
         slip = (now[0] - before[0], now[1] - before[1], now[2] - before[2])
         slip_norm = math.sqrt(slip[0] ** 2 + slip[1] ** 2 + slip[2] ** 2)
         if slip_norm == 0.0:
@@ -620,28 +659,24 @@ def project_contacts(pos, prev_pos, node_inv_mass, edge_nodes, edge_offset, edge
         dlt = slip_norm / weight
         if lam_tangent[p] + dlt < static_friction * lam_normal[p]:
             lam_tangent[p] += dlt
-            f = dlt / slip_norm
-            for m in range(4):
-                for k in range(3):
-                    pos[nodes[m], k] -= w[m] * slip[k] * f
+            _move_nodes(pos, nodes, rotation, w, slip, -dlt / slip_norm)
 
 
 @njit(cache=True)
-def apply_kinetic_friction(pos, vel, node_inv_mass, edge_nodes, edge_offset, pairs, pair_shift, lam_normal,
+def apply_kinetic_friction(pos, vel, node_inv_mass, edge_nodes, pairs, pair_rotation, pair_translation, lam_normal,
                            kinetic_friction, dt):
     """Velocity pass: each touching pair loses up to ``μk |Jn|`` of tangential relative momentum,
     with ``Jn = λn / Δt`` the normal impulse of the step."""
     for p in range(pairs.shape[0]):
         if lam_normal[p] <= 0.0:
             continue
-        nodes, coef, w, weight, _, n = _pair_frame(pos, node_inv_mass, edge_nodes, edge_offset, pairs, pair_shift, p)
+        rotation = pair_rotation[p]
+        nodes, coef, w, weight, _, n = _pair_frame(pos, node_inv_mass, edge_nodes, pairs, pair_rotation,
+                                                   pair_translation, p)
         if weight == 0.0:
             continue
-        vt, speed = _relative_motion(vel, nodes, coef, n)
+        vt, speed = _relative_motion(vel, nodes, coef, rotation, n)
         if speed == 0.0:
             continue
         dv = min(weight * kinetic_friction * lam_normal[p] / dt, speed)
-        impulse = dv / (weight * speed)
-        for m in range(4):
-            for k in range(3):
-                vel[nodes[m], k] -= w[m] * vt[k] * impulse
+        _move_nodes(vel, nodes, rotation, w, vt, -dv / (weight * speed))

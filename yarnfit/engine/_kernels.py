@@ -31,7 +31,10 @@ from numba import njit, prange
 
 from ._quat import (
     cross,
+    mat_t_vec,
+    mat_vec,
     norm,
+    pull_back_block,
     quat_conj,
     quat_dot,
     quat_mul,
@@ -126,9 +129,10 @@ def bend_twist_element(qa, qb, rest_darboux, mean_rest_length, bend1, bend2, twi
 
 
 @njit(cache=True)
-def _edge_end(pos, edge_nodes, edge_offset, e):
-    i1 = edge_nodes[e, 1]
-    return (pos[i1, 0] + edge_offset[e, 0], pos[i1, 1] + edge_offset[e, 1], pos[i1, 2] + edge_offset[e, 2])
+def _edge_end(pos, edge_nodes, edge_end_rotation, edge_offset, e):
+    """End point of edge ``e``: its end node mapped into the edge's tile, ``R x + c``."""
+    r = mat_vec(edge_end_rotation[e], row3(pos, edge_nodes[e, 1]))
+    return (r[0] + edge_offset[e, 0], r[1] + edge_offset[e, 1], r[2] + edge_offset[e, 2])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -141,12 +145,14 @@ def rod_energy_gradient(
     pos,
     quat,
     edge_nodes,
+    edge_end_rotation,
     edge_offset,
     edge_rest_length,
     edge_shear_stiffness,
     edge_stretch_stiffness,
     edge_hardening,
     joint_edges,
+    joint_frame_rotation,
     joint_rest_darboux,
     joint_rest_length,
     joint_stiffness,
@@ -156,6 +162,11 @@ def rod_energy_gradient(
     edge_scale,
 ):
     """Internal rod energy, its gradient, and the magnitude sums used as residual scales.
+
+    An edge's end point is its end node mapped by ``edge_end_rotation (E, 3, 3)`` and
+    ``edge_offset (E, 3)`` (identity and zero within a tile; the map onto a neighbouring tile for a
+    ghost edge); a joint compares its first frame with its second frame turned by
+    ``joint_frame_rotation (J, 4)`` (the second edge seen from the first edge's tile).
 
     Adds into ``node_grad (N, 3)`` (N), ``edge_grad (E, 3)`` (N·m), ``node_scale (N,)`` and
     ``edge_scale (E,)`` (sum of the magnitudes of every contribution, the scale a residual is
@@ -170,7 +181,7 @@ def rod_energy_gradient(
         i1 = edge_nodes[e, 1]
         us, uh, n, tau = stretch_shear_element(
             row3(pos, i0),
-            _edge_end(pos, edge_nodes, edge_offset, e),
+            _edge_end(pos, edge_nodes, edge_end_rotation, edge_offset, e),
             row4(quat, e),
             edge_rest_length[e],
             edge_shear_stiffness[e],
@@ -181,9 +192,10 @@ def rod_energy_gradient(
         u_stretch += us
         u_shear += uh
         nn = norm(n)
+        n1 = mat_t_vec(edge_end_rotation[e], n)
         for k in range(3):
             node_grad[i0, k] -= n[k]
-            node_grad[i1, k] += n[k]
+            node_grad[i1, k] += n1[k]
             edge_grad[e, k] += tau[k]
         node_scale[i0] += nn
         node_scale[i1] += nn
@@ -191,9 +203,10 @@ def rod_energy_gradient(
     for j in range(joint_edges.shape[0]):
         a = joint_edges[j, 0]
         b = joint_edges[j, 1]
+        rho = row4(joint_frame_rotation, j)
         ub, ut, tau_b = bend_twist_element(
             row4(quat, a),
-            row4(quat, b),
+            quat_mul(rho, row4(quat, b)),
             row4(joint_rest_darboux, j),
             joint_rest_length[j],
             joint_stiffness[j, 0],
@@ -203,9 +216,11 @@ def rod_energy_gradient(
         u_bend += ub
         u_twist += ut
         tn = norm(tau_b)
+        # ρ exp(θ) q = exp(R(ρ) θ) ρ q: a rotation θ of frame b turns the mapped frame by R(ρ) θ.
+        tau_own = quat_rotate_inv(rho, tau_b)
         for k in range(3):
             edge_grad[a, k] -= tau_b[k]
-            edge_grad[b, k] += tau_b[k]
+            edge_grad[b, k] += tau_own[k]
         edge_scale[a] += tn
         edge_scale[b] += tn
     return u_stretch, u_shear, u_bend, u_twist
@@ -276,6 +291,21 @@ def stretch_shear_hessian(p0, p1, q, rest_length, shear_stiffness, axial_tangent
 
 
 @njit(cache=True)
+def _quat_matrix(q, out):
+    """Rotation matrix ``(3, 3)`` of unit quaternion ``q`` into ``out``."""
+    w, x, y, z = q
+    out[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    out[0, 1] = 2.0 * (x * y - w * z)
+    out[0, 2] = 2.0 * (x * z + w * y)
+    out[1, 0] = 2.0 * (x * y + w * z)
+    out[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    out[1, 2] = 2.0 * (y * z - w * x)
+    out[2, 0] = 2.0 * (x * z - w * y)
+    out[2, 1] = 2.0 * (y * z + w * x)
+    out[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+
+
+@njit(cache=True)
 def _bend_local_gradient(qa, qb, theta_a, theta_b, rest, lbar, b1, b2, t, out):
     _, _, tau_b = bend_twist_element(
         quat_rotate_world(theta_a, qa), quat_rotate_world(theta_b, qb), rest, lbar, b1, b2, t
@@ -315,12 +345,14 @@ def rod_hessian_coo(
     pos,
     quat,
     edge_nodes,
+    edge_end_rotation,
     edge_offset,
     edge_rest_length,
     edge_shear_stiffness,
     edge_stretch_stiffness,
     edge_hardening,
     joint_edges,
+    joint_frame_rotation,
     joint_rest_darboux,
     joint_rest_length,
     joint_stiffness,
@@ -346,6 +378,7 @@ def rod_hessian_coo(
     gm = np.empty(6)
     dofs9 = np.empty(9, dtype=np.int64)
     dofs6 = np.empty(6, dtype=np.int64)
+    rho_matrix = np.empty((3, 3))
     zero = (0.0, 0.0, 0.0)
     idx = 0
     for e in range(edge_nodes.shape[0]):
@@ -356,17 +389,19 @@ def rod_hessian_coo(
             dofs9[3 + k] = 3 * i1 + k
             dofs9[6 + k] = 3 * n_nodes + 3 * e + k
         p0 = row3(pos, i0)
-        p1 = _edge_end(pos, edge_nodes, edge_offset, e)
+        p1 = _edge_end(pos, edge_nodes, edge_end_rotation, edge_offset, e)
         q = row4(quat, e)
         _, stress, tangent, _ = element_stress(p0, p1, q, edge_rest_length[e], edge_shear_stiffness[e],
                                                edge_stretch_stiffness[e], edge_hardening[e, 0], edge_hardening[e, 1])
         stretch_shear_hessian(p0, p1, q, edge_rest_length[e], edge_shear_stiffness[e], tangent, stress, local9)
+        pull_back_block(local9, 3, edge_end_rotation[e])
         idx = _write_local(local9, dofs9, idx, rows, cols, vals)
     for j in range(joint_edges.shape[0]):
         a = joint_edges[j, 0]
         b = joint_edges[j, 1]
         qa = row4(quat, a)
-        qb = row4(quat, b)
+        rho = row4(joint_frame_rotation, j)
+        qb = quat_mul(rho, row4(quat, b))
         rest = row4(joint_rest_darboux, j)
         lbar = joint_rest_length[j]
         b1 = joint_stiffness[j, 0]
@@ -387,6 +422,9 @@ def rod_hessian_coo(
                 _bend_local_gradient(qa, qb, zero, dm, rest, lbar, b1, b2, t, gm)
             for row in range(6):
                 local6[row, col] = (gp[row] - gm[row]) * (0.5 / hr)
+        # Differentiated with respect to the mapped frame's rotation: pull back by R(ρ).
+        _quat_matrix(rho, rho_matrix)
+        pull_back_block(local6, 3, rho_matrix)
         idx = _write_local(local6, dofs6, idx, rows, cols, vals)
     return idx
 

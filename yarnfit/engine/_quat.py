@@ -1,6 +1,7 @@
 """Quaternion and small-vector helpers for the Numba kernels.
 
-Only ``@njit`` code lives here. Quaternions are 4-tuples ``(w, x, y, z)``; vectors are 3-tuples.
+Only ``@njit`` code lives here. Quaternions are 4-tuples ``(w, x, y, z)``; vectors are 3-tuples;
+rigid maps are 3×3 arrays.
 Working on tuples instead of small arrays keeps the hot loops free of heap allocation.
 
 Conventions (``docs/design.md`` §4):
@@ -13,6 +14,7 @@ Conventions (``docs/design.md`` §4):
 
 import math
 
+import numpy as np
 from numba import njit
 
 
@@ -148,3 +150,37 @@ def row3(arr, i):
 def row4(arr, i):
     """Row ``i`` of an ``(n, 4)`` array as a tuple."""
     return (arr[i, 0], arr[i, 1], arr[i, 2], arr[i, 3])
+
+
+@njit(cache=True)
+def mat_vec(m, v):
+    """``m v`` for a 3×3 array ``m`` (a rigid map's rotation)."""
+    return (m[0, 0] * v[0] + m[0, 1] * v[1] + m[0, 2] * v[2],
+            m[1, 0] * v[0] + m[1, 1] * v[1] + m[1, 2] * v[2],
+            m[2, 0] * v[0] + m[2, 1] * v[1] + m[2, 2] * v[2])
+
+
+@njit(cache=True)
+def mat_t_vec(m, v):
+    """``mᵀ v``: a gradient or correction at a mapped point, pulled back to the node."""
+    return (m[0, 0] * v[0] + m[1, 0] * v[1] + m[2, 0] * v[2],
+            m[0, 1] * v[0] + m[1, 1] * v[1] + m[2, 1] * v[2],
+            m[0, 2] * v[0] + m[1, 2] * v[1] + m[2, 2] * v[2])
+
+
+@njit(cache=True)
+def pull_back_block(local, start, m):
+    """``local ← Tᵀ local T`` in place, T the identity except the 3×3 ``m`` on rows and columns
+    ``start..start+2``: a Hessian over a mapped point ``m x + t`` pulled back to ``x``."""
+    n = local.shape[0]
+    tmp = np.empty(3)
+    for i in range(n):  # columns: local[i, block] ← local[i, block] m
+        for c in range(3):
+            tmp[c] = local[i, start] * m[0, c] + local[i, start + 1] * m[1, c] + local[i, start + 2] * m[2, c]
+        for c in range(3):
+            local[i, start + c] = tmp[c]
+    for j in range(n):  # rows: local[block, j] ← mᵀ local[block, j]
+        for r in range(3):
+            tmp[r] = m[0, r] * local[start, j] + m[1, r] * local[start + 1, j] + m[2, r] * local[start + 2, j]
+        for r in range(3):
+            local[start + r, j] = tmp[r]

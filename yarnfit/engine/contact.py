@@ -13,23 +13,28 @@ import numpy as np
 
 from . import _contact_kernels
 from .model import CONTACT_EXCLUSION_FACTOR, RodModel
+from .tiling import node_maps
 
 
 @dataclass(frozen=True)
 class ContactPairs:
     """Candidate pairs: ``pairs (P, 2)`` edge indices, ``images (P, 2)`` int tile image of the second
-    edge, ``shift (P, 3)`` m, the translation of that image (``images @ lattice``)."""
+    edge, and the rigid maps that place the pair's four nodes ``(a0, a1, b0, b1)``:
+    ``rotation (P, 4, 3, 3)``, ``translation (P, 4, 3)`` m (node ``m`` of pair ``p`` sits at
+    ``rotation[p, m] x + translation[p, m]``; translations only, for a flat tiling)."""
 
     pairs: np.ndarray
     images: np.ndarray
-    shift: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
 
     def __len__(self) -> int:
         return len(self.pairs)
 
     @classmethod
     def empty(cls) -> "ContactPairs":
-        return cls(np.empty((0, 2), dtype=np.int64), np.empty((0, 2), dtype=np.int64), np.empty((0, 3)))
+        return cls(np.empty((0, 2), dtype=np.int64), np.empty((0, 2), dtype=np.int64), np.empty((0, 4, 3, 3)),
+                   np.empty((0, 4, 3)))
 
     def keys(self, n_edges: int) -> np.ndarray:
         """One integer per pair (edges and image), stable across queries."""
@@ -37,12 +42,17 @@ class ContactPairs:
         return ((self.pairs[:, 0] * n_edges + self.pairs[:, 1]) * 64 + self.images[:, 0] + 32) * 64 + self.images[:, 1] + 32
 
     def subset(self, mask: np.ndarray) -> "ContactPairs":
-        return ContactPairs(self.pairs[mask], self.images[mask], self.shift[mask])
+        return ContactPairs(self.pairs[mask], self.images[mask], self.rotation[mask], self.translation[mask])
+
+    def kernel_args(self) -> tuple:
+        """``(pairs, rotation, translation)`` as the contact kernels take them."""
+        return self.pairs, self.rotation, self.translation
 
 
 def image_range(model: RodModel, position: np.ndarray, reach: float) -> np.ndarray:
     """Tile images ``(2,)`` to search: enough to cover the configuration's extent along each
-    lattice vector plus ``reach`` (m); zero for a non-periodic model."""
+    lattice vector plus ``reach`` (m); zero for a non-periodic model. A curved tiling caps it at the
+    tiles its maps cover (less one, as an edge's end lies a tile further)."""
     if not model.periodic:
         return np.zeros(2, dtype=np.int64)
     lattice = model.lattice
@@ -51,7 +61,13 @@ def image_range(model: RodModel, position: np.ndarray, reach: float) -> np.ndarr
     coords = np.linalg.lstsq(lattice.T, position.T, rcond=None)[0]
     span = coords.max(axis=1) - coords.min(axis=1)
     lengths = np.linalg.norm(lattice, axis=1)
-    return np.array([math.ceil(span[k] + reach / lengths[k]) for k in range(2)], dtype=np.int64)
+    needed = np.array([math.ceil(span[k] + reach / lengths[k]) for k in range(2)], dtype=np.int64)
+    if model.tiling is not None:
+        cap = model.tiling.reach - 1
+        if np.any(needed > cap):
+            raise ValueError(f"contacts reach {tuple(int(v) for v in needed)} tiles but the curved tiling covers only "
+                             f"{cap} beyond the home tile; build it with a larger reach")
+    return needed
 
 
 def find_pairs(model: RodModel, position: np.ndarray, margin: float, position_end: np.ndarray | None = None) -> ContactPairs:
@@ -62,19 +78,70 @@ def find_pairs(model: RodModel, position: np.ndarray, margin: float, position_en
     reach = 2.0 * float(m.edge_radius.max()) + margin + float(m.edge_rest_length.max())
     if position_end is not None:
         reach += float(np.abs(end - position).max(initial=0.0))
-    images_searched = image_range(m, position, reach)
-    pairs, images = _contact_kernels.broad_phase(
-        position, end, m.edge_nodes, m.edge_offset, m.edge_radius, m.edge_rod, m.edge_chain_tile, m.edge_arc_start,
-        m.edge_rest_length, m.rod_length, m.rod_closed, m.rod_period, m.lattice, images_searched, ~m.node_pinned,
-        margin, CONTACT_EXCLUSION_FACTOR,
-    )
-    return ContactPairs(pairs, images, np.ascontiguousarray(images @ m.lattice))
+    searched = image_range(m, position, reach)
+    if m.tiling is None:
+        pairs, images = _contact_kernels.broad_phase(
+            position, end, m.edge_nodes, m.edge_end_rotation, m.edge_offset, m.edge_radius, m.edge_rod,
+            m.edge_chain_tile, m.edge_arc_start, m.edge_rest_length, m.rod_length, m.rod_closed, m.rod_period,
+            m.lattice, searched, ~m.node_pinned, margin, CONTACT_EXCLUSION_FACTOR,
+        )
+    else:
+        boxes = _curved_virtual_boxes(m, position, end, margin, searched)
+        pairs, images = _contact_kernels.pairs_of_boxes(
+            *boxes, m.edge_nodes, m.edge_rod, m.edge_chain_tile, m.edge_arc_start, m.edge_rest_length, m.edge_radius,
+            m.rod_length, m.rod_closed, m.rod_period, ~m.node_pinned, CONTACT_EXCLUSION_FACTOR,
+        )
+    return ContactPairs(pairs, images, *_pair_maps(m, pairs, images))
+
+
+def _pair_maps(model: RodModel, pairs: np.ndarray, images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid maps of the nodes ``(a0, a1, b0, b1)`` of each pair: a0 stays, a1 is edge a's end in
+    its tile, b's nodes go to their images in tile ``image`` (b1 one edge tile further)."""
+    n = len(pairs)
+    rotation = np.empty((n, 4, 3, 3))
+    translation = np.empty((n, 4, 3))
+    a, b = pairs[:, 0], pairs[:, 1]
+    rotation[:, 0] = np.eye(3)
+    translation[:, 0] = 0.0
+    rotation[:, 1] = model.edge_end_rotation[a]
+    translation[:, 1] = model.edge_offset[a]
+    rotation[:, 2], translation[:, 2] = node_maps(model, model.edge_nodes[b, 0], images)
+    rotation[:, 3], translation[:, 3] = node_maps(model, model.edge_nodes[b, 1], images + model.edge_tile[b])
+    return rotation, translation
+
+
+def _curved_virtual_boxes(model: RodModel, position, end, margin, searched):
+    """Boxes of every edge at every tile image within ``searched`` that can reach the home tile's
+    boxes, each edge's nodes placed by their own maps: ``(edge, image, lower, upper)``."""
+    m = model
+    n0, n1 = m.edge_nodes[:, 0], m.edge_nodes[:, 1]
+    pad = (m.edge_radius + 0.5 * margin)[:, None]
+    lowers, uppers, edges, images = [], [], [], []
+    for i in range(-int(searched[0]), int(searched[0]) + 1):
+        for j in range(-int(searched[1]), int(searched[1]) + 1):
+            tile = np.array([i, j])
+            r0, t0 = node_maps(m, n0, np.broadcast_to(tile, (m.n_edges, 2)))
+            r1, t1 = node_maps(m, n1, tile + m.edge_tile)
+            points = [np.einsum("eij,ej->ei", r, x[nodes]) + t
+                      for x in (position, end) for r, t, nodes in ((r0, t0, n0), (r1, t1, n1))]
+            lowers.append(np.minimum.reduce(points) - pad)
+            uppers.append(np.maximum.reduce(points) + pad)
+            edges.append(np.arange(m.n_edges))
+            images.append(np.broadcast_to(tile, (m.n_edges, 2)))
+    lower, upper = np.concatenate(lowers), np.concatenate(uppers)
+    edge, image = np.concatenate(edges), np.concatenate(images)
+    # Keep only boxes that overlap the hull of the home tile's boxes.
+    home = np.all(image == 0, axis=1)
+    hull_lo, hull_hi = lower[home].min(axis=0), upper[home].max(axis=0)
+    keep = np.all((lower <= hull_hi) & (upper >= hull_lo), axis=1)
+    return (np.ascontiguousarray(edge[keep]), np.ascontiguousarray(image[keep]), np.ascontiguousarray(lower[keep]),
+            np.ascontiguousarray(upper[keep]))
 
 
 def pair_distances(model: RodModel, position: np.ndarray, pairs: ContactPairs) -> np.ndarray:
     """Centreline distance of every pair (m, ``(P,)``)."""
     out = np.empty(len(pairs))
-    _contact_kernels.pair_distances(position, model.edge_nodes, model.edge_offset, pairs.pairs, pairs.shift, out)
+    _contact_kernels.pair_distances(position, model.edge_nodes, *pairs.kernel_args(), out)
     return out
 
 

@@ -14,6 +14,12 @@ Periodic structures: a model may carry a ``lattice`` of two tile vectors; an edg
 tile offset ``(i, j)`` runs to its end node moved by ``i L1 + j L2`` (``edge_offset``). A closed rod
 whose offsets add up to a non-zero ``rod_period`` is a yarn that continues through the tiles
 (one period of an infinite yarn); contacts then include every periodic image.
+
+A repeat tiled over a curved surface (homogenization) maps each node onto its images by a rigid
+motion of its own (:class:`~yarnfit.engine.tiling.CurvedTiling`, attached with
+:func:`~yarnfit.engine.tiling.retile`): an edge's end point is then ``edge_end_rotation x +
+edge_offset`` and a joint across a tile border compares its first frame with its second frame
+turned by ``joint_frame_rotation``. Both are the identity for flat tilings.
 """
 
 from __future__ import annotations
@@ -154,7 +160,8 @@ def aligned_frames(model: "RodModel", position: np.ndarray, quaternion: np.ndarr
     """
     from ._quat import quat_between, quat_mul
 
-    edge = position[model.edge_nodes[:, 1]] + model.edge_offset - position[model.edge_nodes[:, 0]]
+    end = np.einsum("eij,ej->ei", model.edge_end_rotation, position[model.edge_nodes[:, 1]]) + model.edge_offset
+    edge = end - position[model.edge_nodes[:, 0]]
     tangent = edge / np.linalg.norm(edge, axis=1, keepdims=True)
     d3 = quaternion_d3(quaternion)
     out = np.empty_like(quaternion)
@@ -235,18 +242,22 @@ class RodModel:
     Per node (N): ``node_rest_position (N, 3)`` m, ``node_mass`` kg, ``node_pinned`` bool,
     ``node_rod``. Per edge (E): ``edge_nodes (E, 2)``, ``edge_tile (E, 2)`` int and
     ``edge_offset (E, 3)`` m (``edge_tile @ lattice``, added to the end node; zero except for
-    periodic ghost edges), ``edge_chain_tile (E, 2)`` int (tiles crossed along the rod before the
+    periodic ghost edges), ``edge_end_rotation (E, 3, 3)`` (applied to the end node before the
+    offset; the identity unless the tiling is curved), ``edge_chain_tile (E, 2)`` int (tiles crossed along the rod before the
     edge: the edge sits at ``edge_chain_tile`` in the rod's unrolled chain), ``edge_rest_length``
     m, ``edge_radius`` m,
     ``edge_arc_start`` m (rest arc length of the edge's first node along its rod),
     ``edge_rest_quaternion (E, 4)``, ``edge_shear_stiffness`` GA (N), ``edge_stretch_stiffness`` EA
     (N), ``edge_hardening (E, 2)`` = (A k1, A k2) (N), ``edge_inertia`` kg·m² (about a transverse
     axis), ``edge_pinned`` bool, ``edge_rod``. Per joint (J): ``joint_edges (J, 2)``,
-    ``joint_rest_darboux (J, 4)``, ``joint_rest_length`` l̄ (m), ``joint_stiffness (J, 3)`` =
+    ``joint_frame_rotation (J, 4)`` (quaternion turning the second edge's frame into the first
+    edge's tile; the identity unless the tiling is curved), ``joint_rest_darboux (J, 4)``, ``joint_rest_length`` l̄ (m), ``joint_stiffness (J, 3)`` =
     (EI1, EI2, GJ) (N·m²). Per rod (R): ``rod_node_start``, ``rod_edge_start``,
     ``rod_joint_start`` (R + 1 offsets), ``rod_closed``, ``rod_length`` (m), ``rod_period (R, 2)``
     int (tiles a yarn advances per cycle; zero unless periodic), ``rod_names``. ``lattice (2, 3)``
-    m: the tile vectors of a periodic model (zero otherwise).
+    m: the tile vectors of a periodic model (zero otherwise; for a curved tiling, the tile
+    vectors at the repeat's centre, used to size image searches). ``tiling``: the per-node maps of
+    a curved tiling, or ``None`` (images are lattice translations).
     """
 
     node_rest_position: np.ndarray
@@ -256,6 +267,7 @@ class RodModel:
     edge_nodes: np.ndarray
     edge_tile: np.ndarray
     edge_offset: np.ndarray
+    edge_end_rotation: np.ndarray
     edge_chain_tile: np.ndarray
     edge_rest_length: np.ndarray
     edge_radius: np.ndarray
@@ -268,6 +280,7 @@ class RodModel:
     edge_pinned: np.ndarray
     edge_rod: np.ndarray
     joint_edges: np.ndarray
+    joint_frame_rotation: np.ndarray
     joint_rest_darboux: np.ndarray
     joint_rest_length: np.ndarray
     joint_stiffness: np.ndarray
@@ -279,6 +292,7 @@ class RodModel:
     rod_period: np.ndarray
     rod_names: tuple
     lattice: np.ndarray
+    tiling: object = None
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
@@ -307,6 +321,11 @@ class RodModel:
     def periodic(self) -> bool:
         """The model has a lattice (periodic images exist)."""
         return bool(np.any(self.lattice != 0.0))
+
+    @property
+    def curved(self) -> bool:
+        """Periodic images are rigid motions of each node rather than translations."""
+        return self.tiling is not None
 
     @property
     def node_inv_mass(self) -> np.ndarray:
@@ -381,6 +400,7 @@ class RodModel:
             edge_nodes=np.ascontiguousarray(edge_nodes, dtype=np.int64),
             edge_tile=edge_tile,
             edge_offset=np.ascontiguousarray(edge_tile @ lattice),
+            edge_end_rotation=np.ascontiguousarray(np.broadcast_to(np.eye(3), (len(edge_tile), 3, 3))),
             edge_chain_tile=cat("chain_tiles").reshape(-1, 2),
             edge_rest_length=cat("rest_lengths"),
             edge_radius=cat("edge_radius"),
@@ -393,6 +413,8 @@ class RodModel:
             edge_pinned=cat("edge_pinned"),
             edge_rod=np.repeat(np.arange(len(parts)), [p["n_edges"] for p in parts]).astype(np.int64),
             joint_edges=np.ascontiguousarray(joint_edges, dtype=np.int64),
+            joint_frame_rotation=np.ascontiguousarray(
+                np.broadcast_to([1.0, 0.0, 0.0, 0.0], (len(joint_edges), 4))),
             joint_rest_darboux=cat("rest_darboux").reshape(-1, 4),
             joint_rest_length=cat("joint_rest_length"),
             joint_stiffness=cat("joint_stiffness").reshape(-1, 3),

@@ -21,7 +21,7 @@ solver here is a damped Newton method on the exact energy of :mod:`yarnfit.engin
   yarn resting along another then stalled Newton at residuals near 1e-3; point-to-segment
   distances are C¹ and spread a line contact over its samples. Each constraint's term is
   ``(M(λ − k g) − M(λ)) / k`` with ``M`` the integral of a C¹ ramp ``m`` (zero below ``−δ``, a
-  parabola within ``±δ``, the identity above; ``δ`` a thousandth of ``k (ra + rb)``), so the
+  parabola within ``±δ``, the identity above; ``δ = 10⁻⁴ k (ra + rb)``), so the
   potential is C¹ with a Lipschitz gradient and Newton needs no active set: the normal force is
   ``m(λ − k g) ≥ 0``. With the plain ``max(0, λ − k g)²`` the kink sits within ~1e-10 m of every
   resting contact, Newton's last corrections keep crossing it, and an active set that releases
@@ -79,10 +79,13 @@ ROUNDOFF_FACTOR = 10.0
 # contacts up to the cap, and Newton then crossed the cap's kinks at every step.
 PENETRATION_PROGRESS = 0.25
 MAX_STIFFENING = 1e4
-# Half-width of the contact ramp's smoothing band, in units of k (ra + rb): the band is ±0.1 % of
-# the diameter around λ / k, wide against Newton's last corrections (~1e-10 m) and narrow
-# enough that a lightly loaded contact rests at most 0.1 % of the diameter apart.
-CONTACT_SMOOTHING = 1e-3
+# Half-width of the contact ramp's smoothing band, in units of k (ra + rb): the band is ±0.01 % of
+# the diameter around λ / k (~1.6e-8 m for a 80 µm yarn), wide against Newton's last corrections
+# (~1e-10 m). A touching contact with no multiplier pushes with δ/4 and a lightly loaded one
+# rests up to δ/k apart: an unloaded relaxed repeat is then not quite force-free, and the energy
+# it releases goes as δ². At 1e-3 the undeformed homogenization sample kept 3e-3 J/m² (3e-6 of a
+# 10 % stretch); at 1e-4, 7e-5 J/m², with every relaxation still converging.
+CONTACT_SMOOTHING = 1e-4
 # Spacing of the contact sample points along an edge, in radii. A crossing between samples is
 # seen up to h / 2 off its closest point, which hides h² / (32 r²) of the diameter: 0.2 % here.
 CONTACT_SAMPLE_SPACING = 0.25
@@ -311,9 +314,9 @@ class _Contacts:
         return np.add.reduceat(values, self.start[:-1])
 
     def kernel_args(self) -> tuple:
-        """``(pairs, shift, start, multiplier, stiffness, smoothing)`` as the contact kernels take
-        them (after the model's edge arrays and sample counts)."""
-        return self.pairs.pairs, self.pairs.shift, self.start, self.multiplier, self.stiffness, CONTACT_SMOOTHING
+        """``(pairs, rotation, translation, start, multiplier, stiffness, smoothing)`` as the contact
+        kernels take them (after the model's edge arrays and sample counts)."""
+        return (*self.pairs.kernel_args(), self.start, self.multiplier, self.stiffness, CONTACT_SMOOTHING)
 
 
 class _ContactMemory:
@@ -641,8 +644,8 @@ class QuasiStaticSolver:
         contact_energy = 0.0
         if n_pairs:
             contact_energy = _contact_kernels.contact_energy_gradient(
-                position, m.edge_nodes, m.edge_offset, m.edge_radius, self._edge_samples, *contacts.kernel_args(),
-                node_gradient, node_scale, gap, contact_force,
+                position, m.edge_nodes, m.edge_radius, self._edge_samples, *contacts.kernel_args(), node_gradient,
+                node_scale, gap, contact_force,
             )
         # A torque τ on an edge is carried by forces τ / l0 on its nodes, and a force F on a node
         # makes torques F l0 on its edges: each scale includes the other's equivalent, so that
@@ -706,15 +709,14 @@ class QuasiStaticSolver:
         cols = np.empty(n_entries, dtype=np.int64)
         vals = np.empty(n_entries)
         count = _kernels.rod_hessian_coo(
-            work.position, work.quaternion, m.edge_nodes, m.edge_offset, m.edge_rest_length, m.edge_shear_stiffness,
-            m.edge_stretch_stiffness, m.edge_hardening, m.joint_edges, m.joint_rest_darboux, m.joint_rest_length,
-            m.joint_stiffness, opt.fd_relative_step, rows, cols, vals,
+            work.position, work.quaternion, m.edge_nodes, m.edge_end_rotation, m.edge_offset, m.edge_rest_length,
+            m.edge_shear_stiffness, m.edge_stretch_stiffness, m.edge_hardening, m.joint_edges, m.joint_frame_rotation,
+            m.joint_rest_darboux, m.joint_rest_length, m.joint_stiffness, opt.fd_relative_step, rows, cols, vals,
         )
         if len(c.pairs):
             count = _contact_kernels.contact_hessian_coo(
-                work.position, m.edge_nodes, m.edge_offset, m.edge_radius, self._edge_samples, *c.kernel_args(),
-                opt.fd_relative_step,
-                rows, cols, vals, count,
+                work.position, m.edge_nodes, m.edge_radius, self._edge_samples, *c.kernel_args(),
+                opt.fd_relative_step, rows, cols, vals, count,
             )
         r = self._dof_map[rows[:count]]
         col = self._dof_map[cols[:count]]
@@ -781,8 +783,7 @@ class QuasiStaticSolver:
             contacts = self._contacts(memory, work.position, work.position + alpha_max * dx)
             if len(contacts.pairs):
                 alpha_max *= _contact_kernels.tunneling_step_limit(
-                    work.position, alpha_max * dx, m.edge_nodes, m.edge_offset, contacts.pairs.pairs,
-                    contacts.pairs.shift, TUNNELING_FRACTION,
+                    work.position, alpha_max * dx, m.edge_nodes, *contacts.pairs.kernel_args(), TUNNELING_FRACTION,
                 )
 
         def assess(point):

@@ -75,6 +75,10 @@ class XPBDSolver:
     """Extended position-based dynamics for a :class:`RodModel` (see module docstring)."""
 
     def __init__(self, model: RodModel, options: XPBDOptions | None = None):
+        if model.curved:
+            # The projections map ghost-edge ends by translation only (their rotation and the
+            # frame transport across tile borders live in the quasi-static path).
+            raise ValueError("XPBDSolver steps flat models only; use QuasiStaticSolver on a curved tiling")
         self.model = model
         self.options = options or XPBDOptions()
         self._node_inv_mass = np.ascontiguousarray(model.node_inv_mass)
@@ -115,14 +119,14 @@ class XPBDSolver:
                 self._project_rods(x, q, inv_h2)
                 if len(pairs):
                     _contact_kernels.project_contacts(
-                        x, self._prev_position, self._node_inv_mass, model.edge_nodes, model.edge_offset,
-                        model.edge_radius, pairs.pairs, pairs.shift, lam_normal, lam_tangent, opt.static_friction,
+                        x, self._prev_position, self._node_inv_mass, model.edge_nodes, model.edge_radius,
+                        *pairs.kernel_args(), lam_normal, lam_tangent, opt.static_friction,
                     )
             _kernels.update_velocities(x, q, v, w, self._node_inv_mass, self._edge_inv_inertia,
                                        self._prev_position, self._prev_quaternion, h, opt.damping)
             if len(pairs) and opt.kinetic_friction > 0.0:
-                _contact_kernels.apply_kinetic_friction(x, v, self._node_inv_mass, model.edge_nodes, model.edge_offset,
-                                                        pairs.pairs, pairs.shift, lam_normal, opt.kinetic_friction, h)
+                _contact_kernels.apply_kinetic_friction(x, v, self._node_inv_mass, model.edge_nodes,
+                                                        *pairs.kernel_args(), lam_normal, opt.kinetic_friction, h)
             info = StepInfo(len(pairs), int(np.count_nonzero(lam_normal > 0.0)))
         return info
 

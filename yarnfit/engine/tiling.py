@@ -1,0 +1,131 @@
+"""Periodic images of a repeat: lattice translations, or per-node rigid maps on a curved surface.
+
+A flat periodic model (the relaxation) reaches its images by translations ``T @ lattice``. A repeat
+tiled over a deformed mid-surface (homogenization, paper §4.5) cannot: its neighbour in tile ``T``
+sits where the surface continues, turned with it. There each node ``i`` reaches its image in tile
+``T`` by a rigid map of its own, ``x ↦ Q_iT x + c_iT`` (``Q_iT = R(X_i + T) R(X_i)ᵀ`` with R the
+surface frame at the node's reference position ``X_i``: the co-rotated fluctuation of a node equals
+that of its images, the paper's ``C_RVE_Γ``). A :class:`CurvedTiling` holds those maps for a set
+of tiles; :func:`retile` attaches it to a model, which then maps ghost-edge ends, frames across tile
+borders and contact images through it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .model import RodModel
+
+# A map's rotation must be orthonormal to this (they come from polar decompositions).
+ORTHONORMAL_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class CurvedTiling:
+    """Rigid maps of every node onto its images in a set of tiles.
+
+    Attributes:
+        images: ``(K, 2)`` int tile offsets covered; must include ``(0, 0)`` (the identity).
+        rotation: ``(N, K, 3, 3)`` rotations ``Q``.
+        translation: ``(N, K, 3)`` m, translations ``c``: node ``i``'s image in tile
+            ``images[k]`` is ``rotation[i, k] x_i + translation[i, k]``.
+    """
+
+    images: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+
+    def __post_init__(self) -> None:
+        images = np.asarray(self.images)
+        n, k = self.rotation.shape[:2]
+        if images.shape != (k, 2) or self.rotation.shape != (n, k, 3, 3) or self.translation.shape != (n, k, 3):
+            raise ValueError(f"tiling arrays disagree: images {images.shape}, rotation {self.rotation.shape}, "
+                             f"translation {self.translation.shape}")
+        if len({tuple(t) for t in images.tolist()}) != k:
+            raise ValueError("tiling images must be distinct")
+        if not (np.all(np.isfinite(self.rotation)) and np.all(np.isfinite(self.translation))):
+            raise ValueError("tiling maps must be finite")
+        gram = np.einsum("nkji,nkjl->nkil", self.rotation, self.rotation)
+        if np.abs(gram - np.eye(3)).max(initial=0.0) > ORTHONORMAL_TOLERANCE:
+            raise ValueError("tiling rotations must be orthonormal")
+        home = self.image_index(np.zeros(2, dtype=np.int64))
+        if home < 0:
+            raise ValueError("tiling images must include the home tile (0, 0)")
+        if np.abs(self.rotation[:, home] - np.eye(3)).max() > 0.0 or np.abs(self.translation[:, home]).max() > 0.0:
+            raise ValueError("the home tile's maps must be the identity")
+
+    @property
+    def n_nodes(self) -> int:
+        return self.rotation.shape[0]
+
+    def image_index(self, tiles: np.ndarray) -> np.ndarray:
+        """Index into ``images`` of each tile ``(..., 2)``, −1 where the tiling has no map."""
+        tiles = np.asarray(tiles, dtype=np.int64)
+        table = {tuple(t): k for k, t in enumerate(np.asarray(self.images).tolist())}
+        flat = tiles.reshape(-1, 2)
+        out = np.array([table.get((int(i), int(j)), -1) for i, j in flat], dtype=np.int64)
+        return out.reshape(tiles.shape[:-1])
+
+    @property
+    def reach(self) -> int:
+        """Largest tile offset covered along either axis."""
+        return int(np.abs(self.images).max())
+
+
+def node_maps(model: RodModel, nodes: np.ndarray, tiles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid maps ``(rotation (n, 3, 3), translation (n, 3))`` taking each node to its image in the
+    given tile: translations by ``tiles @ lattice`` for a flat model, the tiling's maps otherwise.
+    Raises ``ValueError`` for a tile the tiling does not cover."""
+    nodes = np.asarray(nodes, dtype=np.int64)
+    tiles = np.asarray(tiles, dtype=np.int64).reshape(-1, 2)
+    if model.tiling is None:
+        rotation = np.broadcast_to(np.eye(3), (len(nodes), 3, 3))
+        return np.ascontiguousarray(rotation), np.ascontiguousarray(tiles @ model.lattice)
+    index = model.tiling.image_index(tiles)
+    if np.any(index < 0):
+        missing = tiles[np.flatnonzero(index < 0)[0]]
+        raise ValueError(f"tile {tuple(int(v) for v in missing)} lies outside the curved tiling's images "
+                         f"(reach {model.tiling.reach})")
+    return model.tiling.rotation[nodes, index], model.tiling.translation[nodes, index]
+
+
+def retile(model: RodModel, tiling: CurvedTiling, lattice: np.ndarray) -> RodModel:
+    """``model`` placed on a curved tiling: ghost-edge ends, frames across tile borders and contact
+    images follow ``tiling``; ``lattice (2, 3)`` (m) gives the tile vectors at the repeat's centre,
+    used to size image searches."""
+    if not model.periodic:
+        raise ValueError("only a periodic model can be retiled")
+    if tiling.n_nodes != model.n_nodes:
+        raise ValueError(f"tiling has maps for {tiling.n_nodes} nodes, the model has {model.n_nodes}")
+    lattice = np.array(lattice, dtype=np.float64)
+    curved = replace(model, tiling=tiling, lattice=lattice)
+    end_rotation, end_offset = node_maps(curved, model.edge_nodes[:, 1], model.edge_tile)
+    # A joint compares edge a with edge b seen from a's tile: b's frame turned by the map of their
+    # shared node into that tile.
+    a = model.joint_edges[:, 0]
+    joint_rotation, _ = node_maps(curved, model.edge_nodes[a, 1], model.edge_tile[a])
+    xyzw = Rotation.from_matrix(joint_rotation).as_quat()
+    frame_rotation = np.ascontiguousarray(np.column_stack([xyzw[:, 3], xyzw[:, :3]]))
+    return replace(curved, edge_end_rotation=np.ascontiguousarray(end_rotation),
+                   edge_offset=np.ascontiguousarray(end_offset), joint_frame_rotation=frame_rotation)
+
+
+def yarn_strips(model: RodModel, position: np.ndarray, tile=(0, 0)) -> list[np.ndarray]:
+    """Each rod's centreline in ``tile`` as a polyline ``(n + 1, 3)`` (m) for drawing: node j
+    placed in its chain tile (so a yarn crossing a tile border mid-way stays continuous), and a
+    closed rod's first node again, one period on."""
+    tile = np.asarray(tile, dtype=np.int64)
+    strips = []
+    for r in range(model.n_rods):
+        nodes = np.arange(model.rod_node_start[r], model.rod_node_start[r + 1])
+        edges = np.arange(model.rod_edge_start[r], model.rod_edge_start[r + 1])
+        tiles = tile + model.edge_chain_tile[edges[: len(nodes)]]
+        if model.rod_closed[r]:
+            nodes = np.append(nodes, nodes[0])
+            tiles = np.vstack([tiles, tile + model.rod_period[r]])
+        rotation, translation = node_maps(model, nodes, tiles)
+        strips.append(np.einsum("nij,nj->ni", rotation, position[nodes]) + translation)
+    return strips
