@@ -126,3 +126,14 @@ def test_loop_heads_and_sinkers_lie_on_the_side_the_chart_says(name):
 def test_malformed_stitch_charts_are_named(chart, message):
     with pytest.raises(PatternError, match=message):
         knit(chart, 1800.0, 1300.0, 7e-5)
+
+
+def test_a_repeat_size_that_leaves_a_gap_is_named():
+    # The same yarns in a tile half a period too wide: each weft yarn jumps half a period where it
+    # enters the next tile.
+    import dataclasses
+
+    pattern = weave(DRAFTS["plain"], 3000.0, 2500.0, 6e-5, name="plain")
+    wide = dataclasses.replace(pattern, repeat_size=pattern.repeat_size * np.array([1.5, 1.0]))
+    with pytest.raises(PatternError, match="does not tile without gaps"):
+        wide.validate()
