@@ -1,0 +1,380 @@
+"""Orthotropic StVK shell: moduli, engineering constants, energy and its gradient, JSON, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize_scalar
+
+from yarnfit.shell import (
+    GF_CM2_PER_CM,
+    PARAMETER_NAMES,
+    SYMMETRY_RTOL,
+    ShellMaterial,
+    bending_strain,
+    membrane_strain,
+)
+
+# Moduli ↔ stiffness and the closed forms below are a handful of multiplications and divisions:
+# a few ulps each, 1e-13 leaves a factor ~100 of margin over float64 ε.
+ROUND_OFF_REL = 1e-13
+# The numerically minimised uniaxial energy: Brent's method finds E_pp to ~1e-8 relative (√ε), and the
+# energy is quadratic around its minimum, so the minimum value is exact to ~(1e-8)² ≪ 1e-10.
+MINIMISED_REL = 1e-10
+# Relative finite-difference step, applied to the largest entry of the perturbed matrix. Below
+# SYMMETRY_RTOL so that a probe of one off-diagonal entry stays an accepted (near-symmetric) form.
+FD_STEP_REL = 1e-9
+# W is quadratic in I and II, so central differences have no truncation error; what remains is
+# round-off ε·W/(δ·max|dW|): ≈ 2e-16·0.1 J/m² / (1.2e-7 /m · 1.2e-3 J/m) ≈ 2e-7 for the II probes below
+# (~3e-9 for the I probes). 1e-5 leaves a margin of 50 and is still 1e5 below the O(1) error of a
+# wrong convention (a missing factor 2 on an off-diagonal entry).
+FD_REL = 1e-5
+
+H = 3.0e-4  # m: a medium-weight woven fabric
+# Realistic fabric: h s00 ≈ 1e3 N/m, h³ b00 ≈ 1e-5 N·m; weft stiffer than warp, b01 ≠ 0.
+MATERIAL = ShellMaterial(
+    thickness=H,
+    s00=1.0e3 / H,
+    s01=1.2e2 / H,
+    s11=6.0e2 / H,
+    s22=5.0e1 / H,
+    b00=1.0e-5 / H**3,
+    b01=1.5e-6 / H**3,
+    b11=6.0e-6 / H**3,
+    b22=2.0e-6 / H**3,
+)
+
+I_GENERAL = np.array([[1.08, 0.04], [0.04, 0.97]])
+II_GENERAL = np.array([[120.0, -35.0], [-35.0, 60.0]])
+
+
+def test_moduli_round_trip_and_paper_relation():
+    moduli = MATERIAL.moduli()
+    bending = {name: getattr(MATERIAL, name) for name in ("b00", "b01", "b11", "b22")}
+    again = ShellMaterial.from_moduli(H, **moduli, **bending)
+    for name in PARAMETER_NAMES:
+        assert getattr(again, name) == pytest.approx(getattr(MATERIAL, name), rel=ROUND_OFF_REL), name
+
+    # Paper Eq. shell_stiffness_moduli written out: s00 = E_t/D, s11 = E_p/D, s01 = ν_pt E_t/D, s22 = μ.
+    E_t, E_p, nu_tp, mu = 2.0e6, 1.0e6, 0.3, 1.0e5
+    nu_pt = nu_tp * E_p / E_t  # reciprocity
+    D = 1.0 - nu_tp * nu_pt
+    m = ShellMaterial.from_moduli(H, E_t, E_p, nu_tp, nu_pt, mu, b00=1.0, b11=2.0, b22=3.0)
+    assert m.s00 == pytest.approx(E_t / D, rel=ROUND_OFF_REL)
+    assert m.s11 == pytest.approx(E_p / D, rel=ROUND_OFF_REL)
+    assert m.s01 == pytest.approx(nu_pt * E_t / D, rel=ROUND_OFF_REL)
+    assert m.s01 == pytest.approx(nu_tp * E_p / D, rel=ROUND_OFF_REL)
+    assert m.s22 == mu and m.b01 == 0.0
+    back = m.moduli()
+    for name, value in {"E_t": E_t, "E_p": E_p, "nu_tp": nu_tp, "nu_pt": nu_pt, "mu": mu}.items():
+        assert back[name] == pytest.approx(value, rel=ROUND_OFF_REL), name
+
+
+def test_from_moduli_rejects_inconsistent_poisson_ratios_and_nonpositive_D():
+    with pytest.raises(ValueError, match="reciprocity"):
+        ShellMaterial.from_moduli(H, 2.0e6, 1.0e6, 0.3, 0.3, 1e5, 1.0, 1.0, 1.0)
+    # ν_pt E_t = ν_tp E_p holds (0.5·4 = 2·1) but D = 1 − 2·0.5 = 0.
+    with pytest.raises(ValueError, match=r"1 - nu_tp\*nu_pt must be > 0"):
+        ShellMaterial.from_moduli(H, 4.0e6, 1.0e6, 2.0, 0.5, 1e5, 1.0, 1.0, 1.0)
+    with pytest.raises(ValueError, match="E_p must be > 0"):
+        ShellMaterial.from_moduli(H, 4.0e6, -1.0e6, 0.0, 0.0, 1e5, 1.0, 1.0, 1.0)
+
+
+def _uniaxial_minimum(material: ShellMaterial, strain: float, axis: int) -> tuple[float, float]:
+    """(min over the transverse Green strain of W, minimiser) for Green strain ``strain`` along ``axis``."""
+
+    def energy(transverse: float) -> float:
+        E = np.zeros((2, 2))
+        E[axis, axis] = strain
+        E[1 - axis, 1 - axis] = transverse
+        return material.energy_density(np.eye(2) + 2.0 * E, np.zeros((2, 2)))
+
+    result = minimize_scalar(energy, bracket=(-strain, 0.0), tol=1e-12)
+    return result.fun, result.x
+
+
+def test_stretch_constants_are_uniaxial_stiffness_with_transverse_direction_free():
+    # Uniaxial test, transverse free, no shear: W_min(E) = ½ k E² with k the stretch stiffness (N/m),
+    # and the free transverse strain is −ν E.
+    eng = MATERIAL.engineering()
+    strain = 1e-3
+    cases = ((0, "weft_stretch_n_per_m", "poisson_weft"), (1, "warp_stretch_n_per_m", "poisson_warp"))
+    for axis, stiffness, poisson in cases:
+        W, transverse = _uniaxial_minimum(MATERIAL, strain, axis)
+        assert 2.0 * W / strain**2 == pytest.approx(eng[stiffness], rel=MINIMISED_REL), stiffness
+        # The minimiser itself is only known to Brent's x tolerance (√ε relative).
+        assert -transverse / strain == pytest.approx(eng[poisson], rel=1e-6), poisson
+    # Hand values for this material: h (s00 − s01²/s11) = 1000 − 120²/600 = 976 N/m, ν = 120/600.
+    assert eng["weft_stretch_n_per_m"] == pytest.approx(976.0, rel=ROUND_OFF_REL)
+    assert eng["warp_stretch_n_per_m"] == pytest.approx(600.0 - 120.0**2 / 1000.0, rel=ROUND_OFF_REL)
+    assert eng["poisson_weft"] == pytest.approx(0.2, rel=ROUND_OFF_REL)
+    assert eng["poisson_warp"] == pytest.approx(0.12, rel=ROUND_OFF_REL)
+
+
+def test_shear_and_bending_constants_from_the_energy_of_pure_deformations():
+    eng = MATERIAL.engineering()
+    zero = np.zeros((2, 2))
+    # Engineering shear strain γ = 2 E_tp = I_01: W = ½ (h s22) γ².
+    g = 0.02
+    W = MATERIAL.energy_density(np.array([[1.0, g], [g, 1.0]]), zero)
+    assert 2.0 * W / g**2 == pytest.approx(eng["shear_n_per_m"], rel=ROUND_OFF_REL)
+    assert eng["shear_n_per_m"] == pytest.approx(50.0, rel=ROUND_OFF_REL)
+
+    # Cylindrical bend of curvature k with curvature direction d: II = k d dᵀ, W = ½ B_dir k².
+    k = 150.0
+    for angle, key, hand in (
+        (0.0, "bending_weft_nm", 1.0e-5),
+        (np.pi / 2, "bending_warp_nm", 6.0e-6),
+        (np.pi / 4, "bending_bias_nm", (1.0e-5 + 6.0e-6 + 2 * 1.5e-6 + 4 * 2.0e-6) / 4),
+    ):
+        d = np.array([np.cos(angle), np.sin(angle)])
+        W = MATERIAL.energy_density(np.eye(2), k * np.outer(d, d))
+        assert 2.0 * W / k**2 == pytest.approx(eng[key], rel=ROUND_OFF_REL), key
+        assert eng[key] == pytest.approx(hand, rel=ROUND_OFF_REL), key
+    # The brief's form of the 45° bend.
+    W = MATERIAL.energy_density(np.eye(2), 0.5 * k * np.ones((2, 2)))
+    assert 2.0 * W / k**2 == pytest.approx(eng["bending_bias_nm"], rel=ROUND_OFF_REL)
+
+
+def test_gf_cm_unit():
+    # 1 gf = 9.80665e-3 N, 1 gf·cm²/cm = 1 gf·cm = 9.80665e-3 N × 1e-2 m.
+    assert GF_CM2_PER_CM == pytest.approx(9.80665e-3 * 1e-2, rel=ROUND_OFF_REL)
+
+
+def test_energy_matches_the_written_out_formula():
+    # W_s = (h/2)(s00 ε0² + 2 s01 ε0 ε1 + s11 ε1² + s22 ε2²), ε = (½(I00−1), ½(I11−1), I01);
+    # W_b = (h³/2)(b00 κ0² + 2 b01 κ0 κ1 + b11 κ1² + b22 κ2²), κ = (II00, II11, 2 II01).
+    m, I, II = MATERIAL, I_GENERAL, II_GENERAL
+    e0, e1, e2 = 0.5 * (I[0, 0] - 1), 0.5 * (I[1, 1] - 1), I[0, 1]
+    k0, k1, k2 = II[0, 0], II[1, 1], 2 * II[0, 1]
+    W_s = 0.5 * H * (m.s00 * e0**2 + 2 * m.s01 * e0 * e1 + m.s11 * e1**2 + m.s22 * e2**2)
+    W_b = 0.5 * H**3 * (m.b00 * k0**2 + 2 * m.b01 * k0 * k1 + m.b11 * k1**2 + m.b22 * k2**2)
+    assert isinstance(m.energy_density(I, II), float)
+    assert m.energy_density(I, II) == pytest.approx(W_s + W_b, rel=ROUND_OFF_REL)
+    np.testing.assert_allclose(membrane_strain(I), [e0, e1, e2], rtol=ROUND_OFF_REL)
+    np.testing.assert_allclose(bending_strain(II), [k0, k1, k2], rtol=ROUND_OFF_REL)
+
+
+def test_energy_is_vectorised_over_a_leading_axis():
+    rng = np.random.default_rng(1)
+    n = 5
+    A = 0.05 * rng.standard_normal((n, 2, 2))
+    Is = np.eye(2) + A + np.swapaxes(A, 1, 2)
+    B = 80.0 * rng.standard_normal((n, 2, 2))
+    IIs = B + np.swapaxes(B, 1, 2)
+    W = MATERIAL.energy_density(Is, IIs)
+    gI, gII = MATERIAL.energy_gradient(Is, IIs)
+    assert W.shape == (n,) and gI.shape == (n, 2, 2) and gII.shape == (n, 2, 2)
+    assert membrane_strain(Is).shape == (n, 3) and bending_strain(IIs).shape == (n, 3)
+    # Batched and single evaluations may sum in a different order: equal to round-off.
+    for k in range(n):
+        assert W[k] == pytest.approx(MATERIAL.energy_density(Is[k], IIs[k]), rel=ROUND_OFF_REL)
+        single_I, single_II = MATERIAL.energy_gradient(Is[k], IIs[k])
+        np.testing.assert_allclose(gI[k], single_I, rtol=ROUND_OFF_REL)
+        np.testing.assert_allclose(gII[k], single_II, rtol=ROUND_OFF_REL)
+    # A single (2, 2) form broadcasts against a stack.
+    stacked = MATERIAL.energy_density(np.stack([np.eye(2)] * n), IIs)
+    np.testing.assert_array_equal(MATERIAL.energy_density(np.eye(2), IIs), stacked)
+
+
+def _central_difference(f, A: np.ndarray, i: int, j: int) -> float:
+    step = FD_STEP_REL * np.max(np.abs(A))
+    plus, minus = A.copy(), A.copy()
+    plus[i, j] += step
+    minus[i, j] -= step
+    # Divide by the steps actually represented, not the nominal ones.
+    return (f(plus) - f(minus)) / (plus[i, j] - minus[i, j])
+
+
+def test_energy_gradient_matches_central_differences_entry_by_entry():
+    gI, gII = MATERIAL.energy_gradient(I_GENERAL, II_GENERAL)
+    np.testing.assert_array_equal(gI, gI.T)
+    np.testing.assert_array_equal(gII, gII.T)
+    scale_I, scale_II = np.max(np.abs(gI)), np.max(np.abs(gII))
+    # W = W_s(I) + W_b(II): each gradient is independent of the other form. Probing each form with the
+    # other at rest keeps the other part's energy out of the differences, where it would only add
+    # round-off (W_s is ~10× W_b here, and the II probes are limited to FD_STEP_REL).
+    np.testing.assert_array_equal(MATERIAL.energy_gradient(I_GENERAL, np.zeros((2, 2)))[0], gI)
+    np.testing.assert_array_equal(MATERIAL.energy_gradient(np.eye(2), II_GENERAL)[1], gII)
+    for i in range(2):
+        for j in range(2):
+            # One entry alone: an off-diagonal probe makes the form slightly asymmetric (< SYMMETRY_RTOL).
+            fd_I = _central_difference(lambda A: MATERIAL.energy_density(A, np.zeros((2, 2))), I_GENERAL, i, j)
+            fd_II = _central_difference(lambda A: MATERIAL.energy_density(np.eye(2), A), II_GENERAL, i, j)
+            assert abs(fd_I - gI[i, j]) <= FD_REL * scale_I, (i, j, fd_I, gI[i, j])
+            assert abs(fd_II - gII[i, j]) <= FD_REL * scale_II, (i, j, fd_II, gII[i, j])
+
+    # A symmetric variation of both off-diagonal entries pairs with the gradient by the Frobenius
+    # product: dW = 2 d (dW/dI)_01.
+    d = FD_STEP_REL
+    E01 = np.array([[0.0, 1.0], [1.0, 0.0]])
+    W_plus = MATERIAL.energy_density(I_GENERAL + d * E01, II_GENERAL)
+    W_minus = MATERIAL.energy_density(I_GENERAL - d * E01, II_GENERAL)
+    fd = (W_plus - W_minus) / (2 * d)
+    assert abs(fd - 2.0 * gI[0, 1]) <= FD_REL * scale_I
+
+    # Closed forms of the convention: dW/dI = (h/2)[[σ0, σ2], [σ2, σ1]], dW/dII = h³[[m0, m2], [m2, m1]].
+    sigma = MATERIAL.S @ membrane_strain(I_GENERAL)
+    moment = MATERIAL.B @ bending_strain(II_GENERAL)
+    expected_I = 0.5 * H * np.array([[sigma[0], sigma[2]], [sigma[2], sigma[1]]])
+    expected_II = H**3 * np.array([[moment[0], moment[2]], [moment[2], moment[1]]])
+    np.testing.assert_allclose(gI, expected_I, rtol=ROUND_OFF_REL)
+    np.testing.assert_allclose(gII, expected_II, rtol=ROUND_OFF_REL)
+
+
+def test_probe_asymmetry_is_inside_the_accepted_tolerance():
+    # The finite-difference probe above relies on this ordering of constants.
+    assert FD_STEP_REL < SYMMETRY_RTOL
+
+
+def test_positive_definiteness_checks_name_block_and_entries():
+    assert MATERIAL.membrane_positive_definite and MATERIAL.bending_positive_definite
+    MATERIAL.check_positive_definite()
+
+    params = MATERIAL.parameters
+    bad_membrane = ShellMaterial(H, **{**params, "s01": 2.0 * np.sqrt(params["s00"] * params["s11"])})
+    assert not bad_membrane.membrane_positive_definite and bad_membrane.bending_positive_definite
+    with pytest.raises(ValueError, match=r"membrane block S not positive definite: s01² = .* >= s00·s11"):
+        bad_membrane.check_positive_definite()
+    with pytest.raises(ValueError, match="s01²"):
+        bad_membrane.engineering()
+    with pytest.raises(ValueError, match="s01²"):
+        bad_membrane.moduli()
+
+    bad_bending = ShellMaterial(H, **{**params, "b22": -1.0})
+    assert bad_bending.membrane_positive_definite and not bad_bending.bending_positive_definite
+    with pytest.raises(ValueError, match=r"bending block B not positive definite: b22 = -1.0 <= 0"):
+        bad_bending.check_positive_definite()
+    bad_bending.moduli()  # moduli need only the membrane block
+
+
+def test_matrices_and_parameters():
+    m = MATERIAL
+    np.testing.assert_array_equal(m.S, [[m.s00, m.s01, 0], [m.s01, m.s11, 0], [0, 0, m.s22]])
+    np.testing.assert_array_equal(m.B, [[m.b00, m.b01, 0], [m.b01, m.b11, 0], [0, 0, m.b22]])
+    assert tuple(MATERIAL.parameters) == PARAMETER_NAMES
+
+
+# -- JSON ---------------------------------------------------------------------------------------------
+
+
+def test_json_round_trip_through_a_material_file(tmp_path):
+    path = tmp_path / "cotton_twill.json"
+    document = {"fabric": {"fibre": "cotton"}, "shell": MATERIAL.to_dict(), "engineering": MATERIAL.engineering()}
+    path.write_text(json.dumps(document), encoding="utf-8")
+    assert ShellMaterial.from_json(path) == MATERIAL
+    assert ShellMaterial.from_json(str(path)) == MATERIAL
+    assert ShellMaterial.from_json(document) == MATERIAL
+    assert ShellMaterial.from_json(MATERIAL.to_dict()) == MATERIAL
+    assert ShellMaterial.from_dict(json.loads(json.dumps(MATERIAL.to_dict()))) == MATERIAL
+    assert MATERIAL.to_dict()["membrane_pa"]["s01"] == MATERIAL.s01
+    assert MATERIAL.to_dict()["thickness_m"] == H
+
+
+def test_json_errors_name_the_key_and_the_file(tmp_path):
+    path = tmp_path / "material.json"
+
+    def write(document):
+        path.write_text(json.dumps(document), encoding="utf-8")
+        return path
+
+    good = MATERIAL.to_dict()
+    with pytest.raises(ValueError, match=r"material\.json: missing key 'shell'"):
+        ShellMaterial.from_json(write({"fabric": {}}))
+    no_b22 = {**good, "bending_pa": {k: v for k, v in good["bending_pa"].items() if k != "b22"}}
+    with pytest.raises(ValueError, match=r"material\.json: shell: missing keys: bending_pa\.b22"):
+        ShellMaterial.from_json(write({"shell": no_b22}))
+    with pytest.raises(ValueError, match=r"material\.json: shell: missing keys: thickness_m"):
+        ShellMaterial.from_json(write({"shell": {k: v for k, v in good.items() if k != "thickness_m"}}))
+    misspelt = {**good, "membrane_pa": {**good["membrane_pa"], "s10": 1.0}}
+    with pytest.raises(ValueError, match=r"unknown keys: membrane_pa\.s10"):
+        ShellMaterial.from_json(write({"shell": misspelt}))
+    with pytest.raises(ValueError, match=r"material\.json: shell: membrane_pa\.s00 must be a number, got '3e6'"):
+        ShellMaterial.from_json(write({"shell": {**good, "membrane_pa": {**good["membrane_pa"], "s00": "3e6"}}}))
+    with pytest.raises(ValueError, match=r"bending_pa must be an object"):
+        ShellMaterial.from_json(write({"shell": {**good, "bending_pa": [1, 2, 3, 4]}}))
+    with pytest.raises(ValueError, match=r"thickness must be > 0"):
+        ShellMaterial.from_json(write({"shell": {**good, "thickness_m": -1e-4}}))
+    path.write_text("{not json", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"material\.json: invalid JSON at line 1"):
+        ShellMaterial.from_json(path)
+    with pytest.raises(ValueError, match="no such material file"):
+        ShellMaterial.from_json(tmp_path / "absent.json")
+
+
+# -- bad input ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "I",
+    [
+        np.array([[1.0, 0.0], [0.0, -0.5]]),  # negative eigenvalue
+        np.array([[1.0, 2.0], [2.0, 1.0]]),  # positive diagonal, negative determinant
+        np.array([[1.0, 0.1], [0.0, 1.0]]),  # asymmetric
+        np.array([[np.nan, 0.0], [0.0, 1.0]]),
+        np.array([[1.0, 0.0], [0.0, np.inf]]),
+    ],
+)
+def test_first_fundamental_form_must_be_finite_symmetric_positive_definite(I):
+    with pytest.raises(ValueError, match="first fundamental form must be symmetric positive definite, got"):
+        MATERIAL.energy_density(I, np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="first fundamental form must be symmetric positive definite"):
+        membrane_strain(I)
+
+
+def test_bad_form_in_a_stack_is_located():
+    stack = np.stack([np.eye(2), np.eye(2), -np.eye(2)])
+    with pytest.raises(ValueError, match=r"at index 2 \(of 3\)"):
+        membrane_strain(stack)
+
+
+@pytest.mark.parametrize(
+    "II",
+    [
+        np.array([[1.0, 2.0], [-2.0, 1.0]]),
+        np.array([[np.nan, 0.0], [0.0, 0.0]]),
+        np.array([[0.0, 0.0], [0.0, -np.inf]]),
+    ],
+)
+def test_second_fundamental_form_must_be_finite_and_symmetric(II):
+    with pytest.raises(ValueError, match="second fundamental form must be finite and symmetric, got"):
+        MATERIAL.energy_gradient(np.eye(2), II)
+    with pytest.raises(ValueError, match="second fundamental form must be finite and symmetric"):
+        bending_strain(II)
+
+
+@pytest.mark.parametrize("shape", [(2,), (3, 3), (2, 2, 2, 2), (4, 2, 3)])
+def test_forms_of_the_wrong_shape_are_rejected(shape):
+    with pytest.raises(ValueError, match=r"must have shape \(2, 2\) or \(n, 2, 2\)"):
+        membrane_strain(np.ones(shape))
+
+
+def test_mismatched_stacks_are_rejected():
+    with pytest.raises(ValueError, match="matching leading shapes"):
+        MATERIAL.energy_density(np.stack([np.eye(2)] * 3), np.zeros((2, 2, 2)))
+
+
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("thickness", -3e-4, r"thickness must be > 0 \(m\), got -0.0003"),
+        ("thickness", 0.0, r"thickness must be > 0"),
+        ("thickness", float("nan"), "thickness must be finite, got nan"),
+        ("s00", float("inf"), "s00 must be finite, got inf"),
+        ("b22", float("nan"), "b22 must be finite"),
+        ("s01", True, "s01 must be a real number, got True"),
+        ("b11", "1e5", "b11 must be a real number"),
+    ],
+)
+def test_bad_fields_are_rejected_by_name(field, value, message):
+    fields = {"thickness": H, **MATERIAL.parameters, field: value}
+    with pytest.raises(ValueError, match=message):
+        ShellMaterial(**fields)
+
+
+def test_indefinite_material_is_constructible():
+    # A fit may produce one; the fitter reports it, the constructor does not refuse it.
+    m = ShellMaterial(H, s00=1.0, s01=2.0, s11=1.0, s22=-1.0, b00=0.0, b01=0.0, b11=0.0, b22=0.0)
+    assert not m.membrane_positive_definite and not m.bending_positive_definite

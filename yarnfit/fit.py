@@ -1,0 +1,597 @@
+"""Weighted least-squares fit of an orthotropic StVK shell to yarn-level energy densities.
+
+Input: :class:`Sample` s, each a prescribed surface deformation (first and second fundamental forms
+``I``, ``II``) with the homogenized yarn-level energy per reference area ``Ū`` (J/m²). Output: a
+:class:`ShellFit` holding the fitted :class:`~yarnfit.shell.ShellMaterial` and its quality report.
+
+Conventions are those of :mod:`yarnfit.shell` (SI units, weft = t = first axis, warp = p = second
+axis). The shell energy is linear in the parameter vector
+
+    γ = (s00, s01, s11, s22, b00, b01, b11, b22)   (Pa),
+
+so the fit is linear: ``W(γ; I, II) = D(I, II) γ`` with the design matrix rows (see
+:func:`design_matrix`) ``h/2 (ε0², 2 ε0 ε1, ε1², ε2²)`` for the membrane and
+``h³/2 (κ0², 2 κ0 κ1, κ1², κ2²)`` for bending.
+
+Sample families. Every sample belongs to one family and is either a membrane sample (``II = 0``)
+or a bending sample (``I = Id``), never both:
+
+* membrane: ``weft_stretch`` (s00), ``warp_stretch`` (s11), ``biaxial_stretch`` (s01 against the
+  two uniaxial families), ``shear`` (s22);
+* bending: ``weft_bend`` (b00), ``warp_bend`` (b11), ``bias_bend`` (b22), ``saddle_bend`` (b01).
+
+Because no parameter is shared between the membrane and the bending group, the two groups are
+fitted (and their residual variances estimated) separately; their energies differ by orders of
+magnitude and a pooled variance would be set by the membrane group alone.
+
+Weights. ``w = exp(−½ (s/σ)²)``, Gaussian in the strain magnitude ``s``: ``‖E‖_F`` for membrane
+samples, the surface strain ``‖II‖_F h/2`` for bending samples. ``σ`` is the caller's
+``weight_width`` (dimensionless strain) or half the largest ``s`` of the group, so the fit favours
+the small-strain behaviour the StVK model is meant to capture.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from yarnfit.shell import (
+    BENDING_PARAMETERS,
+    MEMBRANE_PARAMETERS,
+    PARAMETER_NAMES,
+    ShellMaterial,
+    as_first_fundamental_form,
+    as_second_fundamental_form,
+    bending_strain,
+    membrane_strain,
+)
+
+__all__ = [
+    "BENDING_FAMILIES",
+    "FAMILIES",
+    "IndefiniteFitError",
+    "MEMBRANE_FAMILIES",
+    "MODELS",
+    "Sample",
+    "ShellFit",
+    "design_matrix",
+    "fit_residual_jacobian",
+    "fit_shell",
+    "sample_strain",
+    "sample_weights",
+    "weighted_residuals",
+]
+
+FAMILIES = (
+    "weft_stretch",
+    "warp_stretch",
+    "biaxial_stretch",
+    "shear",
+    "weft_bend",
+    "warp_bend",
+    "bias_bend",
+    "saddle_bend",
+)
+MEMBRANE_FAMILIES = FAMILIES[:4]
+BENDING_FAMILIES = FAMILIES[4:]
+# "full" fits all eight parameters; "paper" fixes b01 = 0 (the paper's model).
+MODELS = ("full", "paper")
+
+# Largest accepted |I − Id| entry of a bending sample (dimensionless strain). The homogenizer
+# prescribes I = Id; 1e-12 admits round-off in building it (~1e-16) and is far below the smallest
+# strain any sample resolves (~1e-4), so the membrane energy it carries (~s·h·1e-24 J/m²) is nil.
+PURE_STRAIN_ATOL = 1e-12
+# Largest accepted |II| entry of a membrane sample (1/m). For any shell thinner than 1 cm its
+# surface strain h|II|/2 stays below 5e-12, the same order as PURE_STRAIN_ATOL.
+PURE_CURVATURE_ATOL = 1e-9
+# Lower bound of a diagonal stiffness (s00, s11, s22, b00, b11, b22) relative to the largest
+# diagonal of its group in the unbounded fit. Positive, so a fitted material stays strictly positive
+# definite; far below any physical anisotropy ratio (< 1e4), so it never binds a real stiffness;
+# far above the round-off of the unbounded solution (~1e-15 relative), so a stiffness the data put
+# at zero lands on the floor and is reported in ShellFit.active_bounds instead of as noise.
+DIAGONAL_FLOOR_REL = 1e-12
+
+_DIAGONAL = ("s00", "s11", "s22", "b00", "b11", "b22")
+_GROUPS = (("membrane", MEMBRANE_FAMILIES, MEMBRANE_PARAMETERS), ("bending", BENDING_FAMILIES, BENDING_PARAMETERS))
+# Each group's coupled block: (diagonal, coupling, diagonal).
+_COUPLINGS = {"membrane": ("s00", "s01", "s11"), "bending": ("b00", "b01", "b11")}
+
+
+class IndefiniteFitError(ValueError):
+    """The least-squares optimum is not positive definite.
+
+    Attributes:
+        family: the sample family whose energies determine the offending coupling
+            (``"biaxial_stretch"`` for s01, ``"saddle_bend"`` for b01).
+        parameters: the fitted parameters (Pa) by name.
+    """
+
+    def __init__(self, message: str, family: str, parameters: dict[str, float]) -> None:
+        super().__init__(message)
+        self.family = family
+        self.parameters = parameters
+
+
+@dataclass(frozen=True, eq=False)
+class Sample:
+    """One homogenized deformation sample.
+
+    Attributes:
+        family: one of :data:`FAMILIES`.
+        I: first fundamental form ``(2, 2)``, SPD (dimensionless); the identity for bending families.
+        II: second fundamental form ``(2, 2)`` (1/m), symmetric; zero for membrane families.
+        energy_density: yarn-level energy per reference area ``Ū`` (J/m²); may be NaN only if
+            ``converged`` is False.
+        residual: the quasi-static solver's worst relative residual (dimensionless, ≥ 0); may be
+            NaN only if ``converged`` is False.
+        converged: whether the solve reached its tolerance; non-converged samples are never fitted.
+        parameter: the scalar that varies along the family (stretch, shear or curvature in the
+            family's own units), for plots and reports.
+    """
+
+    family: str
+    I: np.ndarray
+    II: np.ndarray
+    energy_density: float
+    residual: float
+    converged: bool
+    parameter: float
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.family, str) or self.family not in FAMILIES:
+            raise ValueError(f"Sample.family must be one of {', '.join(FAMILIES)}, got {self.family!r}")
+        if not isinstance(self.converged, (bool, np.bool_)):
+            raise ValueError(f"Sample.converged must be a bool, got {self.converged!r}")
+        converged = bool(self.converged)
+        object.__setattr__(self, "converged", converged)
+
+        I = _single_form(as_first_fundamental_form, self.I, "I")
+        II = _single_form(as_second_fundamental_form, self.II, "II")
+        if self.family in MEMBRANE_FAMILIES and np.max(np.abs(II)) > PURE_CURVATURE_ATOL:
+            raise ValueError(
+                f"Sample.II must be zero for membrane family {self.family} (a sample never mixes "
+                f"membrane and bending; tolerance {PURE_CURVATURE_ATOL} 1/m), got {II.tolist()}"
+            )
+        if self.family in BENDING_FAMILIES and np.max(np.abs(I - np.eye(2))) > PURE_STRAIN_ATOL:
+            raise ValueError(
+                f"Sample.I must be the identity for bending family {self.family} (a sample never mixes "
+                f"membrane and bending; tolerance {PURE_STRAIN_ATOL}), got {I.tolist()}"
+            )
+        I.setflags(write=False)
+        II.setflags(write=False)
+        object.__setattr__(self, "I", I)
+        object.__setattr__(self, "II", II)
+
+        energy = _real(self.energy_density, "Sample.energy_density")
+        residual = _real(self.residual, "Sample.residual")
+        if converged and not math.isfinite(energy):
+            raise ValueError(f"Sample.energy_density must be finite for a converged sample, got {energy!r}")
+        if converged and not math.isfinite(residual):
+            raise ValueError(f"Sample.residual must be finite for a converged sample, got {residual!r}")
+        if residual < 0.0:
+            raise ValueError(f"Sample.residual must be >= 0, got {residual!r}")
+        parameter = _real(self.parameter, "Sample.parameter")
+        if not math.isfinite(parameter):
+            raise ValueError(f"Sample.parameter must be finite, got {parameter!r}")
+        object.__setattr__(self, "energy_density", energy)
+        object.__setattr__(self, "residual", residual)
+        object.__setattr__(self, "parameter", parameter)
+
+    @property
+    def is_membrane(self) -> bool:
+        """True for the membrane families, False for the bending families."""
+        return self.family in MEMBRANE_FAMILIES
+
+
+@dataclass(frozen=True, eq=False)
+class ShellFit:
+    """Result of :func:`fit_shell`.
+
+    Attributes:
+        material: the fitted material, with the thickness given to the fit.
+        model: ``"full"`` or ``"paper"``.
+        parameters: fitted stiffnesses (Pa) by name, all eight (b01 = 0 for the paper model).
+        std_error: standard errors (Pa) by name; 0 for a parameter the model fixes, NaN for a group
+            with no more samples than parameters.
+        families: per family ``{"r2": float, "relative_rms": float, "samples": int}``, unweighted,
+            over the used samples (see :func:`fit_shell` for the edge cases).
+        active_bounds: names of diagonal stiffnesses that ended on their positive floor, and of
+            couplings (s01, b01) held at zero because one of their diagonals did (a direction that
+            carries no energy has no coupling to identify; positive definiteness then requires it
+            to vanish, and the coupled family's data only shows model error).
+        excluded: the samples left out because they did not converge.
+        used: the samples fitted, in input order.
+        weights: ``(len(used),)`` least-squares weights, aligned with ``used``.
+        weight_widths: σ (dimensionless strain) per group, ``{"membrane": σ, "bending": σ}``.
+        fitted_energy: ``(len(used),)`` shell energy density (J/m²) at the used samples.
+    """
+
+    material: ShellMaterial
+    model: str
+    parameters: dict[str, float]
+    std_error: dict[str, float]
+    families: dict[str, dict]
+    active_bounds: list[str]
+    excluded: list[Sample]
+    used: list[Sample]
+    weights: np.ndarray
+    weight_widths: dict[str, float]
+    fitted_energy: np.ndarray = field(repr=False)
+
+    def quality_dict(self) -> dict:
+        """Everything but the material as plain JSON data (str, float, int, list, dict).
+
+        Non-finite numbers (an r2 of −inf, NaN standard errors) are written as ``None`` so that the
+        material file stays strict JSON.
+        """
+        def sample_dict(sample: Sample) -> dict:
+            return {
+                "family": sample.family,
+                "parameter": sample.parameter,
+                "I": sample.I.tolist(),
+                "II_per_m": sample.II.tolist(),
+                "energy_density_j_per_m2": _json_float(sample.energy_density),
+                "residual": _json_float(sample.residual),
+            }
+
+        used = []
+        for sample, weight, fitted in zip(self.used, self.weights, self.fitted_energy):
+            entry = sample_dict(sample)
+            entry["weight"] = float(weight)
+            entry["fitted_energy_density_j_per_m2"] = float(fitted)
+            used.append(entry)
+        return {
+            "model": self.model,
+            "parameters_pa": {k: float(v) for k, v in self.parameters.items()},
+            "std_error_pa": {k: _json_float(v) for k, v in self.std_error.items()},
+            "families": {
+                name: {
+                    "r2": _json_float(f["r2"]),
+                    "relative_rms": _json_float(f["relative_rms"]),
+                    "samples": f["samples"],
+                }
+                for name, f in self.families.items()
+            },
+            "active_bounds": list(self.active_bounds),
+            "weight_widths": {k: float(v) for k, v in self.weight_widths.items()},
+            "used": used,
+            "excluded": [sample_dict(sample) for sample in self.excluded],
+        }
+
+
+def design_matrix(samples: Sequence[Sample], thickness: float) -> np.ndarray:
+    """``dW/dγ`` for each sample, ``(n, 8)``, columns in :data:`~yarnfit.shell.PARAMETER_NAMES` order.
+
+    Rows: ``h/2 (ε0², 2 ε0 ε1, ε1², ε2²)`` in the membrane columns and
+    ``h³/2 (κ0², 2 κ0 κ1, κ1², κ2²)`` in the bending columns (J/m² per Pa), with ε and κ the Voigt
+    strains of :mod:`yarnfit.shell`.
+    """
+    h = _thickness(thickness)
+    samples = _sample_list(samples)
+    eps = membrane_strain(np.stack([s.I for s in samples]))
+    kap = bending_strain(np.stack([s.II for s in samples]))
+    D = np.empty((len(samples), len(PARAMETER_NAMES)))
+    for offset, v, scale in ((0, eps, 0.5 * h), (4, kap, 0.5 * h**3)):
+        D[:, offset + 0] = scale * v[:, 0] ** 2
+        D[:, offset + 1] = scale * 2.0 * v[:, 0] * v[:, 1]
+        D[:, offset + 2] = scale * v[:, 1] ** 2
+        D[:, offset + 3] = scale * v[:, 2] ** 2
+    return D
+
+
+def sample_strain(sample: Sample, thickness: float) -> float:
+    """Strain magnitude used for weighting (dimensionless).
+
+    ``‖E‖_F`` with ``E = ½(I − Id)`` for a membrane sample; ``‖II‖_F h/2``, the surface strain of the
+    shell, for a bending sample.
+    """
+    h = _thickness(thickness)
+    if sample.is_membrane:
+        return float(np.linalg.norm(0.5 * (sample.I - np.eye(2))))
+    return float(np.linalg.norm(sample.II) * 0.5 * h)
+
+
+def sample_weights(
+    samples: Sequence[Sample], thickness: float, weight_width: float | None = None
+) -> tuple[np.ndarray, dict[str, float]]:
+    """Least-squares weights ``w = exp(−½ (s/σ)²)`` and the widths σ used.
+
+    Args:
+        samples: the samples to weight (for a fit: the converged ones).
+        thickness: shell thickness h (m).
+        weight_width: σ (dimensionless strain) for both groups; ``None`` takes half the largest
+            :func:`sample_strain` of each group separately.
+
+    Returns:
+        ``(w, widths)``: ``w`` ``(n,)`` in (0, 1], ``widths`` σ by group name for the groups present.
+
+    Raises:
+        ValueError: ``weight_width`` not finite and > 0, or (for ``None``) a group whose samples all
+            have zero strain.
+    """
+    samples = _sample_list(samples)
+    if weight_width is not None:
+        weight_width = _real(weight_width, "weight_width")
+        if not (math.isfinite(weight_width) and weight_width > 0.0):
+            raise ValueError(f"weight_width must be finite and > 0 (dimensionless strain), got {weight_width!r}")
+    strain = np.array([sample_strain(s, thickness) for s in samples])
+    membrane = np.array([s.is_membrane for s in samples], dtype=bool)
+    weights = np.empty(len(samples))
+    widths = {}
+    for group, mask in (("membrane", membrane), ("bending", ~membrane)):
+        if not np.any(mask):
+            continue
+        sigma = weight_width if weight_width is not None else 0.5 * float(np.max(strain[mask]))
+        if sigma == 0.0:
+            raise ValueError(f"all {group} samples have zero strain: they cannot determine any {group} stiffness")
+        weights[mask] = np.exp(-0.5 * (strain[mask] / sigma) ** 2)
+        widths[group] = sigma
+    return weights, widths
+
+
+def weighted_residuals(
+    params: Sequence[float], samples: Sequence[Sample], thickness: float, weights: np.ndarray
+) -> np.ndarray:
+    """``√w (W_shell(γ; I, II) − Ū)`` (J/m², w dimensionless), ``(n,)``.
+
+    Evaluated through :meth:`ShellMaterial.energy_density`, independently of :func:`design_matrix`,
+    so a finite-difference check of :func:`fit_residual_jacobian` tests the design matrix.
+
+    Args:
+        params: γ ``(8,)`` (Pa) in :data:`~yarnfit.shell.PARAMETER_NAMES` order; need not be
+            positive definite.
+    """
+    samples = _sample_list(samples)
+    gamma = _params(params)
+    material = ShellMaterial(_thickness(thickness), **dict(zip(PARAMETER_NAMES, gamma)))
+    W = material.energy_density(np.stack([s.I for s in samples]), np.stack([s.II for s in samples]))
+    target = np.array([s.energy_density for s in samples])
+    return np.sqrt(_weights(weights, len(samples))) * (W - target)
+
+
+def fit_residual_jacobian(
+    params: Sequence[float], samples: Sequence[Sample], thickness: float, weights: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted residuals ``(n,)`` and their Jacobian ``d r/d γ = √w D`` ``(n, 8)`` at γ = ``params``."""
+    r = weighted_residuals(params, samples, thickness, weights)
+    J = np.sqrt(_weights(weights, len(r)))[:, None] * design_matrix(samples, thickness)
+    return r, J
+
+
+def fit_shell(
+    samples: Iterable[Sample], thickness: float, model: str = "full", weight_width: float | None = None
+) -> ShellFit:
+    """Fit an orthotropic StVK shell to yarn-level energies by weighted linear least squares.
+
+    Solves ``min Σ w_i (W_shell(γ; I_i, II_i) − Ū_i)²`` over the converged samples, each group
+    (membrane, bending) on its own, with the diagonal stiffnesses bounded below by
+    :data:`DIAGONAL_FLOOR_REL` × the largest diagonal of the group's unbounded fit.
+
+    Args:
+        samples: homogenized samples; non-converged ones are excluded and listed in the result.
+        thickness: shell thickness h (m).
+        model: ``"full"`` (fits b01, needs ``saddle_bend`` samples) or ``"paper"`` (b01 = 0).
+        weight_width: σ of the Gaussian weights (dimensionless strain), or ``None``; see
+            :func:`sample_weights`.
+
+    Returns:
+        the :class:`ShellFit`. Per family: ``r2 = 1 − SS_res/SS_tot`` (unweighted, ``SS_tot`` about
+        the family mean) and ``relative_rms = RMS(W − Ū)/RMS(Ū)``. When ``SS_tot = 0`` (one sample,
+        or all energies equal) r2 is 1.0 if ``SS_res = 0`` and −inf otherwise; when ``RMS(Ū) = 0``
+        relative_rms is 0.0 if the residuals are all zero and +inf otherwise. Standard errors:
+        covariance ``σ̂² (Jᵀ W J)⁺`` per group, ``σ̂² = Σ w r² / (n − p)``.
+
+    Raises:
+        ValueError: bad thickness, model or weight width; a required family without converged
+            samples (named); a parameter the samples do not determine (named).
+        IndefiniteFitError: ``s01² ≥ s00 s11`` (family ``biaxial_stretch``) or ``b01² ≥ b00 b11``
+            (family ``saddle_bend``) at the optimum.
+    """
+    h = _thickness(thickness)
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    samples = _sample_list(samples)
+    used = [s for s in samples if s.converged]
+    excluded = [s for s in samples if not s.converged]
+
+    required = FAMILIES if model == "full" else tuple(f for f in FAMILIES if f != "saddle_bend")
+    missing = []
+    for family in required:
+        if not any(s.family == family for s in used):
+            dropped = sum(s.family == family for s in excluded)
+            missing.append(f"{family} ({dropped} excluded as not converged)" if dropped else family)
+    if missing:
+        raise ValueError(
+            f"no usable (converged) samples for families: {', '.join(missing)}; model {model!r} needs "
+            f"{', '.join(required)}"
+        )
+
+    weights, widths = sample_weights(used, h, weight_width)
+    D = design_matrix(used, h)
+    target = np.array([s.energy_density for s in used])
+    membrane = np.array([s.is_membrane for s in used], dtype=bool)
+
+    parameters = dict.fromkeys(PARAMETER_NAMES, 0.0)
+    std_error = dict.fromkeys(PARAMETER_NAMES, 0.0)
+    active: list[str] = []
+    for group, families, names in _GROUPS:
+        rows = membrane if group == "membrane" else ~membrane
+        free = [n for n in names if not (model == "paper" and n == "b01")]
+        cols = [PARAMETER_NAMES.index(n) for n in free]
+        values, errors, at_floor = _fit_group(group, families, free, D[np.ix_(rows, cols)], target[rows], weights[rows])
+        coupling = _COUPLINGS[group]
+        if coupling[1] in free and (coupling[0] in at_floor or coupling[2] in at_floor):
+            free = [n for n in free if n != coupling[1]]
+            cols = [PARAMETER_NAMES.index(n) for n in free]
+            values, errors, at_floor = _fit_group(group, families, free, D[np.ix_(rows, cols)], target[rows],
+                                                  weights[rows])
+            at_floor = at_floor + [coupling[1]]
+        parameters.update(values)
+        std_error.update(errors)
+        active += at_floor
+
+    for d0, off, d1, family in (("s00", "s01", "s11", "biaxial_stretch"), ("b00", "b01", "b11", "saddle_bend")):
+        p0, p01, p1 = parameters[d0], parameters[off], parameters[d1]
+        if p01 * p01 >= p0 * p1:
+            floors = [n for n in (d0, d1) if n in active]
+            note = f"; {', '.join(floors)} at the positive floor" if floors else ""
+            raise IndefiniteFitError(
+                f"fitted {d0}/{off}/{d1} block is not positive definite: {off}² = {p01 * p01:.6g} >= "
+                f"{d0}·{d1} = {p0 * p1:.6g} ({d0} = {p0:.6g} Pa, {off} = {p01:.6g} Pa, {d1} = {p1:.6g} Pa{note}); "
+                f"the {family} energies are inconsistent with the uniaxial ones (check those samples)",
+                family,
+                dict(parameters),
+            )
+
+    material = ShellMaterial(h, **parameters)
+    gamma = np.array([parameters[n] for n in PARAMETER_NAMES])
+    fitted = D @ gamma
+    return ShellFit(
+        material=material,
+        model=model,
+        parameters=parameters,
+        std_error=std_error,
+        families=_family_statistics(used, fitted, target),
+        active_bounds=active,
+        excluded=excluded,
+        used=used,
+        weights=weights,
+        weight_widths=widths,
+        fitted_energy=fitted,
+    )
+
+
+# -- helpers --------------------------------------------------------------------------------------
+
+
+def _fit_group(
+    group: str, families: tuple[str, ...], names: list[str], D: np.ndarray, target: np.ndarray, weights: np.ndarray
+) -> tuple[dict[str, float], dict[str, float], list[str]]:
+    """Bounded weighted fit of one group: (values, standard errors, names at the floor)."""
+    sw = np.sqrt(weights)
+    A = sw[:, None] * D
+    b = sw * target
+    # Unit-norm columns: entries are ~1e-6 J/m² per Pa against parameters of 1e5–1e7 Pa, and the
+    # shear/twist columns are smaller than the stretch/bend ones; scaled, the solve, the floor and the
+    # rank test do not depend on units.
+    scale = np.linalg.norm(A, axis=0)
+    if np.any(scale == 0.0):
+        zero = [n for n, c in zip(names, scale) if c == 0.0]
+        raise ValueError(
+            f"{', '.join(zero)} undetermined: no used {group} sample ({', '.join(families)}) strains "
+            f"{'it' if len(zero) == 1 else 'them'} with non-zero weight"
+        )
+    As = A / scale
+    if np.linalg.matrix_rank(As) < len(names):
+        # The right singular vector of the smallest singular value names the confounded parameters.
+        null = np.linalg.svd(As)[2][-1]
+        mixed = [n for n, v in zip(names, null) if abs(v) > 0.1]
+        raise ValueError(f"the {group} samples do not determine {', '.join(mixed)} separately (rank-deficient design)")
+
+    unbounded = np.linalg.lstsq(As, b, rcond=None)[0] / scale
+    diagonal = np.array([n in _DIAGONAL for n in names])
+    largest = float(np.max(unbounded[diagonal]))
+    if not largest > 0.0:
+        raise ValueError(
+            f"no {group} diagonal stiffness comes out positive in the unbounded fit "
+            f"({', '.join(f'{n} = {v:.6g} Pa' for n, v in zip(names, unbounded))}): the energies of "
+            f"{', '.join(families)} are not positive"
+        )
+    floor = DIAGONAL_FLOOR_REL * largest
+    lower = np.where(diagonal, floor * scale, -np.inf)
+    result = lsq_linear(As, b, bounds=(lower, np.full(len(names), np.inf)), method="bvls")
+    if not result.success:
+        raise RuntimeError(f"{group} least-squares solve failed: {result.message}")
+    values = result.x / scale
+    at_floor = diagonal & (result.active_mask == -1)
+    values[at_floor] = floor  # exact floor, not floor·scale/scale
+
+    n, p = len(b), len(names)
+    if n > p:
+        r = A @ values - b
+        variance = float(r @ r) / (n - p)
+        # (AᵀA)⁺ = A⁺ A⁺ᵀ, computed on the scaled columns and unscaled: cov_ij = cov'_ij / (c_i c_j).
+        pinv = np.linalg.pinv(As)
+        errors = np.sqrt(variance * np.sum(pinv**2, axis=1)) / scale
+    else:
+        errors = np.full(p, np.nan)
+    return (
+        dict(zip(names, values.tolist())),
+        dict(zip(names, errors.tolist())),
+        [n for n, a in zip(names, at_floor) if a],
+    )
+
+
+def _family_statistics(used: list[Sample], fitted: np.ndarray, target: np.ndarray) -> dict[str, dict]:
+    stats = {}
+    for family in FAMILIES:
+        mask = np.array([s.family == family for s in used], dtype=bool)
+        if not np.any(mask):
+            continue
+        u, res = target[mask], fitted[mask] - target[mask]
+        ss_res = float(res @ res)
+        ss_tot = float(np.sum((u - u.mean()) ** 2))
+        r2 = 1.0 - ss_res / ss_tot if ss_tot > 0.0 else (1.0 if ss_res == 0.0 else -math.inf)
+        rms_u = math.sqrt(float(u @ u) / len(u))
+        rms_res = math.sqrt(ss_res / len(u))
+        relative_rms = rms_res / rms_u if rms_u > 0.0 else (0.0 if rms_res == 0.0 else math.inf)
+        stats[family] = {"r2": r2, "relative_rms": relative_rms, "samples": int(mask.sum())}
+    return stats
+
+
+def _single_form(check, value: object, name: str) -> np.ndarray:
+    try:
+        form = check(value)
+    except ValueError as exc:
+        raise ValueError(f"Sample.{name}: {exc}") from None
+    if form.shape != (2, 2):
+        raise ValueError(f"Sample.{name} must have shape (2, 2), got shape {form.shape}")
+    return form.copy()
+
+
+def _real(value: object, name: str) -> float:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be a real number, got {value!r}")
+    return float(value)
+
+
+def _thickness(thickness: object) -> float:
+    h = _real(thickness, "thickness")
+    if not (math.isfinite(h) and h > 0.0):
+        raise ValueError(f"thickness must be finite and > 0 (m), got {h!r}")
+    return h
+
+
+def _sample_list(samples: Iterable[Sample]) -> list[Sample]:
+    samples = list(samples)
+    if not samples:
+        raise ValueError("samples is empty")
+    for k, s in enumerate(samples):
+        if not isinstance(s, Sample):
+            raise ValueError(f"samples[{k}] must be a Sample, got {type(s).__name__}")
+    return samples
+
+
+def _params(params: Sequence[float]) -> np.ndarray:
+    gamma = np.asarray(params, dtype=np.float64)
+    if gamma.shape != (len(PARAMETER_NAMES),):
+        raise ValueError(
+            f"params must have shape ({len(PARAMETER_NAMES)},) ordered as {PARAMETER_NAMES}, got shape {gamma.shape}"
+        )
+    return gamma
+
+
+def _weights(weights: np.ndarray, n: int) -> np.ndarray:
+    w = np.asarray(weights, dtype=np.float64)
+    if w.shape != (n,) or not np.all(np.isfinite(w)) or np.any(w < 0.0):
+        raise ValueError(f"weights must be {n} finite non-negative numbers, got shape {w.shape}")
+    return w
+
+
+def _json_float(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None

@@ -1,0 +1,518 @@
+"""Orthotropic StVK shell material: the model the yarn-level energies are fitted to.
+
+Conventions (``docs/design.md`` §3), SI units throughout:
+
+* Material axes: weft = t = first axis (x), warp = p = second axis (y). The rest surface is flat and
+  its metric is the identity.
+* Membrane strain: Green strain ``E = ½(I − Id)`` with ``I`` the first fundamental form (2×2, SPD,
+  dimensionless), in Voigt form ``ε = (E_tt, E_pp, 2 E_tp)``. Energy per reference area
+  ``W_s = (h/2) εᵀ S ε`` (J/m²) with ``S = [[s00, s01, 0], [s01, s11, 0], [0, 0, s22]]`` (Pa) and
+  ``h`` the shell thickness (m).
+* Bending strain: ``κ = (II_tt, II_pp, 2 II_tp)`` with ``II`` the second fundamental form (2×2
+  symmetric, 1/m). Energy per area ``W_b = (h³/2) κᵀ B κ`` (J/m²) with
+  ``B = [[b00, b01, 0], [b01, b11, 0], [0, 0, b22]]`` (Pa). The paper's model has ``b01 = 0``.
+* Moduli (paper Eq. shell_stiffness_moduli), ``D = 1 − ν_tp ν_pt``: ``s00 = E_t/D``, ``s11 = E_p/D``,
+  ``s01 = ν_pt E_t/D = ν_tp E_p/D``, ``s22 = μ``.
+
+Matrix arguments. ``I`` and ``II`` are given as full 2×2 matrices, one ``(2, 2)`` or a stack
+``(n, 2, 2)``. The energy reads them through their symmetric part, so the off-diagonal strains are
+``2 E_tp = (I_01 + I_10)/2`` and ``2 II_tp = II_01 + II_10``. :meth:`ShellMaterial.energy_gradient`
+returns the derivative with respect to each entry on its own, which is therefore symmetric:
+``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` with ``σ = S ε`` and ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]``
+with ``m = B κ``. A symmetric variation that changes both ``I_01`` and ``I_10`` by ``d`` changes
+``W`` by ``2 d (dW/dI)_01``, i.e. the usual Frobenius pairing ``⟨dW/dI, dI⟩``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "BENDING_PARAMETERS",
+    "GF_CM2_PER_CM",
+    "MEMBRANE_PARAMETERS",
+    "PARAMETER_NAMES",
+    "ShellMaterial",
+    "as_first_fundamental_form",
+    "as_second_fundamental_form",
+    "bending_strain",
+    "membrane_strain",
+]
+
+MEMBRANE_PARAMETERS = ("s00", "s01", "s11", "s22")
+BENDING_PARAMETERS = ("b00", "b01", "b11", "b22")
+# The order of the fit's parameter vector γ and of ShellMaterial.parameters.
+PARAMETER_NAMES = MEMBRANE_PARAMETERS + BENDING_PARAMETERS
+
+# 1 gf·cm²/cm = 1 gf·cm = 9.80665e-3 N × 1e-2 m (N·m): KES-F and cantilever bending rigidity units.
+GF_CM2_PER_CM = 9.80665e-5
+
+# Largest accepted asymmetry |A_01 − A_10| of a fundamental form, relative to its largest entry.
+# Forms built as FᵀF are symmetric to round-off (~1e-16); 1e-8 is far above that yet far below any
+# shear strain a sample resolves (≥ 1e-4), so reading the symmetric part changes nothing that matters.
+SYMMETRY_RTOL = 1e-8
+# Largest accepted relative mismatch |ν_pt E_t − ν_tp E_p| / max(|ν_pt E_t|, |ν_tp E_p|) in
+# from_moduli. Moduli from moduli() or printed with repr agree to round-off (~1e-15); a mismatch above
+# one part per million means the two Poisson ratios describe different materials, not a rounding.
+RECIPROCITY_RTOL = 1e-6
+
+
+def as_first_fundamental_form(I: object) -> np.ndarray:
+    """``I`` as a float64 array ``(2, 2)`` or ``(n, 2, 2)``, checked finite, symmetric and SPD.
+
+    Raises:
+        ValueError: wrong shape, non-finite entries, asymmetry above :data:`SYMMETRY_RTOL` or a
+            symmetric part that is not positive definite (the message shows the offending matrix).
+    """
+    forms = _as_forms(I, "first fundamental form")
+    flat = forms.reshape(-1, 2, 2)
+    bad = ~_finite_each(flat) | ~_symmetric_each(flat)
+    sym = 0.5 * (flat + np.swapaxes(flat, -1, -2))
+    det = sym[:, 0, 0] * sym[:, 1, 1] - sym[:, 0, 1] * sym[:, 1, 0]
+    with np.errstate(invalid="ignore"):
+        bad |= ~((sym[:, 0, 0] > 0.0) & (det > 0.0))
+    if np.any(bad):
+        raise ValueError(
+            f"first fundamental form must be symmetric positive definite, got {_describe(flat, bad, forms.ndim)}"
+        )
+    return forms
+
+
+def as_second_fundamental_form(II: object) -> np.ndarray:
+    """``II`` (1/m) as a float64 array ``(2, 2)`` or ``(n, 2, 2)``, checked finite and symmetric.
+
+    Raises:
+        ValueError: wrong shape, non-finite entries or asymmetry above :data:`SYMMETRY_RTOL`.
+    """
+    forms = _as_forms(II, "second fundamental form")
+    flat = forms.reshape(-1, 2, 2)
+    bad = ~_finite_each(flat) | ~_symmetric_each(flat)
+    if np.any(bad):
+        raise ValueError(
+            f"second fundamental form must be finite and symmetric, got {_describe(flat, bad, forms.ndim)}"
+        )
+    return forms
+
+
+def membrane_strain(I: object) -> np.ndarray:
+    """Voigt membrane strain ``ε = (E_tt, E_pp, 2 E_tp)`` of ``E = ½(I − Id)``, dimensionless.
+
+    Args:
+        I: first fundamental form, ``(2, 2)`` or ``(n, 2, 2)``, SPD.
+
+    Returns:
+        ``(3,)`` or ``(n, 3)``; ``2 E_tp = (I_01 + I_10)/2``.
+    """
+    forms = as_first_fundamental_form(I)
+    return _membrane_voigt(forms)
+
+
+def bending_strain(II: object) -> np.ndarray:
+    """Voigt bending strain ``κ = (II_tt, II_pp, 2 II_tp)`` (1/m).
+
+    Args:
+        II: second fundamental form (1/m), ``(2, 2)`` or ``(n, 2, 2)``, symmetric.
+
+    Returns:
+        ``(3,)`` or ``(n, 3)``; ``2 II_tp = II_01 + II_10``.
+    """
+    forms = as_second_fundamental_form(II)
+    return _bending_voigt(forms)
+
+
+@dataclass(frozen=True)
+class ShellMaterial:
+    """Orthotropic StVK shell: thickness and the membrane and bending stiffness matrices.
+
+    Positive definiteness is not required here: a least-squares fit may produce an indefinite
+    candidate, which the fitter reports (see :meth:`check_positive_definite`).
+
+    Attributes:
+        thickness: shell thickness h (m), > 0.
+        s00, s01, s11, s22: membrane stiffnesses (Pa), entries of ``S``.
+        b00, b01, b11, b22: bending stiffnesses (Pa), entries of ``B``.
+    """
+
+    thickness: float
+    s00: float
+    s01: float
+    s11: float
+    s22: float
+    b00: float
+    b01: float
+    b11: float
+    b22: float
+
+    def __post_init__(self) -> None:
+        for name in ("thickness",) + PARAMETER_NAMES:
+            object.__setattr__(self, name, _finite_float(getattr(self, name), name))
+        if self.thickness <= 0.0:
+            raise ValueError(f"thickness must be > 0 (m), got {self.thickness!r}")
+
+    # -- matrices and parameter views ------------------------------------------------------------
+
+    @property
+    def S(self) -> np.ndarray:
+        """Membrane stiffness matrix ``(3, 3)`` (Pa)."""
+        return np.array([[self.s00, self.s01, 0.0], [self.s01, self.s11, 0.0], [0.0, 0.0, self.s22]])
+
+    @property
+    def B(self) -> np.ndarray:
+        """Bending stiffness matrix ``(3, 3)`` (Pa)."""
+        return np.array([[self.b00, self.b01, 0.0], [self.b01, self.b11, 0.0], [0.0, 0.0, self.b22]])
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """The eight stiffnesses (Pa) by name, in :data:`PARAMETER_NAMES` order."""
+        return {name: getattr(self, name) for name in PARAMETER_NAMES}
+
+    # -- definiteness ------------------------------------------------------------------------------
+
+    @property
+    def membrane_positive_definite(self) -> bool:
+        """``S`` is positive definite: ``s00 > 0``, ``s00 s11 − s01² > 0`` and ``s22 > 0``."""
+        return not _block_problems(self.s00, self.s01, self.s11, self.s22, MEMBRANE_PARAMETERS)
+
+    @property
+    def bending_positive_definite(self) -> bool:
+        """``B`` is positive definite: ``b00 > 0``, ``b00 b11 − b01² > 0`` and ``b22 > 0``."""
+        return not _block_problems(self.b00, self.b01, self.b11, self.b22, BENDING_PARAMETERS)
+
+    def check_positive_definite(self) -> None:
+        """Raise ValueError naming the block (membrane/bending) and the entries that fail."""
+        problems = []
+        membrane = _block_problems(self.s00, self.s01, self.s11, self.s22, MEMBRANE_PARAMETERS)
+        bending = _block_problems(self.b00, self.b01, self.b11, self.b22, BENDING_PARAMETERS)
+        if membrane:
+            problems.append(f"membrane block S not positive definite: {'; '.join(membrane)}")
+        if bending:
+            problems.append(f"bending block B not positive definite: {'; '.join(bending)}")
+        if problems:
+            raise ValueError(". ".join(problems))
+
+    # -- moduli and engineering constants --------------------------------------------------------
+
+    @classmethod
+    def from_moduli(
+        cls,
+        thickness: float,
+        E_t: float,
+        E_p: float,
+        nu_tp: float,
+        nu_pt: float,
+        mu: float,
+        b00: float,
+        b11: float,
+        b22: float,
+        b01: float = 0.0,
+    ) -> ShellMaterial:
+        """A material from in-plane moduli (Pa), Poisson ratios and bending stiffnesses (Pa).
+
+        ``nu_tp`` is the warp contraction under weft load, ``nu_pt`` the weft contraction under warp
+        load; symmetry of ``S`` requires ``nu_pt E_t = nu_tp E_p`` (to :data:`RECIPROCITY_RTOL`).
+
+        Raises:
+            ValueError: non-positive ``E_t``, ``E_p`` or ``mu``, a reciprocity mismatch, or
+                ``D = 1 − nu_tp nu_pt ≤ 0``.
+        """
+        values = {"E_t": E_t, "E_p": E_p, "nu_tp": nu_tp, "nu_pt": nu_pt, "mu": mu}
+        values = {name: _finite_float(value, name) for name, value in values.items()}
+        for name in ("E_t", "E_p", "mu"):
+            if values[name] <= 0.0:
+                raise ValueError(f"{name} must be > 0 (Pa), got {values[name]!r}")
+        E_t, E_p, nu_tp, nu_pt, mu = (values[k] for k in ("E_t", "E_p", "nu_tp", "nu_pt", "mu"))
+        lhs, rhs = nu_pt * E_t, nu_tp * E_p
+        scale = max(abs(lhs), abs(rhs))
+        if abs(lhs - rhs) > RECIPROCITY_RTOL * scale:
+            raise ValueError(
+                f"moduli violate reciprocity nu_pt*E_t = nu_tp*E_p: nu_pt*E_t = {lhs!r}, nu_tp*E_p = {rhs!r} "
+                f"(relative mismatch {abs(lhs - rhs) / scale:.3g} > {RECIPROCITY_RTOL})"
+            )
+        D = 1.0 - nu_tp * nu_pt
+        if D <= 0.0:
+            raise ValueError(f"1 - nu_tp*nu_pt must be > 0, got {D!r} (nu_tp={nu_tp!r}, nu_pt={nu_pt!r})")
+        return cls(
+            thickness=thickness,
+            s00=E_t / D,
+            s01=nu_pt * E_t / D,
+            s11=E_p / D,
+            s22=mu,
+            b00=b00,
+            b01=b01,
+            b11=b11,
+            b22=b22,
+        )
+
+    def moduli(self) -> dict[str, float]:
+        """In-plane moduli: ``E_t``, ``E_p``, ``mu`` (Pa) and ``nu_tp``, ``nu_pt`` (dimensionless).
+
+        Inverse of :meth:`from_moduli`: ``nu_tp = s01/s11``, ``nu_pt = s01/s00``,
+        ``D = 1 − s01²/(s00 s11)``, ``E_t = s00 D``, ``E_p = s11 D``, ``mu = s22``.
+
+        Raises:
+            ValueError: the membrane block is not positive definite (the moduli would be meaningless).
+        """
+        self._require_positive_definite("moduli", membrane=True, bending=False)
+        D = 1.0 - self.s01**2 / (self.s00 * self.s11)
+        return {
+            "E_t": self.s00 * D,
+            "E_p": self.s11 * D,
+            "nu_tp": self.s01 / self.s11,
+            "nu_pt": self.s01 / self.s00,
+            "mu": self.s22,
+        }
+
+    def engineering(self) -> dict[str, float]:
+        """The engineering constants every material report carries (units in the key).
+
+        Stretch and shear stiffnesses are per unit width (N/m); the uniaxial ones leave the
+        transverse direction free. Bending rigidities (N·m) are ``B_dir`` with ``½ B_dir k²`` the
+        energy per area of a cylindrical bend of curvature ``k`` whose curvature direction is along
+        weft, along warp, or at 45° (bias).
+
+        Raises:
+            ValueError: ``S`` or ``B`` is not positive definite.
+        """
+        self._require_positive_definite("engineering constants", membrane=True, bending=True)
+        h = self.thickness
+        return {
+            "weft_stretch_n_per_m": h * (self.s00 - self.s01**2 / self.s11),
+            "warp_stretch_n_per_m": h * (self.s11 - self.s01**2 / self.s00),
+            "poisson_weft": self.s01 / self.s11,
+            "poisson_warp": self.s01 / self.s00,
+            "shear_n_per_m": h * self.s22,
+            "bending_weft_nm": h**3 * self.b00,
+            "bending_warp_nm": h**3 * self.b11,
+            "bending_bias_nm": h**3 * (self.b00 + self.b11 + 2.0 * self.b01 + 4.0 * self.b22) / 4.0,
+        }
+
+    # -- energy ------------------------------------------------------------------------------------
+
+    def energy_density(self, I: object, II: object) -> float | np.ndarray:
+        """Energy per reference area ``W = W_s + W_b`` (J/m²).
+
+        Args:
+            I: first fundamental form, ``(2, 2)`` or ``(n, 2, 2)``.
+            II: second fundamental form (1/m), ``(2, 2)`` or ``(n, 2, 2)``; leading shapes broadcast.
+
+        Returns:
+            a float for two ``(2, 2)`` inputs, else an array ``(n,)``.
+        """
+        eps, kap, single = self._strains(I, II)
+        h = self.thickness
+        W = 0.5 * h * np.einsum("...i,ij,...j->...", eps, self.S, eps)
+        W = W + 0.5 * h**3 * np.einsum("...i,ij,...j->...", kap, self.B, kap)
+        return float(W) if single else W
+
+    def energy_gradient(self, I: object, II: object) -> tuple[np.ndarray, np.ndarray]:
+        """``(dW/dI, dW/dII)``: derivative of :meth:`energy_density` with respect to each matrix entry.
+
+        See the module docstring for the convention: both are symmetric,
+        ``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` (J/m²) with ``σ = S ε`` and
+        ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]`` (J/m) with ``m = B κ``.
+
+        Returns:
+            two arrays ``(2, 2)`` for ``(2, 2)`` inputs, else ``(n, 2, 2)``.
+        """
+        eps, kap, _ = self._strains(I, II)
+        shape = np.broadcast_shapes(eps.shape, kap.shape)
+        sigma = np.broadcast_to(eps @ self.S, shape)  # S symmetric: row-vector product = S ε
+        moment = np.broadcast_to(kap @ self.B, shape)
+        h = self.thickness
+        return 0.5 * h * _voigt_to_matrix(sigma), h**3 * _voigt_to_matrix(moment)
+
+    def _strains(self, I: object, II: object) -> tuple[np.ndarray, np.ndarray, bool]:
+        first = as_first_fundamental_form(I)
+        second = as_second_fundamental_form(II)
+        try:
+            np.broadcast_shapes(first.shape, second.shape)
+        except ValueError:
+            raise ValueError(
+                f"I and II must have matching leading shapes, got {first.shape} and {second.shape}"
+            ) from None
+        return _membrane_voigt(first), _bending_voigt(second), first.ndim == 2 and second.ndim == 2
+
+    def _require_positive_definite(self, what: str, *, membrane: bool, bending: bool) -> None:
+        """ValueError if a requested block is indefinite: moduli and rigidities would be meaningless."""
+        problems = []
+        if membrane:
+            problems += _block_problems(self.s00, self.s01, self.s11, self.s22, MEMBRANE_PARAMETERS)
+        if bending:
+            problems += _block_problems(self.b00, self.b01, self.b11, self.b22, BENDING_PARAMETERS)
+        if problems:
+            raise ValueError(f"{what} need a positive definite material: {'; '.join(problems)}")
+
+    # -- serialisation -----------------------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        """JSON form: ``{"thickness_m": h, "membrane_pa": {s00, s01, s11, s22}, "bending_pa": {b00, ...}}``."""
+        return {
+            "thickness_m": self.thickness,
+            "membrane_pa": {name: getattr(self, name) for name in MEMBRANE_PARAMETERS},
+            "bending_pa": {name: getattr(self, name) for name in BENDING_PARAMETERS},
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping, where: str = "shell material") -> ShellMaterial:
+        """Inverse of :meth:`to_dict`. Unknown keys are rejected (a misspelt key shows up twice).
+
+        Args:
+            data: the mapping written by :meth:`to_dict`.
+            where: what to call the source in error messages (a file name).
+
+        Raises:
+            ValueError: ``<where>: ...`` naming the missing, unknown or non-numeric key.
+        """
+        _check_keys(data, ("thickness_m", "membrane_pa", "bending_pa"), where, "")
+        fields = {"thickness": _json_number(data["thickness_m"], where, "thickness_m")}
+        for block, names in (("membrane_pa", MEMBRANE_PARAMETERS), ("bending_pa", BENDING_PARAMETERS)):
+            _check_keys(data[block], names, where, f"{block}.")
+            for name in names:
+                fields[name] = _json_number(data[block][name], where, f"{block}.{name}")
+        try:
+            return cls(**fields)
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
+
+    @classmethod
+    def from_json(cls, source: str | os.PathLike | Mapping) -> ShellMaterial:
+        """A material from a material file or its parsed contents.
+
+        Args:
+            source: a path to a JSON material file (an object holding the :meth:`to_dict` form
+                under the key ``"shell"``, as ``yarnfit fit`` writes it; other keys are ignored), or
+                such an object already parsed. A mapping without ``"shell"`` is read as the
+                :meth:`to_dict` form itself.
+
+        Raises:
+            ValueError: ``<file>: ...`` for an unreadable file, invalid JSON, a missing ``"shell"``
+                key or any error of :meth:`from_dict`.
+        """
+        if isinstance(source, Mapping):
+            where = "material dict"
+            data = source
+        else:
+            where = os.fspath(source)
+            try:
+                with open(where, encoding="utf-8") as f:
+                    text = f.read()
+            except FileNotFoundError:
+                raise ValueError(f"{where}: no such material file") from None
+            except UnicodeDecodeError as exc:
+                raise ValueError(f"{where}: cannot read material file: not UTF-8 text ({exc.reason})") from None
+            except OSError as exc:
+                raise ValueError(f"{where}: cannot read material file: {exc.strerror or exc}") from None
+            try:
+                data = json.loads(text)
+            except json.JSONDecodeError as exc:
+                raise ValueError(f"{where}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+            if not isinstance(data, dict):
+                raise ValueError(f"{where}: expected a JSON object with key 'shell', got a {type(data).__name__}")
+            if "shell" not in data:
+                raise ValueError(f"{where}: missing key 'shell' (the fitted shell material)")
+        if "shell" in data:
+            return cls.from_dict(data["shell"], f"{where}: shell")
+        return cls.from_dict(data, where)
+
+
+# -- helpers --------------------------------------------------------------------------------------
+
+
+def _finite_float(value: object, name: str) -> float:
+    """``value`` as a float, or ValueError naming the field if it is not a finite real number."""
+    # bool is an int subclass: True must not read as 1.
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be a real number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return value
+
+
+def _block_problems(d0: float, off: float, d1: float, diag: float, names: tuple[str, ...]) -> list[str]:
+    """Why ``[[d0, off], [off, d1]] ⊕ [diag]`` is not positive definite (empty if it is)."""
+    n0, n_off, n1, n_diag = names
+    problems = []
+    if not d0 > 0.0:
+        problems.append(f"{n0} = {d0!r} <= 0")
+    if not d1 > 0.0:
+        problems.append(f"{n1} = {d1!r} <= 0")
+    if d0 > 0.0 and d1 > 0.0 and not off * off < d0 * d1:
+        problems.append(f"{n_off}² = {off * off!r} >= {n0}·{n1} = {d0 * d1!r} ({n_off} = {off!r})")
+    if not diag > 0.0:
+        problems.append(f"{n_diag} = {diag!r} <= 0")
+    return problems
+
+
+def _as_forms(a: object, what: str) -> np.ndarray:
+    try:
+        forms = np.array(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be a real array of shape (2, 2) or (n, 2, 2), got {a!r}") from None
+    if forms.ndim not in (2, 3) or forms.shape[-2:] != (2, 2):
+        raise ValueError(f"{what} must have shape (2, 2) or (n, 2, 2), got shape {forms.shape}")
+    return forms
+
+
+def _finite_each(flat: np.ndarray) -> np.ndarray:
+    return np.all(np.isfinite(flat), axis=(1, 2))
+
+
+def _symmetric_each(flat: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore"):
+        scale = np.max(np.abs(flat), axis=(1, 2))
+        return np.abs(flat[:, 0, 1] - flat[:, 1, 0]) <= SYMMETRY_RTOL * scale
+
+
+def _describe(flat: np.ndarray, bad: np.ndarray, ndim: int) -> str:
+    """The first offending matrix as a nested list, with its index for a stack."""
+    k = int(np.flatnonzero(bad)[0])
+    text = repr(flat[k].tolist())
+    return text if ndim == 2 else f"{text} at index {k} (of {len(flat)})"
+
+
+def _membrane_voigt(I: np.ndarray) -> np.ndarray:
+    return np.stack([0.5 * (I[..., 0, 0] - 1.0), 0.5 * (I[..., 1, 1] - 1.0), 0.5 * (I[..., 0, 1] + I[..., 1, 0])], -1)
+
+
+def _bending_voigt(II: np.ndarray) -> np.ndarray:
+    return np.stack([II[..., 0, 0], II[..., 1, 1], II[..., 0, 1] + II[..., 1, 0]], -1)
+
+
+def _voigt_to_matrix(v: np.ndarray) -> np.ndarray:
+    """``(…, 3)`` → ``(…, 2, 2)`` as ``[[v0, v2], [v2, v1]]``."""
+    out = np.empty(v.shape[:-1] + (2, 2))
+    out[..., 0, 0] = v[..., 0]
+    out[..., 1, 1] = v[..., 1]
+    out[..., 0, 1] = v[..., 2]
+    out[..., 1, 0] = v[..., 2]
+    return out
+
+
+def _check_keys(data: object, required: tuple[str, ...], where: str, prefix: str) -> None:
+    """ValueError naming missing and unknown keys of a JSON object (reported together)."""
+    if not isinstance(data, Mapping):
+        name = prefix.rstrip(".") or "material"
+        raise ValueError(f"{where}: {name} must be an object with keys {', '.join(required)}, got {data!r}")
+    problems = []
+    missing = [f"{prefix}{key}" for key in required if key not in data]
+    unknown = sorted(f"{prefix}{key}" for key in data if key not in required)
+    if missing:
+        problems.append(f"missing keys: {', '.join(missing)}")
+    if unknown:
+        problems.append(f"unknown keys: {', '.join(unknown)} (allowed: {', '.join(prefix + k for k in required)})")
+    if problems:
+        raise ValueError(f"{where}: {'; '.join(problems)}")
+
+
+def _json_number(value: object, where: str, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{where}: {key} must be a number, got {value!r}")
+    return float(value)
