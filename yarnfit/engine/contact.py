@@ -115,21 +115,21 @@ def _curved_virtual_boxes(model: RodModel, position, end, margin, searched):
     boxes, each edge's nodes placed by their own maps: ``(edge, image, lower, upper)``."""
     m = model
     n0, n1 = m.edge_nodes[:, 0], m.edge_nodes[:, 1]
-    pad = (m.edge_radius + 0.5 * margin)[:, None]
-    lowers, uppers, edges, images = [], [], [], []
-    for i in range(-int(searched[0]), int(searched[0]) + 1):
-        for j in range(-int(searched[1]), int(searched[1]) + 1):
-            tile = np.array([i, j])
-            r0, t0 = node_maps(m, n0, np.broadcast_to(tile, (m.n_edges, 2)))
-            r1, t1 = node_maps(m, n1, tile + m.edge_tile)
-            points = [np.einsum("eij,ej->ei", r, x[nodes]) + t
-                      for x in (position, end) for r, t, nodes in ((r0, t0, n0), (r1, t1, n1))]
-            lowers.append(np.minimum.reduce(points) - pad)
-            uppers.append(np.maximum.reduce(points) + pad)
-            edges.append(np.arange(m.n_edges))
-            images.append(np.broadcast_to(tile, (m.n_edges, 2)))
-    lower, upper = np.concatenate(lowers), np.concatenate(uppers)
-    edge, image = np.concatenate(edges), np.concatenate(images)
+    pad = (m.edge_radius + 0.5 * margin)[None, :, None]
+    si, sj = int(searched[0]), int(searched[1])
+    tiles = np.array([(i, j) for i in range(-si, si + 1) for j in range(-sj, sj + 1)], dtype=np.int64)  # (T, 2)
+    n_tiles = len(tiles)
+    # All tiles at once: (T, E) maps of each edge's start node into the tile, of its end node into
+    # the tile plus the edge's own tile offset.
+    r0, t0 = node_maps(m, np.tile(n0, n_tiles), np.repeat(tiles, m.n_edges, axis=0))
+    r1, t1 = node_maps(m, np.tile(n1, n_tiles), np.repeat(tiles, m.n_edges, axis=0) + np.tile(m.edge_tile, (n_tiles, 1)))
+    shape = (n_tiles, m.n_edges, 3)
+    points = [(np.einsum("eij,ej->ei", r, x[np.tile(nodes, n_tiles)]) + t).reshape(shape)
+              for x in (position, end) for r, t, nodes in ((r0, t0, n0), (r1, t1, n1))]
+    lower = (np.minimum.reduce(points) - pad).reshape(-1, 3)
+    upper = (np.maximum.reduce(points) + pad).reshape(-1, 3)
+    edge = np.tile(np.arange(m.n_edges), n_tiles)
+    image = np.repeat(tiles, m.n_edges, axis=0)
     # Keep only boxes that overlap the hull of the home tile's boxes.
     home = np.all(image == 0, axis=1)
     hull_lo, hull_hi = lower[home].min(axis=0), upper[home].max(axis=0)

@@ -51,6 +51,12 @@ class CurvedTiling:
         gram = np.einsum("nkji,nkjl->nkil", self.rotation, self.rotation)
         if np.abs(gram - np.eye(3)).max(initial=0.0) > ORTHONORMAL_TOLERANCE:
             raise ValueError("tiling rotations must be orthonormal")
+        # Dense lookup of image indices over the box of tiles the images span (−1: no map): contact
+        # searches look up every edge's tile at every line-search step.
+        reach = int(np.abs(images).max())
+        lookup = np.full((2 * reach + 1, 2 * reach + 1), -1, dtype=np.int64)
+        lookup[images[:, 0] + reach, images[:, 1] + reach] = np.arange(k)
+        object.__setattr__(self, "_lookup", lookup)
         home = self.image_index(np.zeros(2, dtype=np.int64))
         if home < 0:
             raise ValueError("tiling images must include the home tile (0, 0)")
@@ -64,10 +70,10 @@ class CurvedTiling:
     def image_index(self, tiles: np.ndarray) -> np.ndarray:
         """Index into ``images`` of each tile ``(..., 2)``, −1 where the tiling has no map."""
         tiles = np.asarray(tiles, dtype=np.int64)
-        table = {tuple(t): k for k, t in enumerate(np.asarray(self.images).tolist())}
-        flat = tiles.reshape(-1, 2)
-        out = np.array([table.get((int(i), int(j)), -1) for i, j in flat], dtype=np.int64)
-        return out.reshape(tiles.shape[:-1])
+        reach = self._lookup.shape[0] // 2
+        inside = np.all(np.abs(tiles) <= reach, axis=-1)
+        shifted = np.where(inside[..., None], tiles + reach, 0)
+        return np.where(inside, self._lookup[shifted[..., 0], shifted[..., 1]], -1)
 
     @property
     def reach(self) -> int:
