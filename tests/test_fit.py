@@ -7,9 +7,11 @@ import math
 
 import numpy as np
 import pytest
+import scipy.optimize
 
 from yarnfit.fit import (
     BENDING_FAMILIES,
+    COUPLING_LIMIT,
     DIAGONAL_FLOOR_REL,
     FAMILIES,
     MEMBRANE_FAMILIES,
@@ -31,6 +33,9 @@ RECOVERY_REL = 1e-6
 R2_TOL = 1e-12
 # Shell energies and design matrix entries are a few products: a few ulps, with a margin of ~100.
 ROUND_OFF_REL = 1e-13
+# Coupling-bounded fit against SLSQP on the same problem: SLSQP stops at a cost change of 1e-16
+# relative, which leaves parameters uncertain to ~sqrt(1e-16)/(smallest singular value ~0.1) ~ 1e-7.
+BOUNDED_REL = 1e-6
 # Relative parameter step of the finite-difference Jacobian. The residuals are linear in γ, so any
 # step is free of truncation error; 1e-6 keeps the difference well above round-off.
 JAC_STEP_REL = 1e-6
@@ -125,7 +130,7 @@ def with_energies(samples: list[Sample], energies) -> list[Sample]:
 
 
 def hand_weights(samples: list[Sample], thickness: float) -> np.ndarray:
-    """w = exp(−½(s/σ)²), s = ‖½(I − Id)‖_F or ‖II‖_F h/2, σ = half the group's largest s."""
+    """w = exp(−½(s/σ)²), s = ‖½(I − Id)‖_F or ‖II‖_F h/2, σ = a quarter of the group's largest s."""
     s = np.array(
         [
             np.sqrt(np.sum((0.5 * (x.I - np.eye(2))) ** 2)) if x.family in MEMBRANE_FAMILIES
@@ -134,7 +139,7 @@ def hand_weights(samples: list[Sample], thickness: float) -> np.ndarray:
         ]
     )
     membrane = np.array([x.family in MEMBRANE_FAMILIES for x in samples])
-    sigma = np.where(membrane, 0.5 * s[membrane].max(), 0.5 * s[~membrane].max())
+    sigma = np.where(membrane, 0.25 * s[membrane].max(), 0.25 * s[~membrane].max())
     return np.exp(-0.5 * (s / sigma) ** 2)
 
 
@@ -218,21 +223,21 @@ def test_weighted_residual_jacobian_matches_central_differences():
 # -- weights ----------------------------------------------------------------------------------------
 
 
-def test_weights_are_gaussian_in_strain_with_half_the_largest_strain_as_width():
+def test_weights_are_gaussian_in_strain_with_a_quarter_of_the_largest_strain_as_width():
     samples = make_samples(TRUE)
     weights, widths = sample_weights(samples, H)
     np.testing.assert_allclose(weights, hand_weights(samples, H), rtol=ROUND_OFF_REL)
     # Hand values: the largest membrane strain is biaxial 10 %: E = 0.105 Id, ‖E‖_F = 0.105 √2; the
     # largest surface strain is the saddle at 200 1/m: ‖II‖_F h/2 = 200 √2 · 1.5e-4.
-    assert widths["membrane"] == pytest.approx(0.5 * 0.105 * math.sqrt(2), rel=ROUND_OFF_REL)
-    assert widths["bending"] == pytest.approx(0.5 * 200 * math.sqrt(2) * H / 2, rel=ROUND_OFF_REL)
+    assert widths["membrane"] == pytest.approx(0.25 * 0.105 * math.sqrt(2), rel=ROUND_OFF_REL)
+    assert widths["bending"] == pytest.approx(0.25 * 200 * math.sqrt(2) * H / 2, rel=ROUND_OFF_REL)
     largest = [
         k
         for k, s in enumerate(samples)
         if s.family in ("biaxial_stretch", "saddle_bend") and s.parameter == LARGEST[s.family]
     ]
     assert len(largest) == 2
-    np.testing.assert_allclose(weights[largest], math.exp(-2.0), rtol=ROUND_OFF_REL)
+    np.testing.assert_allclose(weights[largest], math.exp(-8.0), rtol=ROUND_OFF_REL)
 
     # An explicit width applies to both groups: weft 10 % (‖E‖ = 0.105) and weft bend 200/m (0.03).
     weights, widths = sample_weights(samples, H, weight_width=0.05)
@@ -328,20 +333,88 @@ def test_biaxial_energies_far_below_the_uniaxial_sum_give_an_indefinite_membrane
     # (s00 + s11)²/4 > s00 s11 whenever s00 ≠ s11.
     samples = make_samples(TRUE, energy=lambda family, W: 1e-3 * W if family == "biaxial_stretch" else W)
     with pytest.raises(IndefiniteFitError, match=r"s01² = .* >= s00·s11 .* biaxial_stretch") as info:
-        fit_shell(samples, H)
+        fit_shell(samples, H, coupling_limit=None)
     assert info.value.family == "biaxial_stretch"
     assert isinstance(info.value, ValueError)
     assert info.value.parameters["s01"] < 0.0
 
 
-def test_saddle_energies_far_below_the_uniaxial_sum_give_an_indefinite_bending_block():
-    # W_saddle = (h³/2)(b00 − 2 b01 + b11) k² ≈ 0 forces b01 = (b00 + b11)/2.
-    samples = make_samples(TRUE, energy=lambda family, W: 1e-3 * W if family == "saddle_bend" else W)
+def test_saddle_energies_far_above_the_uniaxial_sum_give_an_indefinite_bending_block():
+    # W_saddle = (h³/2)(b00 − 2 b01 + b11) k² ten times the truth forces b01 ≈ −4 (b00 + b11)/2,
+    # beyond −√(b00 b11); b22 takes up the bias bends.
+    samples = make_samples(TRUE, energy=lambda family, W: INDEFINITE_FACTOR[family] * W if family == "saddle_bend" else W)
     with pytest.raises(IndefiniteFitError, match=r"b01² = .* >= b00·b11 .* saddle_bend") as info:
-        fit_shell(samples, H, model="full")
+        fit_shell(samples, H, model="full", coupling_limit=None)
     assert info.value.family == "saddle_bend"
     # The paper model cannot be indefinite in bending: b01 = 0.
-    fit_shell(samples, H, model="paper")
+    fit_shell(samples, H, model="paper", coupling_limit=None)
+
+
+def reference_bounded_fit(samples, thickness, group_columns, coupling, limit):
+    """The same constrained problem solved independently: SLSQP on the unscaled parameters of one
+    group, the coupling bound as the explicit inequality ``limit² d0 d1 − c² ≥ 0``."""
+    used = [s for s in samples if s.converged]
+    weights, _ = sample_weights(used, thickness)
+    D = design_matrix(used, thickness)
+    target = np.array([s.energy_density for s in used])
+    rows = np.array([s.is_membrane for s in used]) == (coupling[0].startswith("s"))
+    cols = [PARAMETER_NAMES.index(n) for n in group_columns]
+    A = np.sqrt(weights[rows])[:, None] * D[np.ix_(rows, cols)]
+    b = np.sqrt(weights[rows]) * target[rows]
+    unit = np.linalg.norm(A, axis=0)  # the same problem in unit-scaled columns, for SLSQP's sake
+    i0, ic, i1 = (group_columns.index(n) for n in coupling)
+
+    def cost(y):
+        r = (A / unit) @ y - b
+        return float(r @ r) / float(b @ b)
+
+    def bound(y):
+        x = y / unit
+        return (limit**2 * x[i0] * x[i1] - x[ic] ** 2) * unit[i0] * unit[i1]
+
+    start = np.linalg.lstsq(A / unit, b, rcond=None)[0]
+    start[ic] = np.sign(start[ic]) * 0.5 * limit * np.sqrt(abs(start[i0] * start[i1]) * unit[ic] ** 2 / (unit[i0] * unit[i1]))
+    result = scipy.optimize.minimize(cost, start, method="SLSQP", constraints=[{"type": "ineq", "fun": bound}],
+                                     bounds=[(0.0, None) if n in ("s00", "s11", "s22", "b00", "b11", "b22") else
+                                             (None, None) for n in group_columns],
+                                     options={"ftol": 1e-16, "maxiter": 1000})
+    assert result.success, result.message
+    return dict(zip(group_columns, result.x / unit)), cost(result.x)
+
+
+# Factors on the coupled family's energies that ask for |ρ| > 1 (see the two tests above).
+INDEFINITE_FACTOR = {"biaxial_stretch": 1e-3, "saddle_bend": 10.0}
+
+
+@pytest.mark.parametrize("family, coupling", [("biaxial_stretch", ("s00", "s01", "s11")),
+                                              ("saddle_bend", ("b00", "b01", "b11"))])
+def test_a_coupling_the_data_push_past_positive_definite_ends_on_its_bound(family, coupling):
+    samples = make_samples(TRUE, energy=lambda f, W: INDEFINITE_FACTOR[family] * W if f == family else W)
+    fit = fit_shell(samples, H)
+    d0, c, d1 = (fit.parameters[n] for n in coupling)
+    assert fit.active_bounds == [coupling[1]]
+    assert abs(c) / math.sqrt(d0 * d1) == pytest.approx(COUPLING_LIMIT, rel=ROUND_OFF_REL)
+    assert fit.material.membrane_positive_definite and fit.material.bending_positive_definite
+    assert len(fit.notes) == 1 and family in fit.notes[0] and "positive-definite bound" in fit.notes[0]
+    assert fit.quality_dict()["notes"] == fit.notes and fit.quality_dict()["coupling_limit"] == COUPLING_LIMIT
+
+    # An independent solver of the same constrained problem finds the same optimum.
+    group = [n for n in PARAMETER_NAMES if n[0] == coupling[0][0]]
+    reference, reference_cost = reference_bounded_fit(samples, H, group, coupling, COUPLING_LIMIT)
+    for name in group:
+        assert fit.parameters[name] == pytest.approx(reference[name], rel=BOUNDED_REL), name
+    # The other group is untouched by the bound: exact data, exact recovery.
+    other = [n for n in PARAMETER_NAMES if n[0] != coupling[0][0]]
+    for name in other:
+        assert fit.parameters[name] == pytest.approx(TRUE.parameters[name], rel=RECOVERY_REL), name
+    del reference_cost
+
+
+def test_the_coupling_limit_must_be_a_fraction():
+    samples = make_samples(TRUE)
+    for bad in (0.0, 1.0, 1.5, -0.5):
+        with pytest.raises(ValueError, match="coupling_limit must be in"):
+            fit_shell(samples, H, coupling_limit=bad)
 
 
 def test_a_stiffness_the_data_put_at_zero_is_reported_at_its_floor():
@@ -358,6 +431,8 @@ def test_a_stiffness_the_data_put_at_zero_is_reported_at_its_floor():
     assert fit.families["warp_stretch"]["r2"] == -math.inf
     assert fit.families["warp_stretch"]["relative_rms"] == math.inf
     assert fit.quality_dict()["active_bounds"] == ["s11", "s01"]
+    assert fit.notes == ["s11 at its positive floor: the warp_stretch energies carry no s11 stiffness",
+                         "s01 held at 0: s11 at the positive floor"]
 
     # Shear energies slightly negative (a solver artefact): s22 would be negative, it stops at the floor.
     samples = make_samples(TRUE, energy=lambda family, W: -1e-3 * W if family == "shear" else W)
@@ -428,7 +503,8 @@ def test_quality_dict_is_plain_json():
     quality = fit.quality_dict()
     again = json.loads(json.dumps(quality, allow_nan=False))
     assert again == quality
-    keys = {"model", "parameters_pa", "std_error_pa", "families", "active_bounds", "weight_widths", "used", "excluded"}
+    keys = {"model", "parameters_pa", "std_error_pa", "families", "active_bounds", "notes", "coupling_limit",
+            "weight_widths", "used", "excluded"}
     assert set(quality) == keys
     assert quality["parameters_pa"] == fit.parameters
     assert len(quality["used"]) == len(fit.used)

@@ -38,7 +38,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import lsq_linear
+from scipy.optimize import least_squares, lsq_linear
 
 from yarnfit.shell import (
     BENDING_PARAMETERS,
@@ -95,11 +95,33 @@ PURE_CURVATURE_ATOL = 1e-9
 # far above the round-off of the unbounded solution (~1e-15 relative), so a stiffness the data put
 # at zero lands on the floor and is reported in ShellFit.active_bounds instead of as noise.
 DIAGONAL_FLOOR_REL = 1e-12
+# Largest |coupling| / sqrt(product of its diagonals), |s01|/sqrt(s00 s11) and |b01|/sqrt(b00 b11),
+# a fit may return. The eigenvalues of the normalised block [[1, rho], [rho, 1]] are 1 +- rho, so
+# at this bound the block's softest mode keeps 1 % of the geometric mean stiffness: strictly
+# positive definite, and a stiffness matrix the shell solver can factor (condition <= 200 within
+# the block). A knit's loops trade course for wale length (biaxial energy near the rank-one limit)
+# and jersey bends one way far more easily than the other, so their yarn-level energies can ask
+# for |rho| > 1, which no quadratic shell has; the fit then ends on this bound and says so.
+COUPLING_LIMIT = 0.99
+# Default width of the Gaussian weights as a fraction of the group's largest sample strain. An
+# energy residual grows as strain², so a sample's pull on the fit goes as w s⁴ = s⁴ exp(−s²/2σ²),
+# largest at s = 2σ: a quarter puts it at the middle of the sampled range, favouring small strains
+# as the paper asks; half would let the largest (most nonlinear) samples dominate.
+WEIGHT_WIDTH_FRACTION = 0.25
+# Stopping tolerances of the coupling-bounded solve (relative step, cost change and gradient, in
+# unit-scaled columns): at round-off, so the constrained optimum is as exact as the linear one; a
+# problem of at most 5 unknowns converges in tens of evaluations, the limit only stops a runaway.
+BOUNDED_SOLVE_TOLERANCE = 1e-15
+BOUNDED_SOLVE_EVALUATIONS = 10000
 
 _DIAGONAL = ("s00", "s11", "s22", "b00", "b11", "b22")
 _GROUPS = (("membrane", MEMBRANE_FAMILIES, MEMBRANE_PARAMETERS), ("bending", BENDING_FAMILIES, BENDING_PARAMETERS))
 # Each group's coupled block: (diagonal, coupling, diagonal).
 _COUPLINGS = {"membrane": ("s00", "s01", "s11"), "bending": ("b00", "b01", "b11")}
+# The sample family that determines each parameter (named in notes and errors).
+_DIAGONAL_FAMILY = {"s00": "weft_stretch", "s11": "warp_stretch", "s22": "shear", "b00": "weft_bend",
+                    "b11": "warp_bend", "b22": "bias_bend"}
+_COUPLING_FAMILY = {"s01": "biaxial_stretch", "b01": "saddle_bend"}
 
 
 class IndefiniteFitError(ValueError):
@@ -200,10 +222,13 @@ class ShellFit:
             with no more samples than parameters.
         families: per family ``{"r2": float, "relative_rms": float, "samples": int}``, unweighted,
             over the used samples (see :func:`fit_shell` for the edge cases).
-        active_bounds: names of diagonal stiffnesses that ended on their positive floor, and of
+        active_bounds: names of diagonal stiffnesses that ended on their positive floor, of
             couplings (s01, b01) held at zero because one of their diagonals did (a direction that
             carries no energy has no coupling to identify; positive definiteness then requires it
-            to vanish, and the coupled family's data only shows model error).
+            to vanish, and the coupled family's data only shows model error), and of couplings at
+            the positive-definite bound ``coupling_limit``.
+        notes: one sentence per active bound: which bound, and which sample family asked for it.
+        coupling_limit: the bound ρ_max on the couplings, or ``None`` (unbounded).
         excluded: the samples left out because they did not converge.
         used: the samples fitted, in input order.
         weights: ``(len(used),)`` least-squares weights, aligned with ``used``.
@@ -222,6 +247,8 @@ class ShellFit:
     weights: np.ndarray
     weight_widths: dict[str, float]
     fitted_energy: np.ndarray = field(repr=False)
+    notes: list[str] = field(default_factory=list)
+    coupling_limit: float | None = COUPLING_LIMIT
 
     def quality_dict(self) -> dict:
         """Everything but the material as plain JSON data (str, float, int, list, dict).
@@ -258,6 +285,8 @@ class ShellFit:
                 for name, f in self.families.items()
             },
             "active_bounds": list(self.active_bounds),
+            "notes": list(self.notes),
+            "coupling_limit": self.coupling_limit,
             "weight_widths": {k: float(v) for k, v in self.weight_widths.items()},
             "used": used,
             "excluded": [sample_dict(sample) for sample in self.excluded],
@@ -304,8 +333,8 @@ def sample_weights(
     Args:
         samples: the samples to weight (for a fit: the converged ones).
         thickness: shell thickness h (m).
-        weight_width: σ (dimensionless strain) for both groups; ``None`` takes half the largest
-            :func:`sample_strain` of each group separately.
+        weight_width: σ (dimensionless strain) for both groups; ``None`` takes WEIGHT_WIDTH_FRACTION
+            of the largest :func:`sample_strain` of each group separately.
 
     Returns:
         ``(w, widths)``: ``w`` ``(n,)`` in (0, 1], ``widths`` σ by group name for the groups present.
@@ -326,7 +355,7 @@ def sample_weights(
     for group, mask in (("membrane", membrane), ("bending", ~membrane)):
         if not np.any(mask):
             continue
-        sigma = weight_width if weight_width is not None else 0.5 * float(np.max(strain[mask]))
+        sigma = weight_width if weight_width is not None else WEIGHT_WIDTH_FRACTION * float(np.max(strain[mask]))
         if sigma == 0.0:
             raise ValueError(f"all {group} samples have zero strain: they cannot determine any {group} stiffness")
         weights[mask] = np.exp(-0.5 * (strain[mask] / sigma) ** 2)
@@ -364,13 +393,18 @@ def fit_residual_jacobian(
 
 
 def fit_shell(
-    samples: Iterable[Sample], thickness: float, model: str = "full", weight_width: float | None = None
+    samples: Iterable[Sample],
+    thickness: float,
+    model: str = "full",
+    weight_width: float | None = None,
+    coupling_limit: float | None = COUPLING_LIMIT,
 ) -> ShellFit:
     """Fit an orthotropic StVK shell to yarn-level energies by weighted linear least squares.
 
     Solves ``min Σ w_i (W_shell(γ; I_i, II_i) − Ū_i)²`` over the converged samples, each group
     (membrane, bending) on its own, with the diagonal stiffnesses bounded below by
-    :data:`DIAGONAL_FLOOR_REL` × the largest diagonal of the group's unbounded fit.
+    :data:`DIAGONAL_FLOOR_REL` × the largest diagonal of the group's unbounded fit and the couplings
+    by ``|s01| ≤ coupling_limit √(s00 s11)``, ``|b01| ≤ coupling_limit √(b00 b11)``.
 
     Args:
         samples: homogenized samples; non-converged ones are excluded and listed in the result.
@@ -378,6 +412,8 @@ def fit_shell(
         model: ``"full"`` (fits b01, needs ``saddle_bend`` samples) or ``"paper"`` (b01 = 0).
         weight_width: σ of the Gaussian weights (dimensionless strain), or ``None``; see
             :func:`sample_weights`.
+        coupling_limit: ρ_max in (0, 1), or ``None`` to fit the couplings unbounded and raise
+            :class:`IndefiniteFitError` when the optimum is not positive definite.
 
     Returns:
         the :class:`ShellFit`. Per family: ``r2 = 1 − SS_res/SS_tot`` (unweighted, ``SS_tot`` about
@@ -389,12 +425,16 @@ def fit_shell(
     Raises:
         ValueError: bad thickness, model or weight width; a required family without converged
             samples (named); a parameter the samples do not determine (named).
-        IndefiniteFitError: ``s01² ≥ s00 s11`` (family ``biaxial_stretch``) or ``b01² ≥ b00 b11``
-            (family ``saddle_bend``) at the optimum.
+        IndefiniteFitError: only with ``coupling_limit=None``: ``s01² ≥ s00 s11`` (family
+            ``biaxial_stretch``) or ``b01² ≥ b00 b11`` (family ``saddle_bend``) at the optimum.
     """
     h = _thickness(thickness)
     if model not in MODELS:
         raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    if coupling_limit is not None:
+        coupling_limit = _real(coupling_limit, "coupling_limit")
+        if not 0.0 < coupling_limit < 1.0:
+            raise ValueError(f"coupling_limit must be in (0, 1) (or None for no bound), got {coupling_limit!r}")
     samples = _sample_list(samples)
     used = [s for s in samples if s.converged]
     excluded = [s for s in samples if not s.converged]
@@ -419,21 +459,35 @@ def fit_shell(
     parameters = dict.fromkeys(PARAMETER_NAMES, 0.0)
     std_error = dict.fromkeys(PARAMETER_NAMES, 0.0)
     active: list[str] = []
+    notes: list[str] = []
     for group, families, names in _GROUPS:
         rows = membrane if group == "membrane" else ~membrane
         free = [n for n in names if not (model == "paper" and n == "b01")]
         cols = [PARAMETER_NAMES.index(n) for n in free]
-        values, errors, at_floor = _fit_group(group, families, free, D[np.ix_(rows, cols)], target[rows], weights[rows])
-        coupling = _COUPLINGS[group]
-        if coupling[1] in free and (coupling[0] in at_floor or coupling[2] in at_floor):
-            free = [n for n in free if n != coupling[1]]
+        d0, off, d1 = _COUPLINGS[group]
+        limit = coupling_limit if off in free else None
+        values, errors, at_bound, ratio = _fit_group(group, families, free, D[np.ix_(rows, cols)], target[rows],
+                                                     weights[rows], _COUPLINGS[group], limit)
+        floors = [n for n in at_bound if n in _DIAGONAL]
+        if off in free and {d0, d1} & set(floors):
+            # A direction that carries no energy has nothing to couple to: refit with the coupling 0.
+            free = [n for n in free if n != off]
             cols = [PARAMETER_NAMES.index(n) for n in free]
-            values, errors, at_floor = _fit_group(group, families, free, D[np.ix_(rows, cols)], target[rows],
-                                                  weights[rows])
-            at_floor = at_floor + [coupling[1]]
+            values, errors, at_bound, _ = _fit_group(group, families, free, D[np.ix_(rows, cols)], target[rows],
+                                                     weights[rows], _COUPLINGS[group], None)
+            floors = list(at_bound)
+            at_bound = floors + [off]
+        notes += [f"{n} at its positive floor: the {_DIAGONAL_FAMILY[n]} energies carry no {n} stiffness"
+                  for n in floors]
+        if off in at_bound and off not in values:
+            notes.append(f"{off} held at 0: {' and '.join(n for n in (d0, d1) if n in floors)} at the positive floor")
+        elif off in at_bound:
+            notes.append(f"{off} at the positive-definite bound |{off}| = {coupling_limit:g} √({d0}·{d1}): the "
+                         f"{_COUPLING_FAMILY[off]} energies ask for {off}/√({d0}·{d1}) = {ratio:.3g}, which no "
+                         f"positive-definite shell has (the unbounded fit is indefinite)")
+        active += at_bound
         parameters.update(values)
         std_error.update(errors)
-        active += at_floor
 
     for d0, off, d1, family in (("s00", "s01", "s11", "biaxial_stretch"), ("b00", "b01", "b11", "saddle_bend")):
         p0, p01, p1 = parameters[d0], parameters[off], parameters[d1]
@@ -463,6 +517,8 @@ def fit_shell(
         weights=weights,
         weight_widths=widths,
         fitted_energy=fitted,
+        notes=notes,
+        coupling_limit=coupling_limit,
     )
 
 
@@ -470,9 +526,22 @@ def fit_shell(
 
 
 def _fit_group(
-    group: str, families: tuple[str, ...], names: list[str], D: np.ndarray, target: np.ndarray, weights: np.ndarray
-) -> tuple[dict[str, float], dict[str, float], list[str]]:
-    """Bounded weighted fit of one group: (values, standard errors, names at the floor)."""
+    group: str,
+    families: tuple[str, ...],
+    names: list[str],
+    D: np.ndarray,
+    target: np.ndarray,
+    weights: np.ndarray,
+    coupling: tuple[str, str, str],
+    coupling_limit: float | None,
+) -> tuple[dict[str, float], dict[str, float], list[str], float]:
+    """Bounded weighted fit of one group.
+
+    Returns ``(values, standard errors, names at a bound, ratio)``: the names of diagonals at the
+    floor, and the coupling's name if it ended on ``|c| = coupling_limit √(d0 d1)`` (``coupling``
+    = (d0, c, d1); ``None`` leaves it unbounded); ``ratio`` is ``c/√(d0 d1)`` of the fit without
+    the coupling bound (NaN when the coupling is not fitted).
+    """
     sw = np.sqrt(weights)
     A = sw[:, None] * D
     b = sw * target
@@ -507,15 +576,27 @@ def _fit_group(
     result = lsq_linear(As, b, bounds=(lower, np.full(len(names), np.inf)), method="bvls")
     if not result.success:
         raise RuntimeError(f"{group} least-squares solve failed: {result.message}")
-    values = result.x / scale
-    at_floor = diagonal & (result.active_mask == -1)
-    values[at_floor] = floor  # exact floor, not floor·scale/scale
+    x = result.x
+    at_bound = diagonal & (result.active_mask == -1)
+
+    ratio = math.nan
+    coupled = coupling[1] in names
+    if coupled:
+        i0, ic, i1 = (names.index(n) for n in coupling)
+        ratio = _coupling_ratio(x / scale, i0, ic, i1)
+        if coupling_limit is not None and not at_bound[[i0, i1]].any() and abs(ratio) > coupling_limit:
+            x = _coupling_bounded_solve(As, b, lower, (i0, ic, i1), scale, coupling_limit, x)
+            at_bound = diagonal & (x <= lower)
+            at_bound[ic] = True
+    values = x / scale
+    values[at_bound & diagonal] = floor  # exact floor, not floor·scale/scale
 
     n, p = len(b), len(names)
     if n > p:
         r = A @ values - b
         variance = float(r @ r) / (n - p)
         # (AᵀA)⁺ = A⁺ A⁺ᵀ, computed on the scaled columns and unscaled: cov_ij = cov'_ij / (c_i c_j).
+        # At an active bound this is the covariance of the unconstrained linearisation.
         pinv = np.linalg.pinv(As)
         errors = np.sqrt(variance * np.sum(pinv**2, axis=1)) / scale
     else:
@@ -523,8 +604,64 @@ def _fit_group(
     return (
         dict(zip(names, values.tolist())),
         dict(zip(names, errors.tolist())),
-        [n for n, a in zip(names, at_floor) if a],
+        [n for n, a in zip(names, at_bound) if a],
+        ratio,
     )
+
+
+def _coupling_ratio(values: np.ndarray, i0: int, ic: int, i1: int) -> float:
+    """``c/√(d0 d1)`` (±inf if a diagonal is not positive)."""
+    product = values[i0] * values[i1]
+    return float(values[ic] / math.sqrt(product)) if product > 0.0 else math.copysign(math.inf, values[ic])
+
+
+def _coupling_bounded_solve(
+    As: np.ndarray, b: np.ndarray, lower: np.ndarray, block: tuple[int, int, int], scale: np.ndarray,
+    limit: float, start: np.ndarray,
+) -> np.ndarray:
+    """``min ‖As x − b‖`` subject to ``x ≥ lower`` and ``|c| ≤ limit √(d0 d1)`` for the block's
+    unscaled values ``d0 = x[i0]/scale[i0]`` etc.; returns the scaled solution ``x``.
+
+    Solved in ``(u, v, ρ, rest)`` with ``x[i0] = u²``, ``x[i1] = v²``, ``x[ic] = ρ u v k`` (``k =
+    scale[ic]/√(scale[i0] scale[i1])``), ``ρ ∈ [−limit, limit]``: the bounded set of x is a convex
+    cone and the objective convex, so the local optimum this finds from the projected ``start`` is
+    the global one.
+    """
+    i0, ic, i1 = block
+    k = scale[ic] / math.sqrt(scale[i0] * scale[i1])
+    rest = [j for j in range(len(start)) if j not in block]
+
+    def unpack(theta):
+        u, v, rho = theta[:3]
+        x = np.empty(len(start))
+        x[i0], x[i1], x[ic] = u * u, v * v, rho * u * v * k
+        x[rest] = theta[3:]
+        return x
+
+    def residual(theta):
+        return As @ unpack(theta) - b
+
+    def jacobian(theta):
+        u, v, rho = theta[:3]
+        J = np.empty((len(b), len(theta)))
+        J[:, 0] = 2.0 * u * As[:, i0] + rho * v * k * As[:, ic]
+        J[:, 1] = 2.0 * v * As[:, i1] + rho * u * k * As[:, ic]
+        J[:, 2] = u * v * k * As[:, ic]
+        J[:, 3:] = As[:, rest]
+        return J
+
+    u0, v0 = math.sqrt(max(start[i0], lower[i0])), math.sqrt(max(start[i1], lower[i1]))
+    theta0 = np.concatenate([[u0, v0, math.copysign(limit, start[ic])], np.maximum(start[rest], lower[rest])])
+    low = np.concatenate([[math.sqrt(lower[i0]), math.sqrt(lower[i1]), -limit], lower[rest]])
+    high = np.concatenate([[np.inf, np.inf, limit], np.full(len(rest), np.inf)])
+    solution = least_squares(residual, theta0, jac=jacobian, bounds=(low, high), method="trf",
+                             xtol=BOUNDED_SOLVE_TOLERANCE, ftol=BOUNDED_SOLVE_TOLERANCE,
+                             gtol=BOUNDED_SOLVE_TOLERANCE, max_nfev=BOUNDED_SOLVE_EVALUATIONS)
+    if solution.status <= 0:
+        raise RuntimeError(f"coupling-bounded least-squares solve failed: {solution.message}")
+    x = unpack(solution.x)
+    x[ic] = math.copysign(limit, x[ic]) * math.sqrt(x[i0] * x[i1]) * k if abs(solution.x[2]) >= limit else x[ic]
+    return x
 
 
 def _family_statistics(used: list[Sample], fitted: np.ndarray, target: np.ndarray) -> dict[str, dict]:
