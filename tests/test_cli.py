@@ -1,11 +1,13 @@
 """The ``yarnfit`` console script: listings, one-line errors for bad input, and a relaxation that
 prints its summary and writes the recording the README documents."""
 
+import json
 import re
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import rerun as rr
 
@@ -108,11 +110,12 @@ def test_a_pyp_with_a_dangling_yarn_end_is_one_line_and_exit_status_2(tmp_path):
 # -- a relaxation ---------------------------------------------------------------------------------
 
 
-def readme_entity_paths() -> set[str]:
-    """Entity paths the README documents for ``yarnfit relax`` recordings."""
+def readme_entity_paths(marker: str = "rerun-paths", root: str = "relax") -> set[str]:
+    """Entity paths (``<family>`` templates kept) under ``root`` that the README documents between
+    its ``<!-- marker:begin -->`` and ``<!-- marker:end -->`` comments."""
     readme = (Path(__file__).parents[1] / "README.md").read_text()
-    section = readme.split("<!-- rerun-paths:begin -->")[1].split("<!-- rerun-paths:end -->")[0]
-    return set(re.findall(r"`(relax(?:/\w+)*)`", section))
+    section = readme.split(f"<!-- {marker}:begin -->")[1].split(f"<!-- {marker}:end -->")[0]
+    return set(re.findall(rf"`({root}(?:/[\w<>]+)*)`", section))
 
 
 def test_relax_prints_a_summary_and_writes_the_documented_recording(tmp_path):
@@ -135,3 +138,91 @@ def test_relax_prints_a_summary_and_writes_the_documented_recording(tmp_path):
 
     relaxed = read_pyp(output)
     assert relaxed.family == "woven" and len(relaxed.yarns()) == 4
+
+
+# -- a shell fit ----------------------------------------------------------------------------------
+
+
+FIT_BAD_INPUTS = {
+    "too few samples": (["fit", "cotton-twill", "--samples", "5"], ["--samples", "13", "5"]),
+    "unknown model": (["fit", "cotton-twill", "--model", "bogus"], ["--model", "bogus", "full", "paper"]),
+    "no workers": (["fit", "cotton-twill", "--workers", "0"], ["--workers"]),
+    "unknown fibre": (["fit", "--fiber", "kevlarish", "--pattern", "plain", "--gsm", "150"], ["kevlarish"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(FIT_BAD_INPUTS))
+def test_fit_bad_input_is_one_line_and_exit_status_2(case, tmp_path):
+    args, mentions = FIT_BAD_INPUTS[case]
+    out = run(*args, "--rerun", str(tmp_path / "x.rrd"), "-o", str(tmp_path / "x.json"))
+    assert out.returncode == 2, (out.stdout, out.stderr)
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+    for word in mentions:
+        assert word in lines[0], (word, lines[0])
+    assert not (tmp_path / "x.rrd").exists() and not (tmp_path / "x.json").exists()
+
+
+def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documented_recording(tmp_path):
+    from yarnfit.shell import GF_CM2_PER_CM, ShellMaterial
+
+    recording, output = tmp_path / "plain-fit.rrd", tmp_path / "plain.json"
+    out = subprocess.run([str(Path(sys.executable).parent / "yarnfit"), "fit", "--fiber", "cotton", "--pattern",
+                          "plain", "--gsm", "200", "--samples", "13", "--workers", "2", "--rerun", str(recording),
+                          "-o", str(output)], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    # Progress went to stderr: the relaxation, then samples done with the time left.
+    assert "relaxed in" in out.stderr and re.search(r"samples (\d+)/\1: .* s left\]", out.stderr), out.stderr
+
+    material = ShellMaterial.from_json(output)
+    engineering = material.engineering()
+    summary = {line.split("  ")[1].strip(): line for line in out.stdout.splitlines() if line.startswith("  ")}
+    for key, label in (("weft_stretch_n_per_m", "weft stretch"), ("shear_n_per_m", "shear")):
+        value, unit = summary[label].split()[-2:]
+        assert unit == "N/m" and float(value) == pytest.approx(engineering[key], rel=1e-4)
+    # Bending in SI beside the textile unit (KES-F gf·cm²/cm).
+    fields = summary["bending weft"].split()
+    assert fields[-3:-1] == ["N·m", f"{engineering['bending_weft_nm'] / GF_CM2_PER_CM:.4g}"]
+    assert fields[-1] == "gf·cm²/cm"
+    assert "fit R²" in out.stdout and str(output) in out.stdout and str(recording) in out.stdout
+
+    # The material file: stable keys, SI units, every sample, and a shell that reproduces them.
+    data = json.loads(output.read_text())
+    assert {"yarnfit_version", "inputs", "yarn", "shell", "engineering", "fit", "samples"} <= set(data)
+    assert data["inputs"]["areal_density_kg_m2"] == pytest.approx(0.2)
+    assert len(data["samples"]) == 13
+    for sample in data["samples"]:
+        assert {"family", "I", "II", "energy_density_j_m2", "residual", "converged"} <= set(sample)
+    weft = [s for s in data["samples"] if s["family"] == "weft_stretch" and s["converged"]]
+    assert weft and all(material.energy_density(np.array(s["I"]), np.array(s["II"])) > 0 for s in weft)
+
+    documented = readme_entity_paths("rerun-fit-paths", "fit")
+    assert {"fit/sample/yarns", "fit/sample/energy", "fit/curves/<family>/shell"} <= documented
+    recorded = {chunk.entity_path.lstrip("/") for chunk in rr.chunk.RrdReader(recording).stream()}
+    recorded = {re.sub(r"^fit/curves/\w+/", "fit/curves/<family>/", p) for p in recorded - {"__properties"}}
+    # `excluded` appears only when a sample did not converge.
+    assert recorded - documented == set() and documented - recorded <= {"fit/curves/<family>/excluded"}
+    rerun = Path(sys.executable).parent / "rerun"
+    verify = subprocess.run([str(rerun), "rrd", "verify", str(recording)], capture_output=True, text=True, timeout=120)
+    assert verify.returncode == 0, verify.stderr
+
+
+def test_a_strict_fit_that_asks_for_an_indefinite_shell_fails_naming_the_family(tmp_path):
+    # Polyester jersey's biaxial energies ask for s01 > √(s00 s11) (its loops trade course for wale
+    # length): by default the coupling ends on the positive-definite bound, with --strict the run fails.
+    recording, output = tmp_path / "x.rrd", tmp_path / "x.json"
+    out = subprocess.run([str(Path(sys.executable).parent / "yarnfit"), "fit", "polyester-jersey", "--strict",
+                          "--samples", "13", "--rerun", str(recording), "-o", str(output)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 1, (out.stdout, out.stderr)
+    last = out.stderr.strip().splitlines()[-1]
+    assert last.startswith("yarnfit fit: failed:") and "biaxial_stretch" in last and "Traceback" not in out.stderr
+    assert not recording.exists() and not output.exists()
+
+    out = subprocess.run([str(Path(sys.executable).parent / "yarnfit"), "fit", "polyester-jersey",
+                          "--samples", "13", "--rerun", str(recording), "-o", str(output)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert re.search(r"note +s01 at the positive-definite bound .* biaxial_stretch", out.stdout), out.stdout
+    data = json.loads(output.read_text())
+    assert "s01" in data["fit"]["active_bounds"] and any("biaxial_stretch" in n for n in data["fit"]["notes"])

@@ -23,8 +23,16 @@ class UsageError(Exception):
     """Bad input: printed as one line, exit status 2."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (its default prints the usage first): bad input is always a
+    single line on stderr and exit status 2."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="yarnfit",
         description=(
             "Real fabric parameters for MuJoCo cloth: from a fabric's label (fibre, knit or weave, "
@@ -33,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     parser.add_argument("--version", action="version", version=f"yarnfit {__version__}")
-    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     commands.add_parser("materials", help="list the built-in fibres and fabric presets",
                         description="List the built-in fibres (one line each) and the fabric presets.")
@@ -56,6 +64,31 @@ def build_parser() -> argparse.ArgumentParser:
     relax.add_argument("--name", help="label for the output files (default: preset, pattern or file name)")
     relax.add_argument("--rerun", metavar="FILE.rrd", help="Rerun recording of the relaxation (default: logs/<name>.rrd)")
     relax.add_argument("-o", "--output", metavar="FILE.pyp", help="write the relaxed repeat as a .pyp file")
+
+    fit = commands.add_parser(
+        "fit",
+        help="fit an orthotropic StVK shell to a fabric (relax, homogenize, fit)",
+        description=(
+            "Relax the fabric's yarn repeat, tile it over sampled stretches, shears and bends, solve each "
+            "sample at the yarn level (in parallel), fit an orthotropic StVK shell (membrane s00 s01 s11 s22, "
+            "bending b00 b01 b11 b22) by weighted least squares, and write the material file (JSON, SI units). "
+            "The summary gives the engineering constants in N/m and gf·cm²/cm beside SI."
+        ),
+    )
+    fit.add_argument("preset", nargs="?", help="a built-in fabric (see `yarnfit materials`)")
+    add_fabric_arguments(fit)
+    fit.add_argument("--samples", type=int, default=None, metavar="N",
+                     help="about how many deformation samples (at least 13; default 26)")
+    fit.add_argument("--model", choices=("full", "paper"), default="full",
+                     help="full: fit b01 too (default); paper: b01 = 0, the paper's 7 parameters")
+    fit.add_argument("--strict", action="store_true",
+                     help="fail (exit status 1) when the yarn-level energies ask for an indefinite shell, instead of "
+                          "fitting the coupling s01 or b01 at the positive-definite bound |rho| = 0.99")
+    fit.add_argument("--workers", type=int, default=None, metavar="N",
+                     help="processes solving samples (default: every core)")
+    fit.add_argument("--name", help="label for the output files (default: preset, pattern or file name)")
+    fit.add_argument("-o", "--output", metavar="MATERIAL.json", help="material file (default: <name>.json)")
+    fit.add_argument("--rerun", metavar="FILE.rrd", help="Rerun recording of the fit (default: logs/<name>-fit.rrd)")
     return parser
 
 
@@ -178,6 +211,10 @@ class ProgressLine:
             self.stream.write("\n")
             self.stream.flush()
 
+    def message(self, text: str, force: bool = False) -> None:
+        """Show ``text`` (off a terminal: only every few seconds, unless ``force``)."""
+        self._write(text, force)
+
     def _write(self, text: str, force: bool = False) -> None:
         now = time.perf_counter()
         if self.tty:
@@ -226,6 +263,85 @@ def cmd_relax(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_fit(args: argparse.Namespace) -> int:
+    from .fit import COUPLING_LIMIT
+    from .homogenize import SAMPLES_PER_LEVEL
+    from .material import DEFAULT_SAMPLES, fit_fabric
+    from .record import FitRecording
+
+    fabric = fabric_from_arguments(args)
+    samples = DEFAULT_SAMPLES if args.samples is None else args.samples
+    if samples < SAMPLES_PER_LEVEL:
+        raise UsageError(f"--samples must be at least {SAMPLES_PER_LEVEL} (one per sample family and sign), "
+                         f"got {samples}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    output = Path(args.output) if args.output else Path(f"{fabric.name}.json")
+    path = Path(args.rerun) if args.rerun else Path("logs") / f"{fabric.name}-fit.rrd"
+    line = ProgressLine()
+    sampling_started = [0.0]
+
+    def on_relaxed(relaxed):
+        sampling_started[0] = time.perf_counter()
+        line.message(f"relaxed in {relaxed.seconds:.1f} s (radius {relaxed.radius * 1e6:.2f} µm); solving samples",
+                     force=True)
+
+    def progress(done, total, result):
+        now = time.perf_counter()
+        left = (now - sampling_started[0]) / done * (total - done)
+        excluded = "" if result.converged else " (did not converge: excluded from the fit)"
+        line.message(f"samples {done}/{total}: {result.spec.family} {result.spec.parameter:+.3g} → "
+                     f"{result.energy_density:.3g} J/m²{excluded}  [{now - line.start:.0f} s, ~{left:.0f} s left]",
+                     force=not result.converged or done == total)
+
+    line.message(f"{fabric.name}: relaxing the repeat", force=True)
+    fitted = fit_fabric(fabric, samples=samples, model=args.model, workers=args.workers, on_relaxed=on_relaxed,
+                        progress=progress, relax_progress=line, on_relax_start=line.start_relaxation,
+                        coupling_limit=None if args.strict else COUPLING_LIMIT)
+    line.close()
+    fitted.write(output)
+    recording = FitRecording(fabric.name, path)
+    recording.start(fitted.relaxed)
+    for index, result in enumerate(fitted.samples):
+        recording.sample(index, fitted.relaxed, result)
+    recording.finish(fitted)
+    print(fit_summary(fitted, output, path))
+    return 0
+
+
+def fit_summary(fitted, output, recording_path) -> str:
+    from .shell import GF_CM2_PER_CM
+
+    fabric, relaxed, fit = fitted.fabric, fitted.relaxed, fitted.fit
+    eng = fitted.material.engineering()
+    used, excluded = len(fit.used), len(fit.excluded)
+    label = f"{fabric.areal_density * 1e3:.4g} g/m²" if fabric.areal_density else "as written"
+    lines = [
+        f"{fabric.name}: {fabric.fiber.name}, {relaxed.pattern.family} "
+        f"{fabric.structure or Path(str(fabric.pattern_file)).name}, {label}; {fit.model} model, "
+        f"{_plural(used, 'sample')} fitted" + (f", {excluded} excluded (did not converge)" if excluded else ""),
+        f"  {'weft stretch':<16}{eng['weft_stretch_n_per_m']:12.5g} N/m",
+        f"  {'warp stretch':<16}{eng['warp_stretch_n_per_m']:12.5g} N/m",
+        f"  {'poisson weft':<16}{eng['poisson_weft']:12.4g}",
+        f"  {'poisson warp':<16}{eng['poisson_warp']:12.4g}",
+        f"  {'shear':<16}{eng['shear_n_per_m']:12.5g} N/m",
+    ]
+    for key, label in (("bending_weft_nm", "bending weft"), ("bending_warp_nm", "bending warp"),
+                       ("bending_bias_nm", "bending bias")):
+        lines.append(f"  {label:<16}{eng[key]:12.5g} N·m   {eng[key] / GF_CM2_PER_CM:10.4g} gf·cm²/cm")
+    lines.append(f"  {'thickness':<16}{fitted.material.thickness * 1e3:12.4g} mm")
+    quality = ", ".join(f"{family} {q['r2']:.3f}" if q["r2"] is not None else f"{family} -"
+                        for family, q in fit.families.items())
+    lines.append(f"  fit R²          {quality}")
+    lines += [f"  note            {note}" for note in fit.notes]
+    t = fitted.seconds
+    lines.append(f"  time            relax {t['relax']:.1f} s, samples {t['homogenize']:.1f} s, fit {t['fit']:.2f} s "
+                 f"(total {sum(t.values()):.1f} s)")
+    lines.append(f"  material        {output}")
+    lines.append(f"  recording       {recording_path}")
+    return "\n".join(lines)
+
+
 def relax_summary(result, fabric, recording_path, output) -> str:
     px, py = result.repeat_size
     lines = [
@@ -252,7 +368,7 @@ def _plural(count: int, noun: str) -> str:
     return f"{count} {noun}{'' if count == 1 else 's'}"
 
 
-COMMANDS = {"materials": cmd_materials, "patterns": cmd_patterns, "relax": cmd_relax}
+COMMANDS = {"materials": cmd_materials, "patterns": cmd_patterns, "relax": cmd_relax, "fit": cmd_fit}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -261,14 +377,23 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    from .fit import IndefiniteFitError
+    from .material import UnusableRelaxation
     from .patterns import PatternError
 
     try:
         return COMMANDS[args.command](args)
+    except (IndefiniteFitError, UnusableRelaxation) as error:
+        # The input was fine; the computation did not give a usable result.
+        print(f"yarnfit {args.command}: failed: {_first_line(error)}", file=sys.stderr)
+        return EXIT_FAILED
     except (UsageError, PatternError, ValueError, OSError) as error:
-        message = str(error).splitlines()[0] if str(error) else type(error).__name__
-        print(f"yarnfit {args.command}: error: {message}", file=sys.stderr)
+        print(f"yarnfit {args.command}: error: {_first_line(error)}", file=sys.stderr)
         return EXIT_USAGE
+
+
+def _first_line(error: Exception) -> str:
+    return str(error).splitlines()[0] if str(error) else type(error).__name__
 
 
 if __name__ == "__main__":

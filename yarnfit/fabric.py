@@ -183,12 +183,13 @@ class Fabric:
                 pattern = self._build(radius)
                 break
             radius = new
-        check_packing(pattern, self.areal_density, self.fiber.density_kg_m3, self._counts_per_m(pattern))
+        check_packing(pattern, self.areal_density, self.fiber.density_kg_m3, self.counts_per_m(pattern))
         return pattern
 
     # -- internals ----------------------------------------------------------------------------
 
-    def _counts_per_m(self, pattern: YarnPattern | None = None) -> tuple[float, float]:
+    def counts_per_m(self, pattern: YarnPattern | None = None) -> tuple[float, float]:
+        """Counts (1/m): as given, the structure's typical ones, or those of ``pattern`` (a file's)."""
         if self.counts is not None:
             return self.counts
         if self.structure is not None:
@@ -203,10 +204,10 @@ class Fabric:
         if self.structure is None:
             return self.file_pattern.radius
         # A start for the fixed point: a tenth of the finer spacing.
-        return 0.1 / max(self._counts_per_m())
+        return 0.1 / max(self.counts_per_m())
 
     def _build(self, radius: float) -> YarnPattern:
-        a, b = self._counts_per_m()
+        a, b = self.counts_per_m()
         if self.structure in DRAFTS:
             return weave(DRAFTS[self.structure], a, b, radius, name=self.name)
         if self.structure in STITCHES:

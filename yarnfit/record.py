@@ -1,8 +1,13 @@
 """Rerun recordings of yarnfit runs.
 
-A :class:`RelaxRecording` writes one relaxation run (phase 1, ``yarnfit.relax``) to one ``.rrd``
-file through its own ``rr.RecordingStream`` (application id ``"yarnfit"``, recording name = the
-run's name); the global recording is never touched. Open the file with ``rerun file.rrd``.
+Each recording writes one run to one ``.rrd`` file through its own ``rr.RecordingStream``
+(application id ``"yarnfit"``, recording name = the run's name, the file's directory created) with
+its viewer layout; the global recording is never touched. Open the file with ``rerun file.rrd``.
+
+Relaxation
+----------
+
+A :class:`RelaxRecording` writes one relaxation run (phase 1, ``yarnfit.relax``).
 
 Timeline ``iteration`` (sequence): one step per logged state, counting on across all relaxations
 of the run (never reset). :meth:`RelaxRecording.start` logs each relaxation's unrelaxed pattern at
@@ -38,10 +43,64 @@ relaxation with :meth:`RelaxRecording.start`)::
     recording.start(pattern)
     result = relax_pattern(pattern, fabric.fiber, progress=recording)
     recording.finish(result)
+
+Shell fit
+---------
+
+A :class:`FitRecording` writes one shell fit run (phases 2 and 3, ``yarnfit.homogenize`` and
+``yarnfit.fit``, driven by ``yarnfit.material.fit_fabric``).
+
+Timeline ``sample`` (sequence): sample k (its index in the design order of
+``yarnfit.homogenize.sample_design``, 0-based, as in ``FabricFit.samples``) is logged at step k, in
+whatever order the samples finish. The relaxed repeat, the fit curves and the summary are static.
+
+Entity paths (positions and radii in m, 3D x weft, y warp, z up):
+
+- ``fit``: ``ViewCoordinates`` right-handed, z up (static, when the recording opens).
+- ``fit/relaxed/yarns``: ``LineStrips3D``, the relaxed repeat in its flat tile, one strip per yarn
+  (``yarn_strips`` of tile (0, 0): a yarn crossing the tile border stays continuous), radius = yarn
+  radius, one colour per yarn (static, by ``start``).
+- ``fit/sample/yarns``: ``LineStrips3D``, the sample's equilibrium on its deformed mid-surface
+  (origin at the repeat's centre) in 3 × 3 tiles: tile ``(i, j)``, i, j ∈ {−1, 0, 1}, i slowest,
+  holds strips ``3 (i + 1) + (j + 1)`` times the yarn count onwards, ``yarn_strips`` of that tile
+  of the model ``tile_repeat`` builds for the sample (each neighbour is the repeat carried on along
+  the curved surface, not merely shifted); the centre tile in the yarn colours, its eight
+  neighbours grey; radius = yarn radius (by ``sample``, at the sample's step).
+- ``fit/sample/energy``: ``Scalars``, the sample's energy density Ū (J/m² of reference area; by
+  ``sample``).
+- ``fit/sample/info``: ``TextDocument`` (markdown), the sample's family, parameter, I, II (1/m), Ū,
+  convergence, iterations and residuals (by ``sample``).
+- ``fit/curves/<family>/yarn``: ``Points2D`` at (parameter, Ū) of the family's converged samples
+  (static, by ``finish``).
+- ``fit/curves/<family>/excluded``: ``Points2D`` in red at (parameter, Ū) of the family's samples
+  that did not converge (excluded from the fit) with a finite Ū; only logged if there are any
+  (static, by ``finish``).
+- ``fit/curves/<family>/shell``: ``LineStrips2D``, the fitted shell's energy density
+  ``W(family_deformation(family, p))`` over a dense range of p spanning the family's sampled
+  parameters and 0, through every sampled parameter (static, by ``finish``).
+- ``fit/summary``: ``TextDocument`` (markdown), the engineering constants in SI and user units (N/m,
+  N·m and gf·cm²/cm for bending), R² and relative RMS per family, the bounds the fit reached (if
+  any), model, thickness, sample counts and wall time per stage (static, by ``finish``).
+
+``<family>`` is each of ``yarnfit.fit.FAMILIES`` with at least one sample. The curves' x is the
+family's parameter (λ − 1 for the stretch families, I12 for shear, curvature in 1/m for the bend
+families) and y is in J/m². Rerun 2D views keep x and y at equal scale with y pointing down, so
+each curve entity also carries a static ``Transform3D`` scaling x by 1 / max |p| and y by
+−1 / max W of its family: the plot fills a unit box, y up. The logged positions keep the units
+above (hovering shows them).
+
+Typical use, after the fit::
+
+    recording = FitRecording(fabric.name, "logs/plain-fit.rrd")
+    recording.start(fitted.relaxed)
+    for index, result in enumerate(fitted.samples):
+        recording.sample(index, fitted.relaxed, result)
+    recording.finish(fitted)
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -49,10 +108,15 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from .engine import Progress
+from .engine.tiling import yarn_strips
+from .fit import BENDING_FAMILIES, FAMILIES
+from .homogenize import family_deformation, tile_repeat
 from .patterns import YarnPattern
+from .shell import GF_CM2_PER_CM
 
 APPLICATION_ID = "yarnfit"
 TIMELINE = "iteration"
+SAMPLE_TIMELINE = "sample"
 
 # Yarn colours (RGB), cycled by yarn index; neighbour tiles are drawn in a neutral grey so the
 # repeat itself stands out in the tiling.
@@ -65,8 +129,22 @@ TILE_LINE_RADIUS = 0.1
 RESIDUALS = ("force", "torque", "penetration", "energy_change")
 ENERGY_TERMS = ("stretch", "shear", "bend", "twist", "external", "total")
 
+# Fit curves: yarn-level samples blue, samples left out red (the colour every plot uses for
+# failures), the shell's curve black so it reads as the model, not as another sample.
+SAMPLE_COLOR = YARN_COLORS[0]
+EXCLUDED_COLOR = np.array([214, 39, 40], dtype=np.uint8)
+SHELL_COLOR = np.array([30, 30, 30], dtype=np.uint8)
+# Marker and line sizes in UI points: the curves are drawn through a scaling transform (see the
+# module docstring), so sizes in scene units would change from family to family.
+SAMPLE_POINT_SIZE = rr.Radius.ui_points(5.0)
+SHELL_LINE_SIZE = rr.Radius.ui_points(1.5)
+# Points of the shell curve's uniform grid (the sampled parameters are added to it): the curve is
+# a quadratic (bends) to quartic (stretches) in p, smooth to the eye at this density.
+CURVE_POINTS = 101
+
 # Tile shifts (i, j) of the 3 × 3 tiling, i, j ∈ {−1, 0, 1}; the centre (0, 0) is entry 4.
-_TILES = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)], dtype=np.float64)
+_TILE_OFFSETS = tuple((i, j) for i in (-1, 0, 1) for j in (-1, 0, 1))
+_TILES = np.array(_TILE_OFFSETS, dtype=np.float64)
 _CENTRE = 4
 
 
@@ -87,13 +165,73 @@ def blueprint() -> rrb.Blueprint:
             ),
             column_shares=[3, 2],
         ),
-        rrb.BlueprintPanel(state="collapsed"),
-        rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="expanded", timeline=TIMELINE),
+        *_folded_panels(TIMELINE),
     )
 
 
-class RelaxRecording:
+def fit_blueprint() -> rrb.Blueprint:
+    """Viewer layout of a fit: the relaxed repeat and the current sample's 3 × 3 tiling in 3D on
+    the left; the sample energy, the sample's numbers and the summary in the middle; one 2D view
+    per sample family with its fit curve on the right; the time panel on the ``sample`` timeline."""
+    curves = [rrb.Spatial2DView(origin=f"fit/curves/{family}",
+                                name=f"{family}: Ū (J/m²) over {parameter_label(family)}") for family in FAMILIES]
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="fit/relaxed", name="relaxed repeat"),
+                rrb.Spatial3DView(origin="fit/sample", name="sample (3 × 3 tiles)"),
+                row_shares=[1, 2],
+            ),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="fit/sample/energy", name="sample energy Ū (J/m²)"),
+                rrb.TextDocumentView(origin="fit/sample/info", name="sample"),
+                rrb.TextDocumentView(origin="fit/summary", name="summary"),
+            ),
+            rrb.Grid(*curves, grid_columns=2, name="fit curves"),
+            column_shares=[3, 2, 3],
+        ),
+        *_folded_panels(SAMPLE_TIMELINE),
+    )
+
+
+def _folded_panels(timeline: str) -> tuple:
+    """The time panel open on ``timeline`` (not rerun's wall-clock ``log_time``), the blueprint
+    and selection panels folded away."""
+    return (rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
+            rrb.TimePanel(state="expanded", timeline=timeline))
+
+
+def parameter_label(family: str) -> str:
+    """What a sample family's parameter measures, with its unit (see ``SampleSpec.parameter``)."""
+    if family == "shear":
+        return "I12"
+    return "curvature (1/m)" if family in BENDING_FAMILIES else "λ − 1"
+
+
+class _Recording:
+    """One run's ``.rrd`` file: its own stream, the file sink, the recording name, the viewer
+    layout and the view coordinates of the ``root`` entity (right-handed, z up)."""
+
+    def __init__(self, name: str, path, layout: rrb.Blueprint, root: str) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._rec = rr.RecordingStream(APPLICATION_ID)
+        # The file sink must be attached before anything is logged, or that data is lost.
+        self._rec.save(self.path)
+        self._rec.send_recording_name(name)
+        self._rec.send_blueprint(layout)
+        self._rec.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+
+    def close(self) -> None:
+        """Flush everything logged and close the file (writing its footer). Idempotent."""
+        self._rec.flush()
+        self._rec.disconnect()
+
+    def _log_markdown(self, entity: str, text: str, static: bool = False) -> None:
+        self._rec.log(entity, rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=static)
+
+
+class RelaxRecording(_Recording):
     """Records relaxations of a periodic yarn repeat to a ``.rrd`` file (see the module docstring
     for the entity paths and the timeline).
 
@@ -106,14 +244,7 @@ class RelaxRecording:
     """
 
     def __init__(self, name: str, path) -> None:
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._rec = rr.RecordingStream(APPLICATION_ID)
-        # The file sink must be attached before anything is logged, or that data is lost.
-        self._rec.save(self.path)
-        self._rec.send_recording_name(name)
-        self._rec.send_blueprint(blueprint())
-        self._rec.log("relax", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        super().__init__(name, path, blueprint(), "relax")
         self._step = -1  # last position used on the timeline
         # Topology of the current relaxation, set by start(): node gather and closing shifts of
         # the strips, strip ends, tile shifts and strip ends of the tiling.
@@ -134,12 +265,10 @@ class RelaxRecording:
         self._tile_ends = (np.arange(len(_TILES))[:, None] * self._ends[-1] + self._ends[None, :]).ravel()
 
         self._advance()
-        colors = YARN_COLORS[np.arange(len(yarns)) % len(YARN_COLORS)]
-        tiling_colors = np.repeat(NEIGHBOUR_COLOR[None], len(_TILES) * len(yarns), axis=0)
-        tiling_colors[_CENTRE * len(yarns):(_CENTRE + 1) * len(yarns)] = colors
         radius = np.float32(pattern.radius)
-        self._rec.log("relax/repeat/yarns", rr.LineStrips3D.from_fields(radii=radius, colors=colors))
-        self._rec.log("relax/tiling/yarns", rr.LineStrips3D.from_fields(radii=radius, colors=tiling_colors))
+        self._rec.log("relax/repeat/yarns", rr.LineStrips3D.from_fields(radii=radius, colors=_yarn_colors(len(yarns))))
+        self._rec.log("relax/tiling/yarns", rr.LineStrips3D.from_fields(radii=radius,
+                                                                        colors=_tiling_colors(len(yarns))))
         outline = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]], dtype=np.float64) @ lattice
         self._rec.log("relax/repeat/tile", rr.LineStrips3D([outline], radii=TILE_LINE_RADIUS * radius,
                                                            colors=NEIGHBOUR_COLOR))
@@ -162,13 +291,8 @@ class RelaxRecording:
         self._log_yarns(result.state.node_position)
         for key in ENERGY_TERMS:
             self._rec.log(f"relax/energy/{key}", rr.Scalars(float(getattr(result.energy, key))))
-        self._rec.log("relax/summary", rr.TextDocument(summary(result), media_type=rr.MediaType.MARKDOWN))
+        self._log_markdown("relax/summary", summary(result))
         self.close()
-
-    def close(self) -> None:
-        """Flush everything logged and close the file (writing its footer). Idempotent."""
-        self._rec.flush()
-        self._rec.disconnect()
 
     # -- helpers --------------------------------------------------------------------------------
 
@@ -189,6 +313,119 @@ class RelaxRecording:
         self._rec.log("relax/tiling/yarns", rr.LineStrips3D.from_fields(strips=np.split(tiled, self._tile_ends[:-1])))
 
 
+class FitRecording(_Recording):
+    """Records a shell fit run — the relaxed repeat, every homogenization sample, the fit curves
+    and a summary — to a ``.rrd`` file (see the module docstring for the entity paths and the
+    ``sample`` timeline).
+
+    Call :meth:`start` once with the relaxed repeat, :meth:`sample` for each solved sample (in any
+    order) and :meth:`finish` once with the :class:`yarnfit.material.FabricFit`, which closes the
+    file.
+
+    Args:
+        name: recording name shown by the viewer (e.g. the fabric's name).
+        path: the ``.rrd`` file to write; its directory is created.
+    """
+
+    def __init__(self, name: str, path) -> None:
+        super().__init__(name, path, fit_blueprint(), "fit")
+
+    def start(self, relaxed) -> None:
+        """Log the relaxed repeat (a :class:`yarnfit.relax.RelaxedRepeat`) as static yarn strips
+        in its flat tile, positions in m."""
+        strips = yarn_strips(relaxed.model, relaxed.state.node_position)
+        self._rec.log("fit/relaxed/yarns", rr.LineStrips3D(strips, radii=np.float32(relaxed.radius),
+                                                           colors=_yarn_colors(len(strips))), static=True)
+
+    def sample(self, index: int, relaxed, result) -> None:
+        """Log sample ``index`` (0-based, in design order) at that step of the ``sample`` timeline:
+        its equilibrium ``result.position`` ``(N, 3)`` m in 3 × 3 tiles of the curved tiling that
+        ``tile_repeat(relaxed, I, II)`` builds for it, its Ū (J/m²) and its numbers.
+
+        Args:
+            index: the sample's index in ``FabricFit.samples`` (design order).
+            relaxed: the :class:`yarnfit.relax.RelaxedRepeat` the sample was solved on.
+            result: the :class:`yarnfit.homogenize.SampleResult`.
+        """
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 0:
+            raise ValueError(f"a sample index must be a non-negative integer, got {index!r}")
+        spec = result.spec
+        # The solver's model is rebuilt rather than shipped back from the (worker) process: it is
+        # deterministic in (relaxed, I, II) and cheap next to the solve.
+        model = tile_repeat(relaxed, spec.I, spec.II).model
+        position = np.asarray(result.position, dtype=np.float64)
+        if position.shape != (model.n_nodes, 3):
+            raise ValueError(f"expected sample positions of shape ({model.n_nodes}, 3), got {position.shape}")
+        strips = [strip for tile in _TILE_OFFSETS for strip in yarn_strips(model, position, tile)]
+        self._rec.set_time(SAMPLE_TIMELINE, sequence=int(index))
+        self._rec.log("fit/sample/yarns", rr.LineStrips3D(strips, radii=np.float32(relaxed.radius),
+                                                          colors=_tiling_colors(model.n_rods)))
+        self._rec.log("fit/sample/energy", rr.Scalars(float(result.energy_density)))
+        self._log_markdown("fit/sample/info", sample_summary(int(index), result))
+
+    def finish(self, fabric_fit) -> None:
+        """Log the fit curves of every sampled family and the summary of ``fabric_fit`` (a
+        :class:`yarnfit.material.FabricFit`), all static; then close the file."""
+        material = fabric_fit.material
+        for family in FAMILIES:
+            results = [r for r in fabric_fit.samples if r.spec.family == family]
+            if results:
+                self._log_curves(family, results, material)
+        self._log_markdown("fit/summary", fit_summary(fabric_fit), static=True)
+        self.close()
+
+    def _log_curves(self, family: str, results, material) -> None:
+        """Samples (parameter, Ū) and the shell's curve (parameter, W) of one family, in the
+        family's parameter unit and J/m², drawn through a transform that fits them to a unit box
+        with y up (see the module docstring)."""
+        parameter = np.array([r.spec.parameter for r in results], dtype=np.float64)
+        energy = np.array([r.energy_density for r in results], dtype=np.float64)
+        converged = np.array([r.converged for r in results], dtype=bool)
+        curve_p, curve_w = shell_curve(material, family, parameter)
+        plotted = np.isfinite(energy)
+        excluded = ~converged & plotted
+        p_extent = float(np.abs(curve_p).max())
+        w_extent = float(np.abs(np.concatenate([energy[plotted], curve_w])).max(initial=0.0))
+        display = rr.Transform3D(scale=[1.0 / p_extent if p_extent > 0 else 1.0,
+                                        -1.0 / w_extent if w_extent > 0 else -1.0, 1.0])
+        root = f"fit/curves/{family}"
+        used = converged & plotted
+        self._rec.log(f"{root}/yarn", rr.Points2D(np.column_stack([parameter[used], energy[used]]),
+                                                  radii=SAMPLE_POINT_SIZE, colors=SAMPLE_COLOR), display, static=True)
+        if excluded.any():
+            self._rec.log(f"{root}/excluded", rr.Points2D(np.column_stack([parameter[excluded], energy[excluded]]),
+                                                          radii=SAMPLE_POINT_SIZE, colors=EXCLUDED_COLOR),
+                          display, static=True)
+        self._rec.log(f"{root}/shell", rr.LineStrips2D([np.column_stack([curve_p, curve_w])], radii=SHELL_LINE_SIZE,
+                                                       colors=SHELL_COLOR), display, static=True)
+
+
+def shell_curve(material, family: str, parameters) -> tuple[np.ndarray, np.ndarray]:
+    """The shell's energy density along ``family``: parameters ``p (n,)`` (the family's unit) on
+    a uniform grid of CURVE_POINTS spanning ``parameters`` and 0, plus ``parameters`` themselves
+    (so the curve passes exactly through the shell's value at every sample), and ``W(p) (n,)``
+    (J/m²) of ``material`` (a :class:`yarnfit.shell.ShellMaterial`)."""
+    parameters = np.asarray(parameters, dtype=np.float64)
+    low, high = min(0.0, float(parameters.min())), max(0.0, float(parameters.max()))
+    p = np.union1d(np.linspace(low, high, CURVE_POINTS), parameters)
+    forms = [family_deformation(family, value) for value in p]
+    energy = material.energy_density(np.array([I for I, _ in forms]), np.array([II for _, II in forms]))
+    return p, np.asarray(energy, dtype=np.float64)
+
+
+def _yarn_colors(n_yarns: int) -> np.ndarray:
+    """``(n_yarns, 3)`` RGB, one colour per yarn."""
+    return YARN_COLORS[np.arange(n_yarns) % len(YARN_COLORS)]
+
+
+def _tiling_colors(n_yarns: int) -> np.ndarray:
+    """``(9 n_yarns, 3)`` RGB for the strips of a 3 × 3 tiling, tile by tile: the centre tile in
+    the yarn colours, its neighbours grey."""
+    colors = np.repeat(NEIGHBOUR_COLOR[None], len(_TILES) * n_yarns, axis=0)
+    colors[_CENTRE * n_yarns:(_CENTRE + 1) * n_yarns] = _yarn_colors(n_yarns)
+    return colors
+
+
 def _strip_layout(yarns, lattice: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """How to turn yarn-order positions ``p (N, 3)`` into closed strips: ``p[gather] + shift``
     ``(N + Y, 3)`` cut at ``ends`` (Y,) is each yarn's nodes followed by its first node moved by
@@ -203,6 +440,20 @@ def _strip_layout(yarns, lattice: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     return gather, shift, ends
 
 
+# -- markdown summaries ----------------------------------------------------------------------------
+
+
+def _markdown_table(rows, header=("quantity", "value")) -> str:
+    """A markdown table of ``rows`` (tuples of cells, as many as ``header``)."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def _converged(flag: bool) -> str:
+    return "yes" if flag else "**no**"
+
+
 def summary(result) -> str:
     """Markdown summary of a relaxed repeat (display units: mm, µm, m/m², g/m²)."""
     px, py = (1e3 * float(v) for v in result.repeat_size)
@@ -215,10 +466,88 @@ def summary(result) -> str:
         ("residual force / torque", f"{r.force:.3g} / {r.torque:.3g}"),
         ("residual energy change / penetration", f"{r.energy_change:.3g} / {r.penetration:.3g}"),
         ("worst penetration", f"{100 * result.penetration:.3g} % of the diameter"),
-        ("converged", "yes" if result.converged else "**no**"),
+        ("converged", _converged(result.converged)),
         ("iterations (last relaxation)", f"{result.iterations}"),
         ("relaxations", f"{result.relaxations}"),
         ("wall time", f"{result.seconds:.3g} s"),
     ]
-    table = "\n".join(f"| {key} | {value} |" for key, value in rows)
-    return f"## Relaxed repeat\n\n| quantity | value |\n|---|---|\n{table}\n"
+    return f"## Relaxed repeat\n\n{_markdown_table(rows)}"
+
+
+def _matrix(m) -> str:
+    """A 2 × 2 matrix on one line: ``[[a, b], [c, d]]``."""
+    return "[" + ", ".join("[" + ", ".join(f"{v:.6g}" for v in row) + "]" for row in np.asarray(m)) + "]"
+
+
+def sample_summary(index: int, result) -> str:
+    """Markdown summary of sample ``index`` (a :class:`yarnfit.homogenize.SampleResult`):
+    parameter in its family's unit, II in 1/m, Ū in J/m²."""
+    spec, r = result.spec, result.residual
+    rows = [
+        ("family", spec.family),
+        (f"parameter ({parameter_label(spec.family)})", f"{spec.parameter:.6g}"),
+        ("I", _matrix(spec.I)),
+        ("II (1/m)", _matrix(spec.II)),
+        ("Ū", f"{result.energy_density:.6g} J/m²"),
+        ("converged", _converged(result.converged)),
+        ("iterations", f"{result.iterations}"),
+        ("residual force / torque", f"{r.force:.3g} / {r.torque:.3g}"),
+        ("residual energy change / penetration", f"{r.energy_change:.3g} / {r.penetration:.3g}"),
+        ("wall time", f"{result.seconds:.3g} s"),
+    ]
+    return f"## Sample {index}\n\n{_markdown_table(rows)}"
+
+
+# Engineering constants as the summary shows them: key of ShellMaterial.engineering(), label, SI
+# unit and, for the bending rigidities, the textile unit (gf·cm²/cm, the KES-F convention).
+_CONSTANTS = (
+    ("weft_stretch_n_per_m", "weft stretch", "N/m"),
+    ("warp_stretch_n_per_m", "warp stretch", "N/m"),
+    ("poisson_weft", "Poisson ratio weft", ""),
+    ("poisson_warp", "Poisson ratio warp", ""),
+    ("shear_n_per_m", "in-plane shear", "N/m"),
+    ("bending_weft_nm", "bending weft", "N·m"),
+    ("bending_warp_nm", "bending warp", "N·m"),
+    ("bending_bias_nm", "bending bias", "N·m"),
+)
+
+
+def fit_summary(fabric_fit) -> str:
+    """Markdown summary of a shell fit (a :class:`yarnfit.material.FabricFit`): engineering
+    constants in SI and user units (N/m; gf·cm²/cm for bending), R² and relative RMS per sampled
+    family, model, thickness (mm), sample counts and wall time per stage (s)."""
+    fit, material = fabric_fit.fit, fabric_fit.material
+    try:
+        engineering = material.engineering()
+    except ValueError as error:
+        # A shell that is not positive definite has no engineering constants; the recording
+        # should still say what the fit produced rather than fail after the run.
+        constants = f"not available: {error}\n"
+    else:
+        rows = []
+        for key, label, unit in _CONSTANTS:
+            value = engineering[key]
+            si = f"{value:.5g} {unit}".rstrip()
+            user = f"{value / GF_CM2_PER_CM:.5g} gf·cm²/cm" if unit == "N·m" else si
+            rows.append((label, si, user))
+        constants = _markdown_table(rows, header=("constant", "SI", "user units"))
+    quality = [(family, f["samples"], f"{f['r2']:.6g}", f"{f['relative_rms']:.3g}")
+               for family, f in fit.families.items() if f["samples"] > 0]
+    samples = fabric_fit.samples
+    converged = sum(bool(r.converged) for r in samples)
+    seconds = fabric_fit.seconds
+    run = [
+        ("fabric", fabric_fit.fabric.name),
+        ("model", fit.model),
+        ("thickness", f"{1e3 * material.thickness:.4g} mm"),
+        ("samples", f"{len(samples)} ({converged} converged, {len(fit.used)} fitted, {len(fit.excluded)} excluded)"),
+        ("stretch range / curvature range", f"{fabric_fit.ranges.stretch:.4g} / {fabric_fit.ranges.curvature:.4g} 1/m"),
+        ("active bounds", ", ".join(fit.active_bounds) or "none"),
+        ("wall time relax / homogenize / fit",
+         " / ".join(f"{seconds.get(stage, math.nan):.3g}" for stage in ("relax", "homogenize", "fit")) + " s"),
+    ]
+    notes = "".join(f"- {note}\n" for note in fit.notes)
+    return (f"## Shell fit\n\n### Engineering constants\n\n{constants}\n### Fit quality\n\n"
+            f"{_markdown_table(quality, header=('family', 'samples', 'R²', 'relative RMS'))}\n"
+            + (f"### Bounds reached\n\n{notes}\n" if notes else "")
+            + f"### Run\n\n{_markdown_table(run)}")

@@ -1,0 +1,267 @@
+"""Homogenization and the end-to-end shell fit.
+
+References: the fundamental forms a surface map must have (finite differences of the map), the
+closed-form stiffness of straight parallel yarns (Eπr²/d in stretch, Eπr⁴/(4d) in bending), the
+undeformed sample's zero energy, the symmetry of a square plain weave, the paper's thickness
+experiment, and serial against parallel solves.
+"""
+
+import functools
+import json
+import math
+
+import numpy as np
+import pytest
+
+from yarnfit.engine import ConvergenceWarning, QuasiStaticOptions
+from yarnfit.engine.tiling import yarn_strips
+from yarnfit.fabric import Fabric
+from yarnfit.fit import FAMILIES, fit_shell
+from yarnfit.homogenize import (
+    SAMPLES_PER_LEVEL,
+    SampleRanges,
+    SampleSpec,
+    SurfaceMap,
+    default_ranges,
+    family_deformation,
+    identity_sample,
+    levels_for,
+    sample_design,
+    solve_sample,
+    solve_samples,
+    tile_repeat,
+)
+from yarnfit.material import FabricFit, fit_fabric, fit_samples, shell_thickness
+from yarnfit.materials import FiberMaterial, get_fiber
+from yarnfit.patterns import YarnPattern
+from yarnfit.relax import relax_pattern
+from yarnfit.shell import ShellMaterial
+
+# Second differences of the map at step 1e-5 m: truncation ~κ³ h² ~ 1e-6 relative at κ = 300/m.
+FORM_RTOL = 1e-5
+# The cylinder is an exact isometry; the membrane map is linear: their metrics are I to round-off.
+ISOMETRY_ATOL = 1e-9
+# The acceptance bound of the analytic end-to-end test.
+ANALYTIC_RTOL = 0.02
+# Warp stretch, shear and warp bending of non-touching parallel weft yarns: "at least 100× smaller".
+DECOUPLED_RATIO = 1e-2
+# A square plain weave: weft and warp constants "equal within 5 %".
+SYMMETRY_RTOL = 0.05
+# The undeformed sample against a 1 % weft stretch: touching contacts without multipliers push with
+# the smoothing force (δ/4, δ = 1e-4 k (ra + rb)) and release energy of order δ² / k (measured
+# 1e-5 of the 1 % stretch); any real offset would be of the order of the stretch energy itself.
+IDENTITY_RTOL = 1e-3
+
+
+def plain(gsm=200.0, counts=(2500.0, 2500.0)):
+    return Fabric(name="plain", fiber=get_fiber("cotton"), structure="plain", areal_density=gsm * 1e-3, counts=counts)
+
+
+@functools.lru_cache(maxsize=None)
+def fitted(gsm=200.0):
+    return fit_fabric(plain(gsm), samples=13, workers=1)
+
+
+# -- the mid-surface -------------------------------------------------------------------------------
+
+
+def _forms(surface: SurfaceMap, X: np.ndarray, h: float = 1e-5):
+    """First and second fundamental forms of the map at X by central differences."""
+    def point(y):
+        return surface.evaluate(np.asarray(y)[None])[0][0]
+
+    e = np.eye(2) * h
+    d = [(point(X + e[a]) - point(X - e[a])) / (2 * h) for a in range(2)]
+    normal = surface.evaluate(X[None])[1][0]
+    first = np.array([[d[a] @ d[b] for b in range(2)] for a in range(2)])
+    second = np.empty((2, 2))
+    for a in range(2):
+        for b in range(2):
+            mixed = (point(X + e[a] + e[b]) - point(X + e[a] - e[b]) - point(X - e[a] + e[b])
+                     + point(X - e[a] - e[b])) / (4 * h * h)
+            second[a, b] = mixed @ normal
+    return first, second
+
+
+@pytest.mark.parametrize("I, II", [
+    (np.diag([1.1**2, 0.97**2]), np.zeros((2, 2))),
+    (np.array([[1.0, 0.08], [0.08, 1.0]]), np.zeros((2, 2))),
+    (np.eye(2), np.diag([300.0, 0.0])),
+    (np.eye(2), 150.0 * np.array([[1.0, -1.0], [-1.0, 1.0]])),
+    (np.eye(2), np.diag([300.0, -300.0])),
+    (np.diag([1.05, 1.0]), np.array([[200.0, 50.0], [50.0, -100.0]])),
+], ids=["stretch", "shear", "weft bend", "bias bend", "saddle", "stretched dome"])
+def test_the_mid_surface_has_the_sampled_fundamental_forms(I, II):
+    surface = SurfaceMap(I, II)
+    first, second = _forms(surface, np.zeros(2))
+    np.testing.assert_allclose(first, I, rtol=FORM_RTOL, atol=FORM_RTOL)
+    np.testing.assert_allclose(second, II, rtol=FORM_RTOL, atol=FORM_RTOL * max(1.0, np.abs(II).max()))
+    # Frames: orthonormal, the normal that of the map.
+    X = np.random.default_rng(0).uniform(-1e-3, 1e-3, (6, 2))
+    _, normal, frame = surface.evaluate(X)
+    np.testing.assert_allclose(np.einsum("nji,njk->nik", frame, frame), np.broadcast_to(np.eye(3), (6, 3, 3)),
+                               atol=1e-12)
+    np.testing.assert_allclose(frame[:, :, 2], normal, atol=1e-12)
+
+
+@pytest.mark.parametrize("I, II", [
+    (np.diag([1.1**2, 0.97**2]), np.zeros((2, 2))),
+    (np.eye(2), np.diag([0.0, -400.0])),
+    (np.eye(2), 150.0 * np.array([[1.0, 1.0], [1.0, 1.0]])),
+])
+def test_developable_samples_keep_their_metric_everywhere(I, II):
+    surface = SurfaceMap(I, II)
+    for X in np.random.default_rng(1).uniform(-2e-3, 2e-3, (5, 2)):
+        first, _ = _forms(surface, X)
+        np.testing.assert_allclose(first, I, atol=ISOMETRY_ATOL + FORM_RTOL * np.abs(I).max())
+
+
+def test_a_saddle_leaves_only_the_gauss_defect():
+    # Metric defect of the corrected quadric: −K X2²/2 and −K X1²/2 on the diagonal (K = −κ²),
+    # against κ² X² for the bare quadric.
+    k = 300.0
+    surface = SurfaceMap(np.eye(2), np.diag([k, -k]))
+    X = np.array([1e-3, 5e-4])
+    first, _ = _forms(surface, X)
+    expected = np.diag([1 + 0.5 * k**2 * X[1] ** 2, 1 + 0.5 * k**2 * X[0] ** 2])
+    # The remaining O(X⁴) terms: (κX)⁴ ~ 1e-2 of the O(X²) defect at κX = 0.3.
+    np.testing.assert_allclose(first, expected, atol=0.1 * (k * X[0]) ** 2)
+
+
+@pytest.mark.parametrize("I, II, message", [
+    (np.array([[1.0, 2.0], [2.0, 1.0]]), np.zeros((2, 2)), "positive definite"),
+    (np.array([[1.0, 0.0], [0.0, -1.0]]), np.zeros((2, 2)), "positive definite"),
+    (np.eye(2), np.array([[0.0, 1.0], [2.0, 0.0]]), "symmetric"),
+    (np.array([[np.nan, 0.0], [0.0, 1.0]]), np.zeros((2, 2)), "positive definite"),
+])
+def test_bad_fundamental_forms_are_rejected(I, II, message):
+    with pytest.raises(ValueError, match=message):
+        SurfaceMap(I, II)
+
+
+# -- tiling on the surface ------------------------------------------------------------------------
+
+
+def test_images_on_a_cylinder_are_rotations_about_its_axis():
+    relaxed = fitted().relaxed
+    k = 200.0
+    tiled = tile_repeat(relaxed, np.eye(2), np.diag([k, 0.0]))
+    position = tiled.state.node_position
+    # The cylinder's axis runs along y at height 1/k above the centre; an image in tile (1, 0)
+    # is the same node turned by k p_x about it, so its distance to the axis is unchanged.
+    centre, image = yarn_strips(tiled.model, position, (0, 0)), yarn_strips(tiled.model, position, (1, 0))
+    axis = np.array([0.0, 0.0, 1.0 / k])
+    for a, b in zip(centre, image):
+        radial_a = np.linalg.norm((a - axis)[:, [0, 2]], axis=1)
+        radial_b = np.linalg.norm((b - axis)[:, [0, 2]], axis=1)
+        np.testing.assert_allclose(radial_b, radial_a, rtol=1e-12)
+        np.testing.assert_allclose(b[:, 1], a[:, 1], atol=1e-15)
+
+
+def test_the_design_samples_every_family_in_tension_and_compression_only_on_request():
+    ranges = SampleRanges(stretch=0.2, curvature=100.0)
+    design = sample_design(ranges, 2)
+    assert len(design) == 2 * SAMPLES_PER_LEVEL == levels_for(26) * SAMPLES_PER_LEVEL
+    assert {s.family for s in design} == set(FAMILIES)
+    stretches = [s for s in design if s.family.endswith("_stretch")]
+    assert [s.parameter for s in stretches if s.family == "weft_stretch"] == [0.1, 0.2]
+    for family in FAMILIES[3:]:  # shear and bends: both signs at each level
+        assert sorted(s.parameter for s in design if s.family == family) == pytest.approx(
+            [-ranges.curvature if "bend" in family else -0.2, -0.5 * (ranges.curvature if "bend" in family else 0.2),
+             0.5 * (ranges.curvature if "bend" in family else 0.2), ranges.curvature if "bend" in family else 0.2])
+    squeezed = sample_design(SampleRanges(stretch=0.2, curvature=100.0, compression=0.25), 2)
+    weft = [s for s in squeezed if s.family == "weft_stretch"]
+    assert [s.parameter for s in weft] == pytest.approx([-0.05, 0.1, 0.2])
+    assert np.allclose(weft[0].I, np.diag([0.95**2, 1.0]))
+    with pytest.raises(ValueError, match="compression"):
+        SampleRanges(stretch=0.2, curvature=100.0, compression=-0.1)
+    with pytest.raises(ValueError, match="at least 13"):
+        levels_for(12)
+
+
+def test_the_undeformed_sample_has_no_energy():
+    relaxed = fitted().relaxed
+    zero = solve_sample(relaxed, identity_sample())
+    stretched = solve_sample(relaxed, SampleSpec("weft_stretch", *family_deformation("weft_stretch", 0.01), 0.01))
+    assert zero.converged and stretched.converged
+    assert stretched.energy_density > 0.0
+    assert abs(zero.energy_density) <= IDENTITY_RTOL * stretched.energy_density
+
+
+def test_parallel_and_serial_solves_agree():
+    relaxed = fitted().relaxed
+    specs = sample_design(default_ranges(relaxed), 1)[::5]
+    serial = solve_samples(relaxed, specs, workers=1)
+    parallel = solve_samples(relaxed, specs, workers=2)
+    assert [r.spec.family for r in parallel] == [s.family for s in specs]
+    for a, b in zip(serial, parallel):
+        assert a.energy_density == b.energy_density
+        np.testing.assert_array_equal(a.position, b.position)
+
+
+# -- end to end ------------------------------------------------------------------------------------
+
+
+def test_straight_parallel_yarns_give_the_closed_form_stiffness():
+    # One straight weft yarn per repeat, spacing d = 3r (not touching, no empty band wider than a
+    # diameter), of a linear fibre; breaking strain 2 % keeps the stretch samples where Green and
+    # engineering strain agree to 1 %.
+    r, d, E = 1e-4, 3e-4, 2e9
+    fiber = FiberMaterial(name="linear", density_kg_m3=1000.0, young_min_pa=E, young_max_pa=E, breaking_strain=0.02,
+                          poisson=0.3, friction=0.2)
+    x = np.linspace(0.0, 2e-3, 16, endpoint=False)
+    points = np.column_stack([x, np.full_like(x, 0.5 * d), np.zeros_like(x)])
+    pattern = YarnPattern.from_yarns("parallel", "woven", (2e-3, d), r, [(points, (1, 0))])
+    relaxed = relax_pattern(pattern, fiber, shrink=1.0)
+    assert relaxed.valid
+    results = solve_samples(relaxed, sample_design(default_ranges(relaxed), 2), workers=1)
+    assert all(s.converged for s in results)
+    # The paper's model: with no warp bending stiffness at all, b01 is not identifiable.
+    material = fit_shell(fit_samples(results), shell_thickness(relaxed), model="paper").material
+    eng = material.engineering()
+    stretch, bending = E * math.pi * r**2 / d, E * math.pi * r**4 / (4 * d)
+    assert eng["weft_stretch_n_per_m"] == pytest.approx(stretch, rel=ANALYTIC_RTOL)
+    assert eng["bending_weft_nm"] == pytest.approx(bending, rel=ANALYTIC_RTOL)
+    assert eng["warp_stretch_n_per_m"] <= DECOUPLED_RATIO * stretch
+    assert eng["shear_n_per_m"] <= DECOUPLED_RATIO * stretch
+    assert eng["bending_warp_nm"] <= DECOUPLED_RATIO * bending
+
+
+def test_a_square_plain_weave_is_as_stiff_along_weft_as_along_warp():
+    eng = fitted().material.engineering()
+    for weft, warp in (("weft_stretch_n_per_m", "warp_stretch_n_per_m"), ("bending_weft_nm", "bending_warp_nm")):
+        assert eng[weft] == pytest.approx(eng[warp], rel=SYMMETRY_RTOL), weft
+
+
+def test_a_heavier_fabric_at_the_same_counts_is_stiffer():
+    # The paper's thickness experiment: more g/m² at fixed counts means thicker yarns.
+    light, heavy = fitted(150.0).material.engineering(), fitted(250.0).material.engineering()
+    for key in ("weft_stretch_n_per_m", "warp_stretch_n_per_m", "bending_weft_nm", "bending_warp_nm"):
+        assert heavy[key] > light[key], key
+
+
+def test_samples_that_do_not_converge_are_listed_and_excluded(tmp_path):
+    base = fitted()
+    relaxed = base.relaxed
+    with pytest.warns(ConvergenceWarning):
+        stuck = solve_sample(relaxed, base.samples[2].spec, QuasiStaticOptions(max_iterations=1))
+    assert not stuck.converged
+    samples = list(base.samples) + [stuck]
+    fit = fit_shell(fit_samples(samples), shell_thickness(relaxed))
+    assert len(fit.excluded) == 1 and len(fit.used) == len(base.samples)
+    result = FabricFit(base.fabric, relaxed, base.ranges, samples, fit, dict(base.seconds))
+    data = json.loads(result.write(tmp_path / "m.json").read_text())
+    assert [s["converged"] for s in data["samples"]].count(False) == 1
+    assert len(data["fit"]["excluded"]) == 1
+
+
+def test_the_material_file_reads_back(tmp_path):
+    result = fitted()
+    path = result.write(tmp_path / "plain.json")
+    data = json.loads(path.read_text())
+    assert set(data) >= {"yarnfit_version", "inputs", "yarn", "shell", "engineering", "fit", "samples"}
+    assert set(data["engineering"]) == {"weft_stretch_n_per_m", "warp_stretch_n_per_m", "poisson_weft",
+                                        "poisson_warp", "shear_n_per_m", "bending_weft_nm", "bending_warp_nm",
+                                        "bending_bias_nm"}
+    assert ShellMaterial.from_json(path) == result.material
+    assert len(data["samples"]) == len(result.samples)

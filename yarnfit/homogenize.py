@@ -1,0 +1,453 @@
+"""Homogenization (paper §4.5, phase 2): the relaxed repeat tiled over a deformed mid-surface.
+
+A sample is a pair of constant fundamental forms ``(I, II)`` (``I`` 2×2 SPD, ``II`` 2×2 symmetric,
+1/m; the rest surface is flat with ``I = Id``). Every node of the relaxed repeat has reference
+coordinates ``X`` in the fabric plane (measured from the repeat's centre) and a height ``h`` above
+its mid-plane; it is placed at ``x = φ(X) + h n(X) + ũ`` on a mid-surface ``φ`` whose fundamental
+forms at ``X = 0`` are ``(I, II)``, with ``R(X) = [∂φ polar rotation | n]`` the surface frame:
+
+- ``φ(X) = β(S X)``, ``S = I^{1/2}`` (symmetric: a pure membrane sample turns nothing), and ``β``
+  the bent plane with second fundamental form ``II' = S⁻¹ II S⁻¹``: a **circular cylinder** when
+  ``II'`` is singular (single, bias and any other developable bend: exact, its metric is ``I``
+  everywhere), otherwise a quadric ``(Y, ½ Yᵀ II' Y)`` with cubic corrections in the plane. A
+  saddle's Gauss curvature K cannot live on a flat metric: the corrections cancel the quadric's
+  own metric strain (``κ² Y²``) and leave the Gauss defect ``K Y² / 4`` per axis, which the saddle
+  curvatures keep small (see :func:`sample_design`).
+- Periodicity (``C_RVE_Γ``): the image of node i in tile T is where its co-rotated fluctuation
+  ``Rᵀ ũ`` is the same at ``X_i + T``: ``Q x + c`` with ``Q = R(X_i + T) R(X_i)ᵀ``. These per-node
+  rigid maps (:class:`~yarnfit.engine.tiling.CurvedTiling`) carry ghost-edge ends, frames across
+  tile borders (so the twist across a border is the twist of a real joint: the paper's matching
+  end twist, and no net twist can build up from tile to tile) and contacts with every image.
+- ``C_RVE``: per yarn, ``Σ_j R_jᵀ ũ_j = 0`` — linear in the positions since ``R_j`` is fixed.
+
+The quasi-static solver then minimises the yarn energy; ``Ū = U / (p_x p_y)`` (J/m² of reference
+area) with its residual is the sample's result. Samples are independent and run in parallel.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .engine import LinearConstraints, QuasiStaticOptions, QuasiStaticSolver, Residual, RodModel, RodState
+from .engine.contact import image_range
+from .engine.model import aligned_frames
+from .engine.tiling import CurvedTiling, retile
+from .relax import RelaxedRepeat
+from .shell import as_first_fundamental_form, as_second_fundamental_form
+
+# A bend whose |det II'| is below this fraction of ‖II'‖² is a cylinder (developable); the
+# sample design's bends are exactly singular or far from it.
+DEVELOPABLE_TOLERANCE = 1e-12
+# Newton iterations per sample: most take 10–60; the limit only stops a run going nowhere.
+MAX_ITERATIONS = 600
+# Tiles of maps beyond those the rest configuration's contacts reach: contact queries during line
+# searches sweep further (the step's length is added to the reach).
+EXTRA_TILES = 2
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceMap:
+    """The deformed mid-surface of one sample: ``φ`` with ``I`` and ``II`` at ``X = 0``."""
+
+    I: np.ndarray
+    II: np.ndarray
+
+    def __post_init__(self) -> None:
+        I = as_first_fundamental_form(self.I)
+        II = as_second_fundamental_form(self.II)
+        if I.shape != (2, 2) or II.shape != (2, 2):
+            raise ValueError(f"a surface map takes one (2, 2) I and II, got {I.shape} and {II.shape}")
+        object.__setattr__(self, "I", 0.5 * (I + I.T))
+        object.__setattr__(self, "II", 0.5 * (II + II.T))
+
+    @property
+    def stretch(self) -> np.ndarray:
+        """``S = I^{1/2}`` (2×2 SPD)."""
+        w, v = np.linalg.eigh(self.I)
+        return (v * np.sqrt(w)) @ v.T
+
+    @property
+    def bend(self) -> np.ndarray:
+        """``II' = S⁻¹ II S⁻¹``: the bend in the stretched plane's coordinates (1/m)."""
+        inv = np.linalg.inv(self.stretch)
+        return inv @ self.II @ inv
+
+    def evaluate(self, X: np.ndarray, height: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Points ``φ(X) + h n(X)`` ``(n, 3)`` (m), normals ``(n, 3)`` and surface frames
+        ``R (n, 3, 3)`` (columns: the polar rotation of ∂φ, then n) at reference points
+        ``X (n, 2)`` (m)."""
+        X = np.asarray(X, dtype=np.float64).reshape(-1, 2)
+        S = self.stretch
+        Y = X @ S  # S symmetric: row-wise S X
+        point, tangent = _bent_plane(self.bend, Y)
+        gradient = tangent @ S  # ∂φ/∂X = ∂β/∂Y S, (n, 3, 2)
+        frame = _surface_frame(gradient)
+        normal = frame[:, :, 2]
+        if height is not None:
+            point = point + np.asarray(height, dtype=np.float64).reshape(-1, 1) * normal
+        return point, normal, frame
+
+
+def _bent_plane(bend: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points ``(n, 3)`` and tangents ``∂β/∂Y (n, 3, 2)`` of the plane bent to second fundamental
+    form ``bend`` at the origin: a circular cylinder if ``bend`` is singular, else a quadric."""
+    n = Y.shape[0]
+    point = np.zeros((n, 3))
+    tangent = np.zeros((n, 3, 2))
+    scale = float(np.abs(bend).max())
+    if scale == 0.0:
+        point[:, :2] = Y
+        tangent[:, 0, 0] = tangent[:, 1, 1] = 1.0
+        return point, tangent
+    w, v = np.linalg.eigh(bend)
+    if abs(w[0] * w[1]) <= DEVELOPABLE_TOLERANCE * scale**2:
+        # Cylinder: curvature κ along u, straight along v = u turned by +90° (so u × v = e_z).
+        k = int(np.argmax(np.abs(w)))
+        kappa, u = float(w[k]), v[:, k]
+        across = np.array([-u[1], u[0]])
+        s, t = Y @ u, Y @ across
+        u3, across3 = np.array([u[0], u[1], 0.0]), np.array([across[0], across[1], 0.0])
+        angle = kappa * s
+        point = (np.outer(t, across3) + np.outer(np.sin(angle) / kappa, u3)
+                 + np.outer(2.0 * np.sin(0.5 * angle) ** 2 / kappa, [0.0, 0.0, 1.0]))
+        along = np.outer(np.cos(angle), u3) + np.outer(np.sin(angle), [0.0, 0.0, 1.0])  # ∂β/∂s
+        tangent = along[:, :, None] * u[None, None, :] + across3[None, :, None] * across[None, None, :]
+        return point, tangent
+    # Non-developable (saddle or dome): no surface carries this bend on a flat metric (Gauss). In
+    # principal coordinates Z, the quadric (Z, ½ Σ κ_i Z_i²) strains the metric by κ_i² Z_i² along
+    # each axis; the cubic terms below cancel that to second order and leave only the Gauss
+    # defect, split evenly: g = diag(1 − K Z2²/2, 1 − K Z1²/2) + O(Z⁴), K = κ1 κ2.
+    z = Y @ v
+    k1, k2 = w
+    gauss = k1 * k2
+    z1, z2 = z[:, 0], z[:, 1]
+    local = np.column_stack([
+        z1 - k1**2 * z1**3 / 6.0 - 0.25 * gauss * z1 * z2**2,
+        z2 - k2**2 * z2**3 / 6.0 - 0.25 * gauss * z1**2 * z2,
+    ])
+    point[:, :2] = local @ v.T
+    point[:, 2] = 0.5 * (k1 * z1**2 + k2 * z2**2)
+    d_local = np.empty((n, 2, 2))  # ∂(local)/∂Z
+    d_local[:, 0, 0] = 1.0 - 0.5 * k1**2 * z1**2 - 0.25 * gauss * z2**2
+    d_local[:, 0, 1] = d_local[:, 1, 0] = -0.5 * gauss * z1 * z2
+    d_local[:, 1, 1] = 1.0 - 0.5 * k2**2 * z2**2 - 0.25 * gauss * z1**2
+    tangent[:, :2, :] = v @ d_local @ v.T
+    tangent[:, 2, :] = np.column_stack([k1 * z1, k2 * z2]) @ v.T
+    return point, tangent
+
+
+def _surface_frame(gradient: np.ndarray) -> np.ndarray:
+    """``(n, 3, 3)`` frames: the rotation of the polar decomposition ``∂φ = R₂ U`` (two columns)
+    and the unit normal ``r₁ × r₂``."""
+    u, _, vt = np.linalg.svd(gradient, full_matrices=False)
+    r2 = u @ vt
+    normal = np.cross(r2[:, :, 0], r2[:, :, 1])
+    return np.concatenate([r2, normal[:, :, None]], axis=2)
+
+
+# -- the repeat on the surface ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class TiledRepeat:
+    """A relaxed repeat placed on a sample's mid-surface, ready to solve.
+
+    Attributes:
+        surface: the mid-surface.
+        model: the relaxed rest model on the curved tiling.
+        state: the initial configuration (``ũ = 0``, frames turned with the surface).
+        constraints: ``C_RVE`` (3 rows per yarn).
+        reference: ``(N, 2)`` m, nodes' reference coordinates from the repeat's centre.
+        height: ``(N,)`` m, nodes' heights above the mid-plane.
+        area: ``p_x p_y`` (m²).
+    """
+
+    surface: SurfaceMap
+    model: RodModel
+    state: RodState
+    constraints: LinearConstraints
+    reference: np.ndarray
+    height: np.ndarray
+    area: float
+
+
+def tile_repeat(relaxed: RelaxedRepeat, I, II) -> TiledRepeat:
+    """Place ``relaxed`` on the mid-surface of ``(I, II)`` (see the module docstring)."""
+    surface = SurfaceMap(np.asarray(I, dtype=np.float64), np.asarray(II, dtype=np.float64))
+    flat = relaxed.model
+    px, py = (float(v) for v in relaxed.repeat_size)
+    rest = flat.node_rest_position
+    reference = rest[:, :2] - np.array([0.5 * px, 0.5 * py])
+    height = rest[:, 2] - rest[:, 2].mean()
+    position, _, frame = surface.evaluate(reference, height)
+    tiling = _curved_tiling(surface, flat, reference, height, position, frame, (px, py))
+    lattice = surface.evaluate(np.array([[px, 0.0], [0.0, py], [0.0, 0.0]]))[0]
+    model = retile(flat, tiling, lattice[:2] - lattice[2])
+    quaternion = _turned_frames(model, relaxed.state.edge_quaternion, reference, (px, py), surface)
+    state = RodState.from_model(model)
+    state.node_position[:] = position
+    state.edge_quaternion[:] = aligned_frames(model, position, quaternion)
+    return TiledRepeat(surface, model, state, _rve_constraints(model, frame), reference, height, px * py)
+
+
+def _curved_tiling(surface, flat, reference, height, position, frame, repeat) -> CurvedTiling:
+    """Per-node maps onto every tile the contacts can reach (with EXTRA_TILES to spare)."""
+    # As find_pairs reaches: two radii, a margin of about one, and an edge.
+    reach = 3.0 * float(flat.edge_radius.max()) + float(flat.edge_rest_length.max())
+    needed = int(image_range(flat, flat.node_rest_position, reach).max())
+    extent = needed + EXTRA_TILES
+    offsets = np.arange(-extent, extent + 1)
+    images = np.array([(0, 0)] + [(i, j) for i in offsets for j in offsets if (i, j) != (0, 0)], dtype=np.int64)
+    n, k = len(reference), len(images)
+    shifted = (reference[:, None, :] + (images * np.asarray(repeat))[None, :, :]).reshape(-1, 2)
+    image_position, _, image_frame = surface.evaluate(shifted, np.repeat(height, k))
+    image_position = image_position.reshape(n, k, 3)
+    image_frame = image_frame.reshape(n, k, 3, 3)
+    rotation = np.einsum("nkij,nlj->nkil", image_frame, frame)  # R(X + T) R(X)ᵀ
+    translation = image_position - np.einsum("nkij,nj->nki", rotation, position)
+    rotation[:, 0], translation[:, 0] = np.eye(3), 0.0  # the home tile exactly
+    return CurvedTiling(images, np.ascontiguousarray(rotation), np.ascontiguousarray(translation))
+
+
+def _turned_frames(model: RodModel, quaternion: np.ndarray, reference: np.ndarray, repeat, surface) -> np.ndarray:
+    """Relaxed frames turned by the surface frame at each edge's reference midpoint."""
+    start = reference[model.edge_nodes[:, 0]]
+    end = reference[model.edge_nodes[:, 1]] + model.edge_tile * np.asarray(repeat)
+    frame = surface.evaluate(0.5 * (start + end))[2]
+    xyzw = (Rotation.from_matrix(frame) * Rotation.from_quat(quaternion[:, [1, 2, 3, 0]])).as_quat()
+    return np.ascontiguousarray(np.column_stack([xyzw[:, 3], xyzw[:, :3]]))
+
+
+def _rve_constraints(model: RodModel, frame: np.ndarray) -> LinearConstraints:
+    """``C_RVE``: per yarn and axis k, ``Σ_j (R_jᵀ x_j)_k`` keeps its initial value."""
+    rows = np.zeros((3 * model.n_rods, model.n_nodes, 3))
+    for r in range(model.n_rods):
+        nodes = np.arange(model.rod_node_start[r], model.rod_node_start[r + 1])
+        for k in range(3):
+            rows[3 * r + k, nodes] = frame[nodes, :, k]
+    return LinearConstraints(rows.reshape(3 * model.n_rods, -1))
+
+
+# -- one sample -----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class SampleSpec:
+    """A sampled deformation: ``family`` (see :data:`yarnfit.fit.FAMILIES`), ``I``, ``II`` (1/m)
+    and the scalar ``parameter`` that varies along the family (stretch λ − 1, shear ``I12``, or
+    curvature in 1/m), for plots."""
+
+    family: str
+    I: np.ndarray
+    II: np.ndarray
+    parameter: float
+
+
+@dataclass(frozen=True, eq=False)
+class SampleResult:
+    """A solved sample: ``energy_density`` Ū (J/m²), the solver's ``residual``, ``converged``,
+    ``iterations``, wall ``seconds`` and the final ``position (N, 3)`` (m)."""
+
+    spec: SampleSpec
+    energy_density: float
+    converged: bool
+    residual: Residual
+    iterations: int
+    seconds: float
+    position: np.ndarray
+
+
+def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions | None = None) -> SampleResult:
+    """Tile ``relaxed`` on the sample's surface and minimise the yarn energy under ``C_RVE``."""
+    start = time.perf_counter()
+    tiled = tile_repeat(relaxed, spec.I, spec.II)
+    options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
+    result = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
+    return SampleResult(
+        spec=spec,
+        energy_density=result.energy.internal / tiled.area,
+        converged=result.converged,
+        residual=result.residual,
+        iterations=result.iterations,
+        seconds=time.perf_counter() - start,
+        position=result.state.node_position,
+    )
+
+
+# -- sample design --------------------------------------------------------------------------------
+
+# Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
+# four bend families of both signs.
+SAMPLES_PER_LEVEL = 13
+# Largest curvature times repeat size (rad): keeps the saddles' Gauss defect (~κ² p² / 16 of
+# strain at the repeat's corners) small. Measured on cotton twill, a saddle's Ū/κ² grows by 4 %
+# from 0.05 to 0.2 rad per repeat and by 10 % to 0.4 rad; single and dome bends by under 2 %.
+MAX_TURN_PER_REPEAT = 0.25
+
+
+@dataclass(frozen=True)
+class SampleRanges:
+    """Largest sampled deformations: ``stretch`` (λ − 1 along a yarn direction, and ``I12`` for
+    shear), ``curvature`` (1/m) and ``compression``, the in-plane compression sampled along weft and
+    warp as a fraction of ``stretch`` (0, the default: none).
+
+    In-plane compression is off by default because a flat repeat cannot show what a fabric does
+    under it: real cloth buckles out of plane at once, while the flat-constrained repeat either goes
+    slack (single jersey: Ū = 0 to round-off at 2.5 % along the wales) or jams (HYLC stockinette:
+    three times its tensile stiffness at 10 %). Fitted together with tension, a quadratic shell
+    takes the average and the knits' membrane blocks came out indefinite.
+    """
+
+    stretch: float
+    curvature: float
+    compression: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("stretch", "curvature"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"sample range {name} must be positive, got {value!r}")
+        if not (math.isfinite(self.compression) and 0.0 <= self.compression < 1.0):
+            raise ValueError(f"sample range compression must be a fraction of the stretch range in [0, 1), "
+                             f"got {self.compression!r}")
+
+
+def default_ranges(relaxed: RelaxedRepeat) -> SampleRanges:
+    """What the fibre can bear: stretch up to its breaking strain, curvature up to the one that
+    strains a yarn's surface fibres to breaking (``ε_max / r``), and no more than
+    MAX_TURN_PER_REPEAT across one repeat."""
+    strain = relaxed.fiber.breaking_strain
+    curvature = min(strain / relaxed.radius, MAX_TURN_PER_REPEAT / float(max(relaxed.repeat_size)))
+    return SampleRanges(stretch=strain, curvature=curvature)
+
+
+def family_deformation(family: str, parameter: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(I, II)`` of a sample of ``family`` at ``parameter`` (see :func:`sample_design`)."""
+    e, eye, zero = float(parameter), np.eye(2), np.zeros((2, 2))
+    forms = {
+        "weft_stretch": lambda: (np.diag([(1 + e) ** 2, 1.0]), zero),
+        "warp_stretch": lambda: (np.diag([1.0, (1 + e) ** 2]), zero),
+        "biaxial_stretch": lambda: ((1 + e) ** 2 * eye, zero),
+        "shear": lambda: (np.array([[1.0, e], [e, 1.0]]), zero),
+        "weft_bend": lambda: (eye, np.diag([e, 0.0])),
+        "warp_bend": lambda: (eye, np.diag([0.0, e])),
+        # Cylinder at +45° for positive parameters, at −45° (curvature |e|) for negative ones.
+        "bias_bend": lambda: (eye, 0.5 * abs(e) * np.array([[1.0, np.sign(e)], [np.sign(e), 1.0]])),
+        "saddle_bend": lambda: (eye, np.diag([e, -e])),
+    }
+    if family not in forms:
+        raise ValueError(f"unknown sample family {family!r}; families: {', '.join(forms)}")
+    return forms[family]()
+
+
+def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
+    """The samples (paper §4.6, plus saddles for b01): ``levels`` magnitudes per family and sign
+    (:func:`family_deformation` gives each one's ``I`` and ``II``).
+
+    - weft, warp stretch: ``I = diag(λ², 1)`` / ``diag(1, λ²)``, λ − 1 at ``j/levels`` of the
+      range, and one compression at ``ranges.compression`` of it if that is not 0; biaxial
+      ``I = λ² Id``, all in tension;
+    - shear: ``I = [[1, s], [s, 1]]``, ``s = ±j/levels`` of the stretch range;
+    - weft, warp bends: ``II = diag(κ, 0)`` / ``diag(0, κ)``, ``κ = ±j/levels`` of the curvature
+      range;
+    - bias bends: cylinders at ±45°, ``II = κ/2 [[1, ±1], [±1, 1]]``;
+    - saddles: ``II = ±κ diag(1, −1)`` (the only samples that separate b01 from b22).
+    """
+    if not (isinstance(levels, int) and levels >= 1):
+        raise ValueError(f"levels must be a positive integer, got {levels!r}")
+    fractions = np.arange(1, levels + 1) / levels
+    both_signs = np.concatenate([-fractions[::-1], fractions])
+    stretch, curvature = ranges.stretch, ranges.curvature
+    uniaxial = np.concatenate([[-ranges.compression] if ranges.compression > 0 else [], fractions])
+    parameters = {
+        "weft_stretch": uniaxial * stretch,
+        "warp_stretch": uniaxial * stretch,
+        "biaxial_stretch": fractions * stretch,
+        "shear": both_signs * stretch,
+        "weft_bend": both_signs * curvature,
+        "warp_bend": both_signs * curvature,
+        "bias_bend": both_signs * curvature,
+        "saddle_bend": both_signs * curvature,
+    }
+    specs = []
+    for family, values in parameters.items():
+        for value in values:
+            I, II = family_deformation(family, value)
+            specs.append(SampleSpec(family, I, II, float(value)))
+    return specs
+
+
+def levels_for(samples: int) -> int:
+    """Magnitudes per family and sign for about ``samples`` samples in all (SAMPLES_PER_LEVEL per
+    level)."""
+    if not (isinstance(samples, int) and samples >= SAMPLES_PER_LEVEL):
+        raise ValueError(f"the sample design needs at least {SAMPLES_PER_LEVEL} samples (one per family and sign), "
+                         f"got {samples!r}")
+    return max(1, round(samples / SAMPLES_PER_LEVEL))
+
+
+# -- many samples in parallel ---------------------------------------------------------------------
+
+_WORKER_REPEAT: RelaxedRepeat | None = None
+
+
+def _worker_start(relaxed: RelaxedRepeat) -> None:
+    global _WORKER_REPEAT
+    _WORKER_REPEAT = relaxed
+
+
+def _worker_solve(index: int, spec: SampleSpec) -> tuple[int, SampleResult]:
+    return index, solve_sample(_WORKER_REPEAT, spec)
+
+
+def solve_samples(
+    relaxed: RelaxedRepeat,
+    specs: Sequence[SampleSpec],
+    workers: int | None = None,
+    progress: Callable[[int, int, SampleResult], None] | None = None,
+) -> list[SampleResult]:
+    """Solve every sample, on ``workers`` processes (default: every core; 1 runs in this
+    process). ``progress(done, total, result)`` is called as each finishes. Results come back in
+    the order of ``specs``."""
+    workers = (os.cpu_count() or 1) if workers is None else int(workers)
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
+    workers = min(workers, len(specs))
+    results: list[SampleResult | None] = [None] * len(specs)
+    if workers <= 1:
+        for i, spec in enumerate(specs):
+            results[i] = solve_sample(relaxed, spec)
+            if progress is not None:
+                progress(i + 1, len(specs), results[i])
+        return results
+    # Fork where the platform has it: a spawned worker re-imports the caller's main module, which
+    # re-runs any unguarded script (it hung the first trial). The workers touch neither the
+    # parent's threads (a Rerun recording) nor Numba's thread pool; they only run serial kernels.
+    method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    context = multiprocessing.get_context(method)
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=_worker_start, initargs=(relaxed,)) as pool:
+        pending = {pool.submit(_worker_solve, i, spec) for i, spec in enumerate(specs)}
+        done = 0
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for future in finished:
+                i, result = future.result()
+                results[i] = result
+                done += 1
+                if progress is not None:
+                    progress(done, len(specs), result)
+    return results
+
+
+def identity_sample() -> SampleSpec:
+    """The undeformed surface (``I = Id``, ``II = 0``): Ū must vanish."""
+    return SampleSpec("weft_stretch", np.eye(2), np.zeros((2, 2)), 0.0)
