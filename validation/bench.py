@@ -1,6 +1,6 @@
 """Benchmarks of yarnfit, one section per stage.
 
-    python validation/bench.py [engine] [relax]
+    python validation/bench.py [engine] [relax] [fit]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -193,7 +193,43 @@ def bench_relax() -> None:
             report(f"{key}_worst_overlap", result.penetration, "of the diameter")
 
 
-SECTIONS = {"engine": bench_engine, "relax": bench_relax}
+# -- fit ------------------------------------------------------------------------------------------
+
+
+def bench_fit() -> None:
+    """Full shell fits (default sample design, every core) of the five presets and of the HYLC
+    stockinette: wall time by stage, the slowest sample, the engineering constants and R² per
+    sample family. A small fit runs first, untimed, so that every kernel is compiled."""
+    import warnings
+    from pathlib import Path
+
+    from yarnfit.fabric import PRESETS, Fabric
+    from yarnfit.material import fit_fabric
+    from yarnfit.materials import get_fiber
+
+    stockinette = Path(__file__).parents[1] / "tests" / "data" / "hylc" / "stockinette.pyp"
+    fabrics = [Fabric.preset(name) for name in PRESETS]
+    fabrics.append(Fabric(name="stockinette", fiber=get_fiber("polyester"), pattern_file=stockinette))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit_fabric(fabrics[0], samples=13, workers=1)
+        for fabric in fabrics:
+            fitted = fit_fabric(fabric)
+            key = "fit_" + fabric.name.replace("-", "_")
+            seconds = fitted.seconds
+            report(f"{key}_seconds", sum(seconds.values()), "s")
+            for stage in ("relax", "homogenize", "fit"):
+                report(f"{key}_{stage}_seconds", seconds[stage], "s")
+            report(f"{key}_slowest_sample_seconds", max(r.seconds for r in fitted.samples), "s (one core)")
+            report(f"{key}_samples_fitted", len(fitted.fit.used), f"of {len(fitted.samples)}")
+            for name, value in fitted.material.engineering().items():
+                report(f"{key}_{name}", value, "")
+            for family, quality in fitted.fit.families.items():
+                if quality["samples"]:
+                    report(f"{key}_r2_{family}", quality["r2"], "")
+
+
+SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit}
 
 
 def main(argv: list[str] | None = None) -> int:
