@@ -15,6 +15,7 @@ from yarnfit.fit import (
     DIAGONAL_FLOOR_REL,
     FAMILIES,
     MEMBRANE_FAMILIES,
+    OPTIONAL_FAMILIES,
     IndefiniteFitError,
     Sample,
     design_matrix,
@@ -80,12 +81,16 @@ LARGEST = {
     "warp_stretch": 0.1,
     "biaxial_stretch": 0.1,
     "shear": 0.05,
+    "weft_uniaxial": 0.1,
+    "warp_uniaxial": 0.1,
     "weft_bend": 200.0,
     "warp_bend": 200.0,
     "bias_bend": 200.0,
     "saddle_bend": 200.0,
 }
 PER_FAMILY = 4
+# The families every fit needs (the paper's, plus saddles).
+CORE_FAMILIES = tuple(f for f in FAMILIES if f not in OPTIONAL_FAMILIES)
 
 
 def forms(family: str, x: float) -> tuple[np.ndarray, np.ndarray]:
@@ -99,6 +104,10 @@ def forms(family: str, x: float) -> tuple[np.ndarray, np.ndarray]:
         I = np.diag([(1 + x) ** 2, (1 + x) ** 2])
     elif family == "shear":
         I = np.array([[1.0, x], [x, 1.0]])
+    elif family == "weft_uniaxial":  # the homogenizer finds μ; any μ makes a valid membrane sample
+        I = np.diag([(1 + x) ** 2, (1 - 0.3 * x) ** 2])
+    elif family == "warp_uniaxial":
+        I = np.diag([(1 - 0.2 * x) ** 2, (1 + x) ** 2])
     elif family == "weft_bend":
         II = np.diag([x, 0.0])
     elif family == "warp_bend":
@@ -314,8 +323,8 @@ def test_standard_errors_match_the_scatter_of_repeated_noisy_fits():
 
 def test_too_few_samples_give_nan_standard_errors_and_strict_json():
     # One sample per family: n = p = 4 in each group, no degrees of freedom left.
-    samples = [s for s in make_samples(TRUE) if s.parameter in (LARGEST[s.family],)]
-    assert len(samples) == len(FAMILIES)
+    samples = [s for s in make_samples(TRUE, CORE_FAMILIES) if s.parameter in (LARGEST[s.family],)]
+    assert len(samples) == len(CORE_FAMILIES)
     fit = fit_shell(samples, H)
     assert all(math.isnan(v) for v in fit.std_error.values())
     for name in PARAMETER_NAMES:
@@ -331,7 +340,7 @@ def test_too_few_samples_give_nan_standard_errors_and_strict_json():
 def test_biaxial_energies_far_below_the_uniaxial_sum_give_an_indefinite_membrane():
     # W_biax = (h/2)(s00 + 2 s01 + s11) e² ≈ 0 forces s01 = −(s00 + s11)/2, and
     # (s00 + s11)²/4 > s00 s11 whenever s00 ≠ s11.
-    samples = make_samples(TRUE, energy=lambda family, W: 1e-3 * W if family == "biaxial_stretch" else W)
+    samples = make_samples(TRUE, CORE_FAMILIES, energy=lambda family, W: 1e-3 * W if family == "biaxial_stretch" else W)
     with pytest.raises(IndefiniteFitError, match=r"s01² = .* >= s00·s11 .* biaxial_stretch") as info:
         fit_shell(samples, H, coupling_limit=None)
     assert info.value.family == "biaxial_stretch"
@@ -342,7 +351,8 @@ def test_biaxial_energies_far_below_the_uniaxial_sum_give_an_indefinite_membrane
 def test_saddle_energies_far_above_the_uniaxial_sum_give_an_indefinite_bending_block():
     # W_saddle = (h³/2)(b00 − 2 b01 + b11) k² ten times the truth forces b01 ≈ −4 (b00 + b11)/2,
     # beyond −√(b00 b11); b22 takes up the bias bends.
-    samples = make_samples(TRUE, energy=lambda family, W: INDEFINITE_FACTOR[family] * W if family == "saddle_bend" else W)
+    samples = make_samples(TRUE, CORE_FAMILIES,
+                           energy=lambda family, W: INDEFINITE_FACTOR[family] * W if family == "saddle_bend" else W)
     with pytest.raises(IndefiniteFitError, match=r"b01² = .* >= b00·b11 .* saddle_bend") as info:
         fit_shell(samples, H, model="full", coupling_limit=None)
     assert info.value.family == "saddle_bend"
@@ -389,7 +399,7 @@ INDEFINITE_FACTOR = {"biaxial_stretch": 1e-3, "saddle_bend": 10.0}
 @pytest.mark.parametrize("family, coupling", [("biaxial_stretch", ("s00", "s01", "s11")),
                                               ("saddle_bend", ("b00", "b01", "b11"))])
 def test_a_coupling_the_data_push_past_positive_definite_ends_on_its_bound(family, coupling):
-    samples = make_samples(TRUE, energy=lambda f, W: INDEFINITE_FACTOR[family] * W if f == family else W)
+    samples = make_samples(TRUE, CORE_FAMILIES, energy=lambda f, W: INDEFINITE_FACTOR[family] * W if f == family else W)
     fit = fit_shell(samples, H)
     d0, c, d1 = (fit.parameters[n] for n in coupling)
     assert fit.active_bounds == [coupling[1]]
@@ -567,7 +577,8 @@ def test_bending_samples_must_not_stretch():
         Sample("bias_bend", np.diag([1.0 + 1e-6, 1.0]), 50.0 * np.ones((2, 2)), 1.0, 0.0, True, 100.0)
     # Round-off in building I = Id is accepted.
     Sample("bias_bend", np.diag([1.0 + 1e-15, 1.0]), 50.0 * np.ones((2, 2)), 1.0, 0.0, True, 100.0)
-    assert set(BENDING_FAMILIES) == set(FAMILIES[4:])
+    assert set(BENDING_FAMILIES) | set(MEMBRANE_FAMILIES) == set(FAMILIES)
+    assert not set(BENDING_FAMILIES) & set(MEMBRANE_FAMILIES)
 
 
 def test_sample_arrays_are_read_only_copies():

@@ -18,12 +18,12 @@ from yarnfit.engine.tiling import yarn_strips
 from yarnfit.fabric import Fabric
 from yarnfit.fit import FAMILIES, fit_shell
 from yarnfit.homogenize import (
-    SAMPLES_PER_LEVEL,
     SampleRanges,
     SampleSpec,
     SurfaceMap,
     default_ranges,
     family_deformation,
+    design_size,
     identity_sample,
     levels_for,
     sample_design,
@@ -31,7 +31,7 @@ from yarnfit.homogenize import (
     solve_samples,
     tile_repeat,
 )
-from yarnfit.material import FabricFit, fit_fabric, fit_samples, shell_thickness
+from yarnfit.material import DEFAULT_SAMPLES, FabricFit, fit_fabric, fit_samples, shell_thickness
 from yarnfit.materials import FiberMaterial, get_fiber
 from yarnfit.patterns import YarnPattern
 from yarnfit.relax import relax_pattern
@@ -59,7 +59,7 @@ def plain(gsm=200.0, counts=(2500.0, 2500.0)):
 
 @functools.lru_cache(maxsize=None)
 def fitted(gsm=200.0):
-    return fit_fabric(plain(gsm), samples=13, workers=1)
+    return fit_fabric(plain(gsm), samples=15, workers=1)
 
 
 # -- the mid-surface -------------------------------------------------------------------------------
@@ -161,22 +161,40 @@ def test_images_on_a_cylinder_are_rotations_about_its_axis():
 def test_the_design_samples_every_family_in_tension_and_compression_only_on_request():
     ranges = SampleRanges(stretch=0.2, curvature=100.0)
     design = sample_design(ranges, 2)
-    assert len(design) == 2 * SAMPLES_PER_LEVEL == levels_for(26) * SAMPLES_PER_LEVEL
+    assert len(design) == design_size(2) == 2 * 13 + 2 and levels_for(DEFAULT_SAMPLES) == 2
     assert {s.family for s in design} == set(FAMILIES)
-    stretches = [s for s in design if s.family.endswith("_stretch")]
-    assert [s.parameter for s in stretches if s.family == "weft_stretch"] == [0.1, 0.2]
-    for family in FAMILIES[3:]:  # shear and bends: both signs at each level
+    assert [s.parameter for s in design if s.family == "weft_stretch"] == [0.1, 0.2]
+    # Uniaxial tension only at the smaller level; it starts from the pure stretch.
+    uniaxial = [s for s in design if s.family == "warp_uniaxial"]
+    assert [s.parameter for s in uniaxial] == [0.1] and np.allclose(uniaxial[0].I, np.diag([1.0, 1.1**2]))
+    for family, largest in (("shear", 0.2), ("weft_bend", 100.0), ("bias_bend", 100.0), ("saddle_bend", 100.0)):
         assert sorted(s.parameter for s in design if s.family == family) == pytest.approx(
-            [-ranges.curvature if "bend" in family else -0.2, -0.5 * (ranges.curvature if "bend" in family else 0.2),
-             0.5 * (ranges.curvature if "bend" in family else 0.2), ranges.curvature if "bend" in family else 0.2])
+            [-largest, -0.5 * largest, 0.5 * largest, largest]), family
     squeezed = sample_design(SampleRanges(stretch=0.2, curvature=100.0, compression=0.25), 2)
     weft = [s for s in squeezed if s.family == "weft_stretch"]
     assert [s.parameter for s in weft] == pytest.approx([-0.05, 0.1, 0.2])
     assert np.allclose(weft[0].I, np.diag([0.95**2, 1.0]))
     with pytest.raises(ValueError, match="compression"):
         SampleRanges(stretch=0.2, curvature=100.0, compression=-0.1)
-    with pytest.raises(ValueError, match="at least 13"):
-        levels_for(12)
+    with pytest.raises(ValueError, match="at least 15"):
+        levels_for(14)
+    assert [levels_for(n) for n in (15, 28, 41, 56)] == [1, 2, 3, 4]
+
+
+def test_uniaxial_tension_finds_the_free_width_minimum():
+    # The plain weave at 5 % weft stretch: the search's Ū must be below its neighbours 5e-3 away in
+    # the free Green strain (50× the search's tolerance) and below the pure stretch.
+    relaxed = fitted().relaxed
+    spec = SampleSpec("weft_uniaxial", *family_deformation("weft_uniaxial", 0.05), 0.05)
+    result = solve_sample(relaxed, spec)
+    assert result.converged
+    free = 0.5 * (result.spec.I[1, 1] - 1.0)
+    assert result.spec.I[0, 0] == pytest.approx(1.05**2) and free < 0.0
+    scan = [solve_sample(relaxed, SampleSpec("weft_stretch", np.diag([1.05**2, 1.0 + 2.0 * (free + d)]),
+                                             np.zeros((2, 2)), 0.05)) for d in (-5e-3, 5e-3)]
+    pure = solve_sample(relaxed, SampleSpec("weft_stretch", *family_deformation("weft_stretch", 0.05), 0.05))
+    assert all(s.energy_density > result.energy_density for s in scan)
+    assert result.energy_density < pure.energy_density
 
 
 def test_the_undeformed_sample_has_no_energy():

@@ -378,3 +378,18 @@ def test_indefinite_material_is_constructible():
     # A fit may produce one; the fitter reports it, the constructor does not refuse it.
     m = ShellMaterial(H, s00=1.0, s01=2.0, s11=1.0, s22=-1.0, b00=0.0, b01=0.0, b11=0.0, b22=0.0)
     assert not m.membrane_positive_definite and not m.bending_positive_definite
+
+
+def test_uniaxial_tension_is_the_free_width_minimum_and_the_engineering_stretch():
+    material = ShellMaterial(3e-4, s00=3e6, s01=9e5, s11=2e6, s22=1e5, b00=1e6, b01=1e5, b11=8e5, b22=2e5)
+    eng = material.engineering()
+    for axis, key in ((0, "weft_stretch_n_per_m"), (1, "warp_stretch_n_per_m")):
+        I, W = material.uniaxial_tension(axis, 1.02)
+        assert I[axis, axis] == pytest.approx(1.02**2) and I[0, 1] == 0.0
+        assert W == pytest.approx(material.energy_density(I, np.zeros((2, 2))), rel=1e-13)
+        assert W == pytest.approx(0.5 * eng[key] * (0.5 * (1.02**2 - 1.0)) ** 2, rel=1e-12)
+        # The free direction is stationary: the transverse stress dW/dI vanishes there.
+        stress = material.energy_gradient(I, np.zeros((2, 2)))[0]
+        assert abs(stress[1 - axis, 1 - axis]) <= 1e-12 * abs(stress[axis, axis])
+    with pytest.raises(ValueError, match="axis"):
+        material.uniaxial_tension(2, 1.1)

@@ -212,7 +212,7 @@ def bench_fit() -> None:
     fabrics.append(Fabric(name="stockinette", fiber=get_fiber("polyester"), pattern_file=stockinette))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fit_fabric(fabrics[0], samples=13, workers=1)
+        fit_fabric(fabrics[0], samples=15, workers=1)
         for fabric in fabrics:
             fitted = fit_fabric(fabric)
             key = "fit_" + fabric.name.replace("-", "_")

@@ -78,7 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("preset", nargs="?", help="a built-in fabric (see `yarnfit materials`)")
     add_fabric_arguments(fit)
     fit.add_argument("--samples", type=int, default=None, metavar="N",
-                     help="about how many deformation samples (at least 13; default 26)")
+                     help="about how many deformation samples (at least 15; default 28)")
     fit.add_argument("--model", choices=("full", "paper"), default="full",
                      help="full: fit b01 too (default); paper: b01 = 0, the paper's 7 parameters")
     fit.add_argument("--strict", action="store_true",
@@ -265,14 +265,14 @@ def cmd_relax(args: argparse.Namespace) -> int:
 
 def cmd_fit(args: argparse.Namespace) -> int:
     from .fit import COUPLING_LIMIT
-    from .homogenize import SAMPLES_PER_LEVEL
+    from .homogenize import design_size
     from .material import DEFAULT_SAMPLES, fit_fabric
     from .record import FitRecording
 
     fabric = fabric_from_arguments(args)
     samples = DEFAULT_SAMPLES if args.samples is None else args.samples
-    if samples < SAMPLES_PER_LEVEL:
-        raise UsageError(f"--samples must be at least {SAMPLES_PER_LEVEL} (one per sample family and sign), "
+    if samples < design_size(1):
+        raise UsageError(f"--samples must be at least {design_size(1)} (one per sample family and sign), "
                          f"got {samples}")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be at least 1, got {args.workers}")
@@ -330,7 +330,8 @@ def fit_summary(fitted, output, recording_path) -> str:
                        ("bending_bias_nm", "bending bias")):
         lines.append(f"  {label:<16}{eng[key]:12.5g} N·m   {eng[key] / GF_CM2_PER_CM:10.4g} gf·cm²/cm")
     lines.append(f"  {'thickness':<16}{fitted.material.thickness * 1e3:12.4g} mm")
-    quality = ", ".join(f"{family} {q['r2']:.3f}" if q["r2"] is not None else f"{family} -"
+    # R² needs spread within a family; a family of one sample gets its relative RMS error instead.
+    quality = ", ".join(f"{family} {q['r2']:.3f}" if q["samples"] > 1 else f"{family} (rms {q['relative_rms']:.2g})"
                         for family, q in fit.families.items())
     lines.append(f"  fit R²          {quality}")
     lines += [f"  note            {note}" for note in fit.notes]

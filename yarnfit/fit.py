@@ -17,7 +17,10 @@ Sample families. Every sample belongs to one family and is either a membrane sam
 or a bending sample (``I = Id``), never both:
 
 * membrane: ``weft_stretch`` (s00), ``warp_stretch`` (s11), ``biaxial_stretch`` (s01 against the
-  two uniaxial families), ``shear`` (s22);
+  two uniaxial families), ``shear`` (s22), and optionally ``weft_uniaxial``, ``warp_uniaxial``:
+  uniaxial tension with the transverse direction free (``I = diag(λ², μ²)`` with μ where the
+  yarn-level energy is least), which probe the free-width stiffness ``h (s00 − s01²/s11)`` directly
+  (for a knit a small difference of large numbers that the pure families cannot resolve);
 * bending: ``weft_bend`` (b00), ``warp_bend`` (b11), ``bias_bend`` (b22), ``saddle_bend`` (b01).
 
 Because no parameter is shared between the membrane and the bending group, the two groups are
@@ -57,6 +60,7 @@ __all__ = [
     "IndefiniteFitError",
     "MEMBRANE_FAMILIES",
     "MODELS",
+    "OPTIONAL_FAMILIES",
     "Sample",
     "ShellFit",
     "design_matrix",
@@ -67,18 +71,12 @@ __all__ = [
     "weighted_residuals",
 ]
 
-FAMILIES = (
-    "weft_stretch",
-    "warp_stretch",
-    "biaxial_stretch",
-    "shear",
-    "weft_bend",
-    "warp_bend",
-    "bias_bend",
-    "saddle_bend",
-)
-MEMBRANE_FAMILIES = FAMILIES[:4]
-BENDING_FAMILIES = FAMILIES[4:]
+MEMBRANE_FAMILIES = ("weft_stretch", "warp_stretch", "biaxial_stretch", "shear", "weft_uniaxial", "warp_uniaxial")
+BENDING_FAMILIES = ("weft_bend", "warp_bend", "bias_bend", "saddle_bend")
+FAMILIES = MEMBRANE_FAMILIES + BENDING_FAMILIES
+# The uniaxial-tension families (the transverse direction free) add what a tensile test measures;
+# they are optional: the pure families alone determine every parameter.
+OPTIONAL_FAMILIES = ("weft_uniaxial", "warp_uniaxial")
 # "full" fits all eight parameters; "paper" fixes b01 = 0 (the paper's model).
 MODELS = ("full", "paper")
 
@@ -439,7 +437,7 @@ def fit_shell(
     used = [s for s in samples if s.converged]
     excluded = [s for s in samples if not s.converged]
 
-    required = FAMILIES if model == "full" else tuple(f for f in FAMILIES if f != "saddle_bend")
+    required = tuple(f for f in FAMILIES if f not in OPTIONAL_FAMILIES and (model == "full" or f != "saddle_bend"))
     missing = []
     for family in required:
         if not any(s.family == family for s in used):

@@ -38,7 +38,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .engine import LinearConstraints, QuasiStaticOptions, QuasiStaticSolver, Residual, RodModel, RodState
-from .engine.contact import image_range
+from .engine.contact import TilingReachError, image_range
 from .engine.model import aligned_frames
 from .engine.tiling import CurvedTiling, retile
 from .relax import RelaxedRepeat
@@ -203,7 +203,9 @@ def _curved_tiling(surface, flat, reference, height, position, frame, repeat) ->
     """Per-node maps onto every tile the contacts can reach (with EXTRA_TILES to spare)."""
     # As find_pairs reaches: two radii, a margin of about one, and an edge.
     reach = 3.0 * float(flat.edge_radius.max()) + float(flat.edge_rest_length.max())
-    needed = int(image_range(flat, flat.node_rest_position, reach).max())
+    # A compressed direction brings images closer: the same reach spans more tiles.
+    smallest_stretch = math.sqrt(float(np.linalg.eigvalsh(surface.I).min()))
+    needed = int(math.ceil(image_range(flat, flat.node_rest_position, reach).max() / smallest_stretch))
     extent = needed + EXTRA_TILES
     offsets = np.arange(-extent, extent + 1)
     images = np.array([(0, 0)] + [(i, j) for i in offsets for j in offsets if (i, j) != (0, 0)], dtype=np.int64)
@@ -267,10 +269,15 @@ class SampleResult:
 
 
 def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions | None = None) -> SampleResult:
-    """Tile ``relaxed`` on the sample's surface and minimise the yarn energy under ``C_RVE``."""
+    """Tile ``relaxed`` on the sample's surface and minimise the yarn energy under ``C_RVE``.
+
+    A uniaxial-tension sample (``weft_uniaxial``, ``warp_uniaxial``) also minimises over the free
+    transverse stretch μ (see :func:`_solve_uniaxial`); its result's spec carries the μ found."""
     start = time.perf_counter()
-    tiled = tile_repeat(relaxed, spec.I, spec.II)
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
+    if spec.family in UNIAXIAL_FAMILIES:
+        return _solve_uniaxial(relaxed, spec, options, start)
+    tiled = tile_repeat(relaxed, spec.I, spec.II)
     result = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
     return SampleResult(
         spec=spec,
@@ -283,11 +290,137 @@ def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticO
     )
 
 
+# Uniaxial tension along weft (axis 0) or warp (axis 1) with the other direction free.
+UNIAXIAL_FAMILIES = {"weft_uniaxial": 0, "warp_uniaxial": 1}
+# Tolerance on the free Green strain E⊥ = (μ² − 1)/2: Ū is flat at its minimum, so an error δ
+# costs about ½ k δ² with k the pure transverse stiffness (~1e5 J/m² for the presets): 1e-4 leaves
+# ~5e-4 J/m², a few percent of the smallest uniaxial Ū measured (jersey at 1 %: 3e-2 J/m²) and far
+# less at the larger strains the fit weighs most.
+FREE_STRAIN_TOLERANCE = 1e-4
+# Search interval of E⊥ in units of the prescribed strain E: knits contract by up to ~1.5 times
+# their stretch at small strain (measured on cotton jersey); 3 leaves room; μ stays ≥ 0.5.
+FREE_STRAIN_RANGE = 3.0
+SMALLEST_FREE_STRETCH = 0.5
+# First trial of E⊥ / E: a woven's Poisson ratio (0.2–0.3); the parabolas take it from there.
+FREE_STRAIN_GUESS = -0.3
+# Solves per uniaxial sample at most; successive parabolas typically need 4–10.
+FREE_STRAIN_SOLVES = 15
+# The search also stops when the parabola around the best point promises less than this relative
+# decrease of Ū: warm-started solves of a knit land in nearby equilibria whose Ū differ by ~1e-4,
+# below which the parabolas only chase that noise, and the fit's residuals are percent-level.
+SEARCH_ENERGY_RTOL = 1e-3
+# Ū that varies by less than this (relative) over the E⊥ tried does not depend on E⊥: round-off of
+# the energy sum (1e-16 × the number of terms) with a wide margin.
+FLAT_ENERGY_RTOL = 1e-10
+# A minimum at the interval's lower end counts as a plateau if Ū there is within this (relative)
+# of its neighbour's: the energy has stopped changing with E⊥ to the accuracy the fit can use.
+PLATEAU_RTOL = 1e-3
+
+
+def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:
+    """Minimise Ū over the free transverse Green strain E⊥ by successive parabolic interpolation
+    (Ū is close to quadratic in E⊥ near its minimum), each evaluation a full solve started from the
+    nearest solved E⊥'s equilibrium stretched across (exact for its affine part, and it keeps C_RVE's
+    values, which are linear in the positions). Not converged if the solve at the optimum did not
+    converge, the search ran out of solves, or E⊥ ends at the interval's lower end (the fabric
+    would contract further)."""
+    axis = UNIAXIAL_FAMILIES[spec.family]
+    stretch = math.sqrt(float(spec.I[axis, axis]))
+    strain = 0.5 * (stretch**2 - 1.0)
+    low = max(0.5 * (SMALLEST_FREE_STRETCH**2 - 1.0), -FREE_STRAIN_RANGE * strain)
+    solved: dict[float, tuple] = {}  # E⊥ -> (quasi-static result, area)
+    iterations = 0
+
+    def form(free: float) -> np.ndarray:
+        diagonal = [0.0, 0.0]
+        diagonal[axis], diagonal[1 - axis] = stretch**2, 1.0 + 2.0 * free
+        return np.diag(diagonal)
+
+    def usable(e: float) -> bool:
+        return solved[e][0] is not None and solved[e][0].converged
+
+    def energy(free: float) -> float:
+        nonlocal iterations
+        free = float(min(0.0, max(low, free)))
+        if free not in solved:
+            tiled = tile_repeat(relaxed, form(free), spec.II)
+            state = tiled.state
+            warm = [e for e in solved if usable(e)]
+            if warm:
+                nearest = min(warm, key=lambda e: abs(e - free))
+                previous = solved[nearest][0].state
+                state.node_position[:] = previous.node_position
+                state.node_position[:, 1 - axis] *= math.sqrt((1.0 + 2.0 * free) / (1.0 + 2.0 * nearest))
+                state.edge_quaternion[:] = aligned_frames(tiled.model, state.node_position, previous.edge_quaternion)
+            try:
+                result = QuasiStaticSolver(tiled.model, options).solve(state, constraints=tiled.constraints)
+                iterations += result.iterations
+            except TilingReachError:
+                # The solver's steps ran beyond the tiles mapped (a strongly squeezed width): this
+                # E⊥ is unusable, and the search treats it as a wall. (The pure stretch, solved
+                # first, fails as any pure sample would.)
+                if not solved:
+                    raise
+                result = None
+            solved[free] = (result, tiled.area)
+        return solved[free][0].energy.internal / solved[free][1] if usable(free) else math.inf
+
+    energy(0.0)  # the pure stretch first: every later start is near it
+    energy(FREE_STRAIN_GUESS * strain)
+    found = plateau = False
+    for _ in range(FREE_STRAIN_SOLVES):
+        xs = sorted(solved)
+        ys = np.array([energy(e) for e in xs])
+        i = int(np.argmin(ys))
+        if np.isfinite(ys).all() and np.ptp(ys) <= FLAT_ENERGY_RTOL * np.abs(ys).max():
+            found = True  # Ū does not depend on E⊥ (nothing resists the transverse direction)
+            break
+        if i == 0:
+            if xs[0] <= low:
+                # At the interval's end: a plateau (the transverse direction has gone slack, as a
+                # jersey's wales do) is a minimum; still falling, the fabric would contract further.
+                found = plateau = bool(ys[1] - ys[0] <= PLATEAU_RTOL * abs(ys[0]))
+                break
+            trial = max(low, xs[0] - 2.0 * (xs[1] - xs[0]))  # not yet bracketed: step on down
+        else:
+            # Bracketed by its neighbours (or by E⊥ = 0 from above): the vertex of the parabola
+            # through the three points around the best, kept inside the bracket.
+            j = min(max(i, 1), len(xs) - 2) if len(xs) >= 3 else 1
+            x, y = np.array(xs[j - 1:j + 2]), ys[j - 1:j + 2]
+            a, b, c = np.polyfit(x, y, 2) if len(x) == 3 and np.isfinite(y).all() else (0.0, 0.0, 0.0)
+            lower, upper = xs[i - 1], xs[i + 1] if i + 1 < len(xs) else 0.0
+            if a > 0.0 and ys[i] - (c - b * b / (4.0 * a)) <= SEARCH_ENERGY_RTOL * ys[i]:
+                found = True  # the parabola promises no useful decrease below the best
+                break
+            trial = -b / (2.0 * a) if a > 0.0 else 0.5 * (lower + xs[i])
+            if not lower < trial < upper or min(abs(trial - e) for e in xs) < 0.1 * FREE_STRAIN_TOLERANCE:
+                # Outside the bracket or already solved: bisect the wider side instead.
+                trial = 0.5 * (xs[i] + (lower if xs[i] - lower > upper - xs[i] else upper))
+            if abs(trial - xs[i]) < FREE_STRAIN_TOLERANCE:
+                found = True
+                break
+        energy(trial)
+    free = min(solved, key=lambda e: energy(e))
+    result, area = solved[free]
+    converged = bool(found and usable(free) and (free - low > FREE_STRAIN_TOLERANCE or plateau))
+    return SampleResult(
+        spec=SampleSpec(spec.family, form(free), spec.II, spec.parameter),
+        energy_density=result.energy.internal / area,
+        converged=converged,
+        residual=result.residual,
+        iterations=iterations,
+        seconds=time.perf_counter() - start,
+        position=result.state.node_position,
+    )
+
+
 # -- sample design --------------------------------------------------------------------------------
 
 # Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
-# four bend families of both signs.
+# four bend families of both signs; plus weft and warp uniaxial tension at the lower half of the
+# levels (each costs 5–15 solves; the small strains are what a tensile test's start measures).
 SAMPLES_PER_LEVEL = 13
+UNIAXIAL_PER_LEVEL = 2
 # Largest curvature times repeat size (rad): keeps the saddles' Gauss defect (~κ² p² / 16 of
 # strain at the repeat's corners) small. Measured on cotton twill, a saddle's Ū/κ² grows by 4 %
 # from 0.05 to 0.2 rad per repeat and by 10 % to 0.4 rad; single and dome bends by under 2 %.
@@ -338,6 +471,9 @@ def family_deformation(family: str, parameter: float) -> tuple[np.ndarray, np.nd
         "warp_stretch": lambda: (np.diag([1.0, (1 + e) ** 2]), zero),
         "biaxial_stretch": lambda: ((1 + e) ** 2 * eye, zero),
         "shear": lambda: (np.array([[1.0, e], [e, 1.0]]), zero),
+        # The transverse stretch is found by the solve; this is where its search starts.
+        "weft_uniaxial": lambda: (np.diag([(1 + e) ** 2, 1.0]), zero),
+        "warp_uniaxial": lambda: (np.diag([1.0, (1 + e) ** 2]), zero),
         "weft_bend": lambda: (eye, np.diag([e, 0.0])),
         "warp_bend": lambda: (eye, np.diag([0.0, e])),
         # Cylinder at +45° for positive parameters, at −45° (curvature |e|) for negative ones.
@@ -357,6 +493,9 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
       range, and one compression at ``ranges.compression`` of it if that is not 0; biaxial
       ``I = λ² Id``, all in tension;
     - shear: ``I = [[1, s], [s, 1]]``, ``s = ±j/levels`` of the stretch range;
+    - weft, warp uniaxial tension: λ as for the pure stretches at the lower half of the levels
+      (:func:`uniaxial_levels`), the other direction free (its stretch μ minimises Ū; the spec
+      holds μ = 1, the result the μ found);
     - weft, warp bends: ``II = diag(κ, 0)`` / ``diag(0, κ)``, ``κ = ±j/levels`` of the curvature
       range;
     - bias bends: cylinders at ±45°, ``II = κ/2 [[1, ±1], [±1, 1]]``;
@@ -373,6 +512,8 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
         "warp_stretch": uniaxial * stretch,
         "biaxial_stretch": fractions * stretch,
         "shear": both_signs * stretch,
+        "weft_uniaxial": fractions[:uniaxial_levels(levels)] * stretch,
+        "warp_uniaxial": fractions[:uniaxial_levels(levels)] * stretch,
         "weft_bend": both_signs * curvature,
         "warp_bend": both_signs * curvature,
         "bias_bend": both_signs * curvature,
@@ -386,13 +527,24 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
     return specs
 
 
+def uniaxial_levels(levels: int) -> int:
+    """Levels at which the uniaxial-tension families are sampled: the lower half, at least one."""
+    return (levels + 1) // 2
+
+
+def design_size(levels: int) -> int:
+    """Samples in a design of ``levels`` magnitudes per family and sign."""
+    return SAMPLES_PER_LEVEL * levels + UNIAXIAL_PER_LEVEL * uniaxial_levels(levels)
+
+
 def levels_for(samples: int) -> int:
-    """Magnitudes per family and sign for about ``samples`` samples in all (SAMPLES_PER_LEVEL per
-    level)."""
-    if not (isinstance(samples, int) and samples >= SAMPLES_PER_LEVEL):
-        raise ValueError(f"the sample design needs at least {SAMPLES_PER_LEVEL} samples (one per family and sign), "
+    """Magnitudes per family and sign for about ``samples`` samples in all (at least
+    ``design_size(1)``)."""
+    smallest = design_size(1)
+    if not (isinstance(samples, int) and samples >= smallest):
+        raise ValueError(f"the sample design needs at least {smallest} samples (one per family and sign), "
                          f"got {samples!r}")
-    return max(1, round(samples / SAMPLES_PER_LEVEL))
+    return min(range(1, samples // SAMPLES_PER_LEVEL + 2), key=lambda levels: abs(design_size(levels) - samples))
 
 
 # -- many samples in parallel ---------------------------------------------------------------------
@@ -435,7 +587,11 @@ def solve_samples(
     method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
     context = multiprocessing.get_context(method)
     with ProcessPoolExecutor(workers, mp_context=context, initializer=_worker_start, initargs=(relaxed,)) as pool:
-        pending = {pool.submit(_worker_solve, i, spec) for i, spec in enumerate(specs)}
+        # Longest first, so that no long sample starts last while the other workers idle: the
+        # uniaxial searches (5–15 solves), then the membrane samples by strain (large stretches
+        # take the most Newton iterations), then the bends.
+        order = sorted(range(len(specs)), key=lambda i: _expected_cost(specs[i]), reverse=True)
+        pending = {pool.submit(_worker_solve, i, specs[i]) for i in order}
         done = 0
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
@@ -446,6 +602,13 @@ def solve_samples(
                 if progress is not None:
                     progress(done, len(specs), result)
     return results
+
+
+def _expected_cost(spec: SampleSpec) -> tuple:
+    """Sort key of a sample's expected solve time (larger first): uniaxial searches, then membrane
+    samples by strain, then bends by curvature."""
+    strain = float(np.abs(spec.I - np.eye(2)).max())
+    return (spec.family in UNIAXIAL_FAMILIES, float(np.abs(spec.II).max()) == 0.0, strain, float(np.abs(spec.II).max()))
 
 
 def identity_sample() -> SampleSpec:

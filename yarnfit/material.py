@@ -45,9 +45,10 @@ from .homogenize import SampleRanges, SampleResult, default_ranges, levels_for, 
 from .relax import RelaxedRepeat, relax, rod_material
 from .shell import ShellMaterial
 
-# Two magnitudes per family and sign of deformation (26 in all): enough to see curvature of the
-# response, few enough that a preset fits in about a minute on two cores.
-DEFAULT_SAMPLES = 26
+# Two magnitudes per family and sign of deformation, uniaxial tension at the smaller (28 in all):
+# enough to see curvature of the response, few enough that a preset fits in about a minute on two
+# cores.
+DEFAULT_SAMPLES = 28
 
 
 class UnusableRelaxation(ValueError):

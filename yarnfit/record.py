@@ -76,7 +76,8 @@ Entity paths (positions and radii in m, 3D x weft, y warp, z up):
   that did not converge (excluded from the fit) with a finite Ū; only logged if there are any
   (static, by ``finish``).
 - ``fit/curves/<family>/shell``: ``LineStrips2D``, the fitted shell's energy density
-  ``W(family_deformation(family, p))`` over a dense range of p spanning the family's sampled
+  ``W(family_deformation(family, p))`` (for the uniaxial families ``W`` of
+  ``ShellMaterial.uniaxial_tension``, the shell's own free width) over a dense range of p spanning the family's sampled
   parameters and 0, through every sampled parameter (static, by ``finish``).
 - ``fit/summary``: ``TextDocument`` (markdown), the engineering constants in SI and user units (N/m,
   N·m and gf·cm²/cm for bending), R² and relative RMS per family, the bounds the fit reached (if
@@ -110,7 +111,7 @@ import rerun.blueprint as rrb
 from .engine import Progress
 from .engine.tiling import yarn_strips
 from .fit import BENDING_FAMILIES, FAMILIES
-from .homogenize import family_deformation, tile_repeat
+from .homogenize import UNIAXIAL_FAMILIES, family_deformation, tile_repeat
 from .patterns import YarnPattern
 from .shell import GF_CM2_PER_CM
 
@@ -408,6 +409,10 @@ def shell_curve(material, family: str, parameters) -> tuple[np.ndarray, np.ndarr
     parameters = np.asarray(parameters, dtype=np.float64)
     low, high = min(0.0, float(parameters.min())), max(0.0, float(parameters.max()))
     p = np.union1d(np.linspace(low, high, CURVE_POINTS), parameters)
+    if family in UNIAXIAL_FAMILIES:
+        # The shell's own free width: the Schur complement, not the yarn-level sample's μ.
+        energy = [material.uniaxial_tension(UNIAXIAL_FAMILIES[family], 1.0 + value)[1] for value in p]
+        return p, np.asarray(energy, dtype=np.float64)
     forms = [family_deformation(family, value) for value in p]
     energy = material.energy_density(np.array([I for I, _ in forms]), np.array([II for _, II in forms]))
     return p, np.asarray(energy, dtype=np.float64)

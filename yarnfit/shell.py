@@ -311,6 +311,24 @@ class ShellMaterial:
         W = W + 0.5 * h**3 * np.einsum("...i,ij,...j->...", kap, self.B, kap)
         return float(W) if single else W
 
+    def uniaxial_tension(self, axis: int, stretch: float) -> tuple[np.ndarray, float]:
+        """Uniaxial tension along weft (``axis`` 0) or warp (1) with the other direction free:
+        ``(I (2, 2), W)``. The free Green strain minimises W, ``E_other = −(s01/s_other) E`` with
+        ``E = (stretch² − 1)/2``, and ``W = (h/2) (s_axis − s01²/s_other) E²`` (J/m²), the
+        free-width stiffness of the engineering constants. Needs a positive-definite membrane."""
+        if axis not in (0, 1):
+            raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
+        stretch = _finite_float(stretch, "stretch")
+        if stretch <= 0.0:
+            raise ValueError(f"stretch must be positive, got {stretch!r}")
+        self._require_positive_definite("uniaxial tension states", membrane=True, bending=False)
+        along, other = (self.s00, self.s11) if axis == 0 else (self.s11, self.s00)
+        strain = 0.5 * (stretch**2 - 1.0)
+        free = -self.s01 / other * strain
+        diagonal = [0.0, 0.0]
+        diagonal[axis], diagonal[1 - axis] = 1.0 + 2.0 * strain, 1.0 + 2.0 * free
+        return np.diag(diagonal), 0.5 * self.thickness * (along - self.s01**2 / other) * strain**2
+
     def energy_gradient(self, I: object, II: object) -> tuple[np.ndarray, np.ndarray]:
         """``(dW/dI, dW/dII)``: derivative of :meth:`energy_density` with respect to each matrix entry.
 

@@ -49,6 +49,10 @@ class ContactPairs:
         return self.pairs, self.rotation, self.translation
 
 
+class TilingReachError(ValueError):
+    """A configuration's contacts reach tiles a curved tiling has no maps for."""
+
+
 def image_range(model: RodModel, position: np.ndarray, reach: float) -> np.ndarray:
     """Tile images ``(2,)`` to search: enough to cover the configuration's extent along each
     lattice vector plus ``reach`` (m); zero for a non-periodic model. A curved tiling caps it at the
@@ -65,7 +69,7 @@ def image_range(model: RodModel, position: np.ndarray, reach: float) -> np.ndarr
     if model.tiling is not None:
         cap = model.tiling.reach - 1
         if np.any(needed > cap):
-            raise ValueError(f"contacts reach {tuple(int(v) for v in needed)} tiles but the curved tiling covers only "
+            raise TilingReachError(f"contacts reach {tuple(int(v) for v in needed)} tiles but the curved tiling covers only "
                              f"{cap} beyond the home tile; build it with a larger reach")
     return needed
 
