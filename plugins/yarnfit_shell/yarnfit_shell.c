@@ -34,13 +34,17 @@ typedef struct {
   double* area;      // (ntri) rest areas (m^2)
 } Shell;
 
+// Configuration errors use mju_error: during compilation (where MuJoCo first runs init) it becomes
+// the compiler's error message, so the model fails to compile with a message naming the key; a
+// returned -1 alone only says "plugin->init failed".
+
 // Parse attribute `key` of instance `instance` as a finite number; fail with a message naming it.
 static int read_number(const mjModel* m, int instance, const char* key, double fallback, int required,
                        double* out) {
   const char* text = mj_getPluginConfig(m, instance, key);
   if (!text || !text[0]) {
     if (required) {
-      mju_warning(YF_NAME ": config key '%s' is required", key);
+      mju_error(YF_NAME ": config key '%s' is required", key);
       return -1;
     }
     *out = fallback;
@@ -50,7 +54,7 @@ static int read_number(const mjModel* m, int instance, const char* key, double f
   double value = strtod(text, &end);
   while (end && (*end == ' ' || *end == '\t')) end++;
   if (end == text || (end && *end) || !isfinite(value)) {
-    mju_warning(YF_NAME ": config key '%s' must be a finite number, got '%s'", key, text);
+    mju_error(YF_NAME ": config key '%s' must be a finite number, got '%s'", key, text);
     return -1;
   }
   *out = value;
@@ -71,22 +75,22 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
   const double values[] = {s->s00, s->s11, s->s22, s->b00, s->b11, s->b22, s->thickness};
   for (int k = 0; k < 7; k++) {
     if (!(values[k] > 0)) {
-      mju_warning(YF_NAME ": config key '%s' must be positive, got %g", positive[k], values[k]);
+      mju_error(YF_NAME ": config key '%s' must be positive, got %g", positive[k], values[k]);
       return -1;
     }
   }
   if (s->s01 * s->s01 >= s->s00 * s->s11) {
-    mju_warning(YF_NAME ": membrane matrix S is not positive definite: s01^2 = %g >= s00*s11 = %g",
+    mju_error(YF_NAME ": membrane matrix S is not positive definite: s01^2 = %g >= s00*s11 = %g",
                 s->s01 * s->s01, s->s00 * s->s11);
     return -1;
   }
   if (s->b01 * s->b01 >= s->b00 * s->b11) {
-    mju_warning(YF_NAME ": bending matrix B is not positive definite: b01^2 = %g >= b00*b11 = %g",
+    mju_error(YF_NAME ": bending matrix B is not positive definite: b01^2 = %g >= b00*b11 = %g",
                 s->b01 * s->b01, s->b00 * s->b11);
     return -1;
   }
   if (s->damping < 0) {
-    mju_warning(YF_NAME ": config key 'damping' must be >= 0 (s), got %g", s->damping);
+    mju_error(YF_NAME ": config key 'damping' must be >= 0 (s), got %g", s->damping);
     return -1;
   }
   return 0;
@@ -126,20 +130,21 @@ static void shell_free(Shell* s) {
 }
 
 static int shell_init(const mjModel* m, mjData* d, int instance) {
-  Shell* s = calloc(1, sizeof(Shell));
-  if (!s) return -1;
-  if (read_config(m, instance, s)) { shell_free(s); return -1; }
+  // Validate before allocating anything: mju_error does not return.
+  Shell config = {0};
+  if (read_config(m, instance, &config)) return -1;
   int f = find_flex(m, instance);
   if (f < 0) {
-    mju_warning(YF_NAME ": plugin instance %d is attached to no flex", instance);
-    shell_free(s);
+    mju_error(YF_NAME ": plugin instance %d is attached to no flex", instance);
     return -1;
   }
   if (m->flex_dim[f] != 2) {
-    mju_warning(YF_NAME ": needs a 2D flex (triangles), flex %d has dim %d", f, m->flex_dim[f]);
-    shell_free(s);
+    mju_error(YF_NAME ": needs a 2D flex (triangles), flex %d has dim %d", f, m->flex_dim[f]);
     return -1;
   }
+  Shell* s = calloc(1, sizeof(Shell));
+  if (!s) return -1;
+  *s = config;
   s->flex = f;
   s->ntri = m->flex_elemnum[f];
   s->tri = malloc(sizeof(int) * 3 * s->ntri);
@@ -198,9 +203,9 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
     double D10 = mju_dot3(e1, axis1), D11 = mju_dot3(e2, axis1);
     double det = D00 * D11 - D01 * D10;
     if (!(fabs(det) > 0)) {
-      mju_warning(YF_NAME ": flex %d triangle %d has zero rest area", f, t);
       free(x0);
       shell_free(s);
+      mju_error(YF_NAME ": flex %d triangle %d has zero rest area", f, t);
       return -1;
     }
     s->rest_inv[4 * t + 0] = D11 / det;
