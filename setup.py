@@ -10,7 +10,6 @@ that loads it first.
 """
 
 import os
-import sysconfig
 from pathlib import Path
 
 from setuptools import Extension, setup
