@@ -264,24 +264,27 @@ static void shell_compute(const mjModel* m, mjData* d, int instance, int capabil
   (void)capability_bit;
   const Shell* s = (const Shell*)d->plugin_data[instance];
   if (!s) return;
-  int f = s->flex, vadr = m->flex_vertadr[f];
-  double* jac = malloc(sizeof(double) * 3 * m->nv);
-  double* qfrc = malloc(sizeof(double) * m->nv);
-  if (!jac || !qfrc) { free(jac); free(qfrc); return; }
+  int f = s->flex, vadr = m->flex_vertadr[f], nvert = m->flex_vertnum[f];
+  mj_markStack(d);
+  // Vertex forces first, then one Jacobian per vertex (not one per triangle corner).
+  mjtNum* force = mj_stackAllocNum(d, 3 * nvert);
+  mjtNum* jac = mj_stackAllocNum(d, 3 * m->nv);
+  mjtNum* qfrc = mj_stackAllocNum(d, m->nv);
+  mju_zero(force, 3 * nvert);
   for (int t = 0; t < s->ntri; t++) {
     double x[9], grad[9] = {0};
     for (int k = 0; k < 3; k++) mju_copy3(x + 3 * k, d->flexvert_xpos + 3 * (vadr + s->tri[3 * t + k]));
     membrane_triangle(s, t, x, grad);
     for (int k = 0; k < 3; k++) {
-      int body = m->flex_vertbodyid[vadr + s->tri[3 * t + k]];
-      double force[3] = {-grad[3 * k], -grad[3 * k + 1], -grad[3 * k + 2]};
-      mj_jac(m, d, jac, NULL, x + 3 * k, body);
-      mju_mulMatTVec(qfrc, jac, force, 3, m->nv);
-      mju_addTo(d->qfrc_passive, qfrc, m->nv);
+      for (int i = 0; i < 3; i++) force[3 * s->tri[3 * t + k] + i] -= grad[3 * k + i];
     }
   }
-  free(jac);
-  free(qfrc);
+  for (int v = 0; v < nvert; v++) {
+    mj_jac(m, d, jac, NULL, d->flexvert_xpos + 3 * (vadr + v), m->flex_vertbodyid[vadr + v]);
+    mju_mulMatTVec(qfrc, jac, force + 3 * v, 3, m->nv);
+    mju_addTo(d->qfrc_passive, qfrc, m->nv);
+  }
+  mj_freeStack(d);
 }
 
 static int shell_nstate(const mjModel* m, int instance) {
