@@ -123,17 +123,18 @@ def _curved_virtual_boxes(model: RodModel, position, end, margin, searched):
     si, sj = int(searched[0]), int(searched[1])
     tiles = np.array([(i, j) for i in range(-si, si + 1) for j in range(-sj, sj + 1)], dtype=np.int64)  # (T, 2)
     n_tiles = len(tiles)
-    # All tiles at once: (T, E) maps of each edge's start node into the tile, of its end node into
-    # the tile plus the edge's own tile offset.
-    r0, t0 = node_maps(m, np.tile(n0, n_tiles), np.repeat(tiles, m.n_edges, axis=0))
-    r1, t1 = node_maps(m, np.tile(n1, n_tiles), np.repeat(tiles, m.n_edges, axis=0) + np.tile(m.edge_tile, (n_tiles, 1)))
-    shape = (n_tiles, m.n_edges, 3)
-    points = [(np.einsum("eij,ej->ei", r, x[np.tile(nodes, n_tiles)]) + t).reshape(shape)
-              for x in (position, end) for r, t, nodes in ((r0, t0, n0), (r1, t1, n1))]
-    lower = (np.minimum.reduce(points) - pad).reshape(-1, 3)
-    upper = (np.maximum.reduce(points) + pad).reshape(-1, 3)
+    # All tiles at once, tile-major rows (T·E): each edge's start node mapped into the tile, its end
+    # node into the tile plus the edge's own tile offset.
     edge = np.tile(np.arange(m.n_edges), n_tiles)
     image = np.repeat(tiles, m.n_edges, axis=0)
+    start, finish = n0[edge], n1[edge]
+    r0, t0 = node_maps(m, start, image)
+    r1, t1 = node_maps(m, finish, image + m.edge_tile[edge])
+    shape = (n_tiles, m.n_edges, 3)
+    points = [(np.einsum("eij,ej->ei", r, x[nodes]) + t).reshape(shape)
+              for x in (position, end) for r, t, nodes in ((r0, t0, start), (r1, t1, finish))]
+    lower = (np.minimum.reduce(points) - pad).reshape(-1, 3)
+    upper = (np.maximum.reduce(points) + pad).reshape(-1, 3)
     # Keep only boxes that overlap the hull of the home tile's boxes.
     home = np.all(image == 0, axis=1)
     hull_lo, hull_hi = lower[home].min(axis=0), upper[home].max(axis=0)
