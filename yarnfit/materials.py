@@ -27,10 +27,11 @@ data supply their own fibre as JSON (:func:`load_fiber_file`).
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
+
+from .jsonfile import read_json
 
 __all__ = ["FIBERS", "FiberMaterial", "UnknownFiberError", "get_fiber", "load_fiber_file"]
 
@@ -291,21 +292,7 @@ def load_fiber_file(path: str | os.PathLike) -> FiberMaterial:
             unreadable, is not valid JSON (with line and column), lacks keys or has unknown ones
             (all listed), has a non-numeric value, or fails :class:`FiberMaterial` validation.
     """
-    where = os.fspath(path)
-    try:
-        with open(where, encoding="utf-8") as f:
-            text = f.read()
-    except FileNotFoundError:
-        raise ValueError(f"{where}: no such fibre file") from None
-    except UnicodeDecodeError as exc:
-        raise ValueError(f"{where}: cannot read fibre file: not UTF-8 text ({exc.reason})") from None
-    except OSError as exc:
-        raise ValueError(f"{where}: cannot read fibre file: {exc.strerror or exc}") from None
-
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{where}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+    where, data = read_json(path, "fibre file")
     if not isinstance(data, dict):
         kind = type(data).__name__
         raise ValueError(f"{where}: expected a JSON object with keys {', '.join(_REQUIRED_KEYS)}, got a {kind}")

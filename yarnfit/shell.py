@@ -25,7 +25,6 @@ with ``m = B κ``. A symmetric variation that changes both ``I_01`` and ``I_10``
 
 from __future__ import annotations
 
-import json
 import math
 import numbers
 import os
@@ -33,6 +32,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+
+from .jsonfile import read_json
 
 __all__ = [
     "BENDING_PARAMETERS",
@@ -417,20 +418,7 @@ class ShellMaterial:
             where = "material dict"
             data = source
         else:
-            where = os.fspath(source)
-            try:
-                with open(where, encoding="utf-8") as f:
-                    text = f.read()
-            except FileNotFoundError:
-                raise ValueError(f"{where}: no such material file") from None
-            except UnicodeDecodeError as exc:
-                raise ValueError(f"{where}: cannot read material file: not UTF-8 text ({exc.reason})") from None
-            except OSError as exc:
-                raise ValueError(f"{where}: cannot read material file: {exc.strerror or exc}") from None
-            try:
-                data = json.loads(text)
-            except json.JSONDecodeError as exc:
-                raise ValueError(f"{where}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+            where, data = read_json(source, "material file")
             if not isinstance(data, dict):
                 raise ValueError(f"{where}: expected a JSON object with key 'shell', got a {type(data).__name__}")
             if "shell" not in data:
