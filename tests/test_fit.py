@@ -26,6 +26,8 @@ from yarnfit.fit import (
 )
 from yarnfit.shell import PARAMETER_NAMES, ShellMaterial
 
+from fabric_shell import FABRIC as TRUE, H  # a realistic woven
+
 # The acceptance level for recovering a material from its own energies. Exact data come back to
 # ~1e-14 (the unit-column design has a condition number ~10), so this fails only for a real error.
 RECOVERY_REL = 1e-6
@@ -60,19 +62,6 @@ CALIBRATION_REL = 0.12
 # the scatter the Monte-Carlo test compares with.
 NOISE_REL = 1e-4
 
-H = 3.0e-4  # m
-# Realistic fabric (as in test_shell): h s00 = 1000 N/m, h³ b00 = 1e-5 N·m, b01 ≠ 0.
-TRUE = ShellMaterial(
-    thickness=H,
-    s00=1.0e3 / H,
-    s01=1.2e2 / H,
-    s11=6.0e2 / H,
-    s22=5.0e1 / H,
-    b00=1.0e-5 / H**3,
-    b01=1.5e-6 / H**3,
-    b11=6.0e-6 / H**3,
-    b22=2.0e-6 / H**3,
-)
 TRUE_PAPER = ShellMaterial(H, **{**TRUE.parameters, "b01": 0.0})
 
 # Largest parameter of each family: 10 % stretch, I_01 = 0.05 of shear, 200 1/m of curvature.

@@ -17,6 +17,8 @@ from yarnfit.shell import (
     membrane_strain,
 )
 
+from fabric_shell import FABRIC as MATERIAL, H  # a realistic woven
+
 # Moduli ↔ stiffness and the closed forms below are a handful of multiplications and divisions:
 # a few ulps each, 1e-13 leaves a factor ~100 of margin over float64 ε.
 ROUND_OFF_REL = 1e-13
@@ -32,19 +34,6 @@ FD_STEP_REL = 1e-9
 # wrong convention (a missing factor 2 on an off-diagonal entry).
 FD_REL = 1e-5
 
-H = 3.0e-4  # m: a medium-weight woven fabric
-# Realistic fabric: h s00 ≈ 1e3 N/m, h³ b00 ≈ 1e-5 N·m; weft stiffer than warp, b01 ≠ 0.
-MATERIAL = ShellMaterial(
-    thickness=H,
-    s00=1.0e3 / H,
-    s01=1.2e2 / H,
-    s11=6.0e2 / H,
-    s22=5.0e1 / H,
-    b00=1.0e-5 / H**3,
-    b01=1.5e-6 / H**3,
-    b11=6.0e-6 / H**3,
-    b22=2.0e-6 / H**3,
-)
 
 I_GENERAL = np.array([[1.08, 0.04], [0.04, 0.97]])
 II_GENERAL = np.array([[120.0, -35.0], [-35.0, 60.0]])
