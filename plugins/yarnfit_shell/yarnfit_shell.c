@@ -1,14 +1,30 @@
 // yarnfit.shell: an orthotropic StVK shell for 2D MuJoCo flexes (mjPLUGIN_PASSIVE).
 //
-// WORK IN PROGRESS (issue 5): membrane only. Bending, damping and the split with MuJoCo's
-// built-in isotropic elasticity are still to come; see plugins/README.md.
+// Energy per reference area, in the material frame (weft = first axis, turned by `angle` from the
+// flex's first reference axis), with the conventions of yarnfit's docs/design.md §3:
 //
-// Membrane, per triangle (linear, constant strain): with rest edge vectors in the material frame
-// (weft = first axis, turned by `angle` from the flex's first reference axis) the deformation
-// gradient F (3x2) maps rest to current edges; Green strain E = (F^T F - I)/2, Voigt
-// eps = (E00, E11, 2 E01); energy A0 (h/2) eps^T S eps with S = [[s00, s01, 0], [s01, s11, 0],
-// [0, 0, s22]] (Pa) and A0 the rest area. Forces are minus its gradient, accumulated into
-// qfrc_passive through the vertex bodies' Jacobians.
+//   W = (h/2) eps^T S eps + (h^3/2) kappa^T B kappa,
+//   eps = (E00, E11, 2 E01)       Green strain,          S = [[s00, s01, 0], [s01, s11, 0], [0, 0, s22]],
+//   kappa = (II00, II11, 2 II01)  second fundamental form, B = [[b00, b01, 0], [b01, b11, 0], [0, 0, b22]].
+//
+// Membrane: per linear triangle, constant deformation gradient F (3x2) from the rest edges.
+// Bending: per triangle, a discrete shape operator from the dihedral angles theta_e of its three
+// edges (hinges shared with the neighbouring triangles),
+//
+//   II_t = sum_e theta_e l_e / (2 A_t) n_e n_e^T,
+//
+// with l_e the rest edge length, A_t the rest area and n_e the in-plane unit normal of the edge
+// in the rest material frame. It is exact for a cylinder on a regular grid in any direction and
+// converges to (h^3/2) kappa^T B kappa; a boundary edge has no hinge (a free edge carries no
+// moment). See plugins/README.md.
+//
+// Damping (Kelvin-Voigt, stiffness-proportional, the Rayleigh form of the Gauss-Newton stiffness):
+// stresses use eps + damping * d(eps)/dt and kappa + damping * d(kappa)/dt.
+//
+// Split with MuJoCo's built-in elasticity: the configuration is always the full material. When
+// the flex also carries <elasticity elastic2d="stretch" young poisson thickness>, the keys
+// builtin_young, builtin_poisson, builtin_thickness repeat it; init checks them against the
+// compiled flex stiffness and the plugin adds only h S - t_b S_iso, so the total is h S.
 
 #include <math.h>
 #include <stdio.h>
@@ -19,19 +35,38 @@
 
 #define YF_NAME "yarnfit.shell"
 
+// Doubles per element in mjModel.flex_stiffness for MuJoCo 4.0 (the upper triangle of a 6x6
+// edge-edge matrix; a triangle uses its first 6 entries, measured against our own formula).
+#define YF_STIFFNESS_STRIDE 21
+// Relative agreement demanded between the builtin_* keys and the compiled built-in stiffness:
+// both are the same closed form in double precision, so they agree to ~1e-15; a mismatch a user
+// makes (a different modulus or Poisson ratio) is far larger.
+#define YF_BUILTIN_RTOL 1e-9
+
 static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
+  "builtin_young", "builtin_poisson", "builtin_thickness",
 };
 enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 
-// Per instance: material, the flex it drives, and per-triangle rest data.
+// Per instance: material, the flex it drives, and rest data.
 typedef struct {
   double s00, s01, s11, s22, b00, b01, b11, b22, thickness, angle, damping;
+  double builtin_young, builtin_poisson, builtin_thickness;
+  double membrane[4];   // the plugin's membrane stiffness h S - t_b S_iso: c00 c01 c11 c22 (N/m)
+  double bending[4];    // h^3 B: d00 d01 d11 d22 (N m)
   int flex;
+  int nvert;
   int ntri;
-  int* tri;          // (ntri x 3) flex-local vertex ids
-  double* rest_inv;  // (ntri x 4) inverse of the rest edge matrix [e1 e2] in the material frame
-  double* area;      // (ntri) rest areas (m^2)
+  int nhinge;
+  int* tri;             // (ntri x 3) flex-local vertex ids
+  double* rest_inv;     // (ntri x 4) inverse of the rest edge matrix [e1 e2] in the material frame
+  double* area;         // (ntri) rest areas (m^2)
+  int* hinge;           // (nhinge x 4) x1 x2 o0 o1: edge x1->x2 as its first triangle (x1 x2 o0) runs
+  int* tri_hinge;       // (ntri x 3) hinge of each edge of a triangle, -1 on the boundary
+  double* tri_weight;   // (ntri x 9) d kappa / d theta for each edge: l/(2A) (n0^2, n1^2, 2 n0 n1)
+  int* vert_dof;        // (nvert) last dof of the vertex body's kinematic chain, -1 if none
+  unsigned char* slide_only;  // (nvert) 1 if that chain has only slide joints (Jacobian = axes)
 } Shell;
 
 // Configuration errors use mju_error: during compilation (where MuJoCo first runs init) it becomes
@@ -67,6 +102,8 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
     {"s00", &s->s00, 1, 0}, {"s01", &s->s01, 1, 0}, {"s11", &s->s11, 1, 0}, {"s22", &s->s22, 1, 0},
     {"b00", &s->b00, 1, 0}, {"b01", &s->b01, 1, 0}, {"b11", &s->b11, 1, 0}, {"b22", &s->b22, 1, 0},
     {"thickness", &s->thickness, 1, 0}, {"angle", &s->angle, 0, 0}, {"damping", &s->damping, 0, 0},
+    {"builtin_young", &s->builtin_young, 0, 0}, {"builtin_poisson", &s->builtin_poisson, 0, 0},
+    {"builtin_thickness", &s->builtin_thickness, 0, 0},
   };
   for (size_t k = 0; k < sizeof(keys) / sizeof(keys[0]); k++) {
     if (read_number(m, instance, keys[k].key, keys[k].fallback, keys[k].required, keys[k].value)) return -1;
@@ -91,6 +128,20 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
   }
   if (s->damping < 0) {
     mju_error(YF_NAME ": config key 'damping' must be >= 0 (s), got %g", s->damping);
+    return -1;
+  }
+  if (s->builtin_young < 0 || s->builtin_thickness < 0) {
+    mju_error(YF_NAME ": config keys 'builtin_young' and 'builtin_thickness' must be >= 0, got %g and %g",
+              s->builtin_young, s->builtin_thickness);
+    return -1;
+  }
+  if ((s->builtin_young > 0) != (s->builtin_thickness > 0)) {
+    mju_error(YF_NAME ": config keys 'builtin_young' and 'builtin_thickness' must both be given "
+              "(the flex's <elasticity>) or both be absent");
+    return -1;
+  }
+  if (!(s->builtin_poisson >= 0 && s->builtin_poisson < 0.5)) {
+    mju_error(YF_NAME ": config key 'builtin_poisson' must lie in [0, 0.5), got %g", s->builtin_poisson);
     return -1;
   }
   return 0;
@@ -126,7 +177,169 @@ static void shell_free(Shell* s) {
   free(s->tri);
   free(s->rest_inv);
   free(s->area);
+  free(s->hinge);
+  free(s->tri_hinge);
+  free(s->tri_weight);
+  free(s->vert_dof);
+  free(s->slide_only);
   free(s);
+}
+
+// The Green-strain basis of one triangle: G_k = dE/d(l_k^2) for its edge (local vertices k, k+1),
+// with Dinv the inverse rest edge matrix. (2x2 row-major, 3 of them.)
+static void strain_basis(const double Dinv[4], double G[3][4]) {
+  // dC/d(l^2) for C = [[e1.e1, e1.e2], [e1.e2, e2.e2]]: edge 01 is e1, edge 12 is e2 - e1, edge 20 is e2.
+  static const double dC[3][4] = {{1, 0.5, 0.5, 0}, {0, -0.5, -0.5, 0}, {0, 0.5, 0.5, 1}};
+  for (int k = 0; k < 3; k++) {
+    double tmp[4];  // dC Dinv
+    for (int i = 0; i < 2; i++) {
+      for (int j = 0; j < 2; j++) tmp[2 * i + j] = dC[k][2 * i] * Dinv[j] + dC[k][2 * i + 1] * Dinv[2 + j];
+    }
+    for (int i = 0; i < 2; i++) {  // 1/2 Dinv^T tmp
+      for (int j = 0; j < 2; j++) G[k][2 * i + j] = 0.5 * (Dinv[i] * tmp[j] + Dinv[2 + i] * tmp[2 + j]);
+    }
+  }
+}
+
+// Check the builtin_* keys against the flex's compiled built-in membrane stiffness. MuJoCo stores,
+// per triangle, K_ab = 4 A t (mu tr(G_a G_b) + lambda*/2 tr G_a tr G_b) for its edges a, b in
+// flex_elemedge order (upper triangle), lambda* = E nu / (1 - nu^2) the plane-stress Lame constant.
+static int check_builtin(const mjModel* m, const Shell* s, const int* tri_edge_local) {
+  int f = s->flex;
+  if (m->flex_bendingadr[f] >= 0) {
+    mju_error(YF_NAME ": flex %d has built-in bending (elastic2d='bend' or 'both'); yarnfit.shell "
+              "carries all the bending: use elastic2d='stretch' or 'none'", f);
+    return -1;
+  }
+  double E = s->builtin_young, nu = s->builtin_poisson, t = s->builtin_thickness;
+  if (m->flex_stiffnessadr[f] < 0) {  // no built-in stretch elasticity on this flex
+    if (E > 0) {
+      mju_error(YF_NAME ": config key builtin_young=%g is given but flex %d has no built-in stretch "
+                "elasticity (<elasticity elastic2d=\"stretch\">)", E, f);
+      return -1;
+    }
+    return 0;
+  }
+  double mu = E / (2 * (1 + nu)), lambda = E * nu / (1 - nu * nu);
+  const mjtNum* stiffness = m->flex_stiffness + m->flex_stiffnessadr[f];
+  for (int tri = 0; tri < s->ntri; tri++) {
+    double G[3][4], expected[6], largest = 0, worst = 0;
+    strain_basis(s->rest_inv + 4 * tri, G);
+    int n = 0;
+    for (int a = 0; a < 3; a++) {
+      for (int b = a; b < 3; b++) {
+        const double* Ga = G[tri_edge_local[3 * tri + a]];
+        const double* Gb = G[tri_edge_local[3 * tri + b]];
+        double trace_ab = Ga[0] * Gb[0] + Ga[1] * Gb[2] + Ga[2] * Gb[1] + Ga[3] * Gb[3];
+        double value = 4 * s->area[tri] * t * (mu * trace_ab + 0.5 * lambda * (Ga[0] + Ga[3]) * (Gb[0] + Gb[3]));
+        expected[n++] = value;
+        largest = fmax(largest, fabs(value));
+      }
+    }
+    for (int k = 0; k < 6; k++) {
+      double compiled = stiffness[YF_STIFFNESS_STRIDE * tri + k];
+      largest = fmax(largest, fabs(compiled));
+      worst = fmax(worst, fabs(compiled - expected[k]));
+    }
+    if (worst > YF_BUILTIN_RTOL * largest) {
+      if (E > 0) {
+        mju_error(YF_NAME ": config keys builtin_young=%g builtin_poisson=%g builtin_thickness=%g do not "
+                  "match flex %d's built-in <elasticity> (triangle %d); they must repeat its young, poisson "
+                  "and thickness", E, nu, t, f, tri);
+      } else {
+        mju_error(YF_NAME ": flex %d carries built-in stretch elasticity: give the plugin builtin_young, "
+                  "builtin_poisson and builtin_thickness equal to its <elasticity> so that it adds only "
+                  "the remainder", f);
+      }
+      return -1;
+    }
+  }
+  return 0;
+}
+
+// Hinges: each interior edge with its two opposite vertices, oriented by its first triangle; and
+// per triangle edge the hinge and d kappa / d theta. Needs s->tri, s->area and the rest edges in
+// the material frame `rest2d` (ntri x 6: the three vertices' material coordinates relative to the
+// first). Returns -1 (after mju_error) on a non-manifold or inconsistently oriented mesh.
+static int build_hinges(const mjModel* m, Shell* s, const double* rest2d, int* tri_edge_local) {
+  int f = s->flex, nedge = m->flex_edgenum[f];
+  const int* edge = m->flex_edge + 2 * m->flex_edgeadr[f];
+  const int* elemedge = m->flex_elemedge + m->flex_elemedgeadr[f];
+  int* side = malloc(sizeof(int) * 4 * nedge);
+  int* edge_hinge = malloc(sizeof(int) * nedge);
+  int* tri_edge = malloc(sizeof(int) * 3 * s->ntri);
+  if (!side || !edge_hinge || !tri_edge) {
+    free(side); free(edge_hinge); free(tri_edge);
+    return -1;
+  }
+  for (int i = 0; i < 4 * nedge; i++) side[i] = -1;
+  const char* problem = NULL;
+  int bad_tri = -1;
+  for (int t = 0; t < s->ntri && !problem; t++) {
+    const int* v = s->tri + 3 * t;
+    for (int j = 0; j < 3 && !problem; j++) {
+      int e = elemedge[3 * t + j], p = edge[2 * e], q = edge[2 * e + 1], k = 0;
+      while (k < 3 && !((v[k] == p && v[(k + 1) % 3] == q) || (v[k] == q && v[(k + 1) % 3] == p))) k++;
+      if (k == 3) { problem = "an element edge that is not an edge of its triangle"; bad_tri = t; break; }
+      int a = v[k], b = v[(k + 1) % 3], o = v[(k + 2) % 3];
+      tri_edge[3 * t + k] = e;
+      tri_edge_local[3 * t + j] = k;  // flex_elemedge slot j is the triangle's local edge k
+      if (side[4 * e] < 0) {
+        side[4 * e] = a; side[4 * e + 1] = b; side[4 * e + 2] = o;
+      } else if (side[4 * e + 3] < 0 && side[4 * e] == b && side[4 * e + 1] == a) {
+        side[4 * e + 3] = o;
+      } else {
+        problem = "an edge shared by more than two triangles, or neighbouring triangles of opposite "
+                  "orientation";
+        bad_tri = t;
+      }
+    }
+  }
+  if (problem) {
+    free(side); free(edge_hinge); free(tri_edge);
+    mju_error(YF_NAME ": flex %d (triangle %d) has %s; the bending model needs a consistently oriented "
+              "manifold mesh", f, bad_tri, problem);
+    return -1;
+  }
+  s->nhinge = 0;
+  for (int e = 0; e < nedge; e++) edge_hinge[e] = side[4 * e + 3] >= 0 ? s->nhinge++ : -1;
+  s->hinge = malloc(sizeof(int) * 4 * (s->nhinge > 0 ? s->nhinge : 1));
+  if (!s->hinge) { free(side); free(edge_hinge); free(tri_edge); return -1; }
+  for (int e = 0; e < nedge; e++) {
+    if (edge_hinge[e] >= 0) memcpy(s->hinge + 4 * edge_hinge[e], side + 4 * e, sizeof(int) * 4);
+  }
+  for (int t = 0; t < s->ntri; t++) {
+    const double* r = rest2d + 6 * t;  // material coordinates of vertices 0, 1, 2 (vertex 0 at 0)
+    for (int k = 0; k < 3; k++) {
+      s->tri_hinge[3 * t + k] = edge_hinge[tri_edge[3 * t + k]];
+      double d0 = r[2 * ((k + 1) % 3)] - r[2 * k], d1 = r[2 * ((k + 1) % 3) + 1] - r[2 * k + 1];
+      double length = sqrt(d0 * d0 + d1 * d1);
+      double n0 = d1 / length, n1 = -d0 / length, scale = length / (2 * s->area[t]);
+      s->tri_weight[9 * t + 3 * k + 0] = scale * n0 * n0;
+      s->tri_weight[9 * t + 3 * k + 1] = scale * n1 * n1;
+      s->tri_weight[9 * t + 3 * k + 2] = scale * 2 * n0 * n1;
+    }
+  }
+  free(side);
+  free(edge_hinge);
+  free(tri_edge);
+  return 0;
+}
+
+// Kinematic chain of each vertex body: its last dof, and whether every dof on it is a slide joint
+// (then the vertex Jacobian is the joint axes, and forces go straight to those dofs).
+static void classify_vertices(const mjModel* m, Shell* s) {
+  int vadr = m->flex_vertadr[s->flex];
+  for (int v = 0; v < s->nvert; v++) {
+    int body = m->flex_vertbodyid[vadr + v];
+    while (body > 0 && m->body_dofnum[body] == 0) body = m->body_parentid[body];
+    int dof = body > 0 ? m->body_dofadr[body] + m->body_dofnum[body] - 1 : -1;
+    s->vert_dof[v] = dof;
+    s->slide_only[v] = 1;
+    for (int j = dof; j >= 0; j = m->dof_parentid[j]) {
+      if (m->jnt_type[m->dof_jntid[j]] != mjJNT_SLIDE) s->slide_only[v] = 0;
+    }
+  }
 }
 
 static int shell_init(const mjModel* m, mjData* d, int instance) {
@@ -142,23 +355,53 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
     mju_error(YF_NAME ": needs a 2D flex (triangles), flex %d has dim %d", f, m->flex_dim[f]);
     return -1;
   }
+  if (m->flex_interp[f]) {
+    mju_error(YF_NAME ": flex %d is interpolated (dof trilinear/quadratic); needs a plain triangle flex", f);
+    return -1;
+  }
   Shell* s = calloc(1, sizeof(Shell));
   if (!s) return -1;
   *s = config;
   s->flex = f;
   s->ntri = m->flex_elemnum[f];
+  s->nvert = m->flex_vertnum[f];
   s->tri = malloc(sizeof(int) * 3 * s->ntri);
   s->rest_inv = malloc(sizeof(double) * 4 * s->ntri);
   s->area = malloc(sizeof(double) * s->ntri);
-  if (!s->tri || !s->rest_inv || !s->area) { shell_free(s); return -1; }
+  s->tri_hinge = malloc(sizeof(int) * 3 * s->ntri);
+  s->tri_weight = malloc(sizeof(double) * 9 * s->ntri);
+  s->vert_dof = malloc(sizeof(int) * s->nvert);
+  s->slide_only = malloc(s->nvert);
+  double* x0 = malloc(sizeof(double) * 3 * s->nvert);
+  double* rest2d = malloc(sizeof(double) * 6 * s->ntri);
+  int* tri_edge_local = malloc(sizeof(int) * 3 * s->ntri);
+  if (!s->tri || !s->rest_inv || !s->area || !s->tri_hinge || !s->tri_weight || !s->vert_dof ||
+      !s->slide_only || !x0 || !rest2d || !tri_edge_local) {
+    free(x0); free(rest2d); free(tri_edge_local);
+    shell_free(s);
+    return -1;
+  }
+
+  // Membrane stiffness the plugin carries: h S minus the built-in isotropic t_b S_iso.
+  {
+    double E = s->builtin_young, nu = s->builtin_poisson, t = s->builtin_thickness;
+    double mu = E / (2 * (1 + nu)), lambda = E * nu / (1 - nu * nu), h = s->thickness;
+    s->membrane[0] = h * s->s00 - t * (lambda + 2 * mu);
+    s->membrane[1] = h * s->s01 - t * lambda;
+    s->membrane[2] = h * s->s11 - t * (lambda + 2 * mu);
+    s->membrane[3] = h * s->s22 - t * mu;
+    double h3 = h * h * h;
+    s->bending[0] = h3 * s->b00;
+    s->bending[1] = h3 * s->b01;
+    s->bending[2] = h3 * s->b11;
+    s->bending[3] = h3 * s->b22;
+  }
 
   // Rest vertex positions (qpos0) and the flex's reference axes: the first two edges of triangle 0
-  // span its plane; the first reference axis is the direction of the flex's first edge, turned by
+  // span its plane; the first reference axis is world x projected into that plane, turned by
   // `angle` about the normal to give weft.
-  int nvert = m->flex_vertnum[f], vadr = m->flex_vertadr[f];
-  double* x0 = malloc(sizeof(double) * 3 * nvert);
-  if (!x0) { shell_free(s); return -1; }
-  for (int v = 0; v < nvert; v++) {
+  int vadr = m->flex_vertadr[f];
+  for (int v = 0; v < s->nvert; v++) {
     double pos[3], quat[4], local[3];
     int body = m->flex_vertbodyid[vadr + v];
     body_position0(m, body, pos, quat);
@@ -190,7 +433,8 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
     mju_copy3(axis0, w0);
     mju_copy3(axis1, w1);
   }
-  for (int t = 0; t < s->ntri; t++) {
+  int bad = -1;
+  for (int t = 0; t < s->ntri && bad < 0; t++) {
     const int* v = elem + 3 * t;
     for (int k = 0; k < 3; k++) s->tri[3 * t + k] = v[k];
     double e1[3], e2[3];
@@ -202,19 +446,32 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
     double D00 = mju_dot3(e1, axis0), D01 = mju_dot3(e2, axis0);
     double D10 = mju_dot3(e1, axis1), D11 = mju_dot3(e2, axis1);
     double det = D00 * D11 - D01 * D10;
-    if (!(fabs(det) > 0)) {
-      free(x0);
-      shell_free(s);
-      mju_error(YF_NAME ": flex %d triangle %d has zero rest area", f, t);
-      return -1;
-    }
+    if (!(fabs(det) > 0)) { bad = t; break; }
     s->rest_inv[4 * t + 0] = D11 / det;
     s->rest_inv[4 * t + 1] = -D01 / det;
     s->rest_inv[4 * t + 2] = -D10 / det;
     s->rest_inv[4 * t + 3] = D00 / det;
     s->area[t] = 0.5 * fabs(det);
+    double* r = rest2d + 6 * t;
+    r[0] = r[1] = 0;
+    r[2] = D00; r[3] = D10; r[4] = D01; r[5] = D11;
   }
   free(x0);
+  if (bad >= 0) {
+    free(rest2d); free(tri_edge_local);
+    shell_free(s);
+    mju_error(YF_NAME ": flex %d triangle %d has zero rest area", f, bad);
+    return -1;
+  }
+  int status = build_hinges(m, s, rest2d, tri_edge_local);
+  free(rest2d);
+  if (status == 0) status = check_builtin(m, s, tri_edge_local);
+  free(tri_edge_local);
+  if (status) {
+    shell_free(s);
+    return -1;
+  }
+  classify_vertices(m, s);
   d->plugin_data[instance] = (uintptr_t)s;
   return 0;
 }
@@ -224,10 +481,12 @@ static void shell_destroy(mjData* d, int instance) {
   d->plugin_data[instance] = 0;
 }
 
-// Membrane energy of one triangle and its gradient with respect to the three vertex positions.
-// x: (3 x 3) current vertex positions; grad: (3 x 3) out, added to.
-static double membrane_triangle(const Shell* s, int t, const double x[9], double grad[9]) {
+// Membrane force of one triangle: grad (3 x 3, added to) of its energy A0/2 eps^T C eps with the
+// stress evaluated at eps + damping * d(eps)/dt. x, xdot: (3 x 3) vertex positions and velocities
+// (xdot NULL without damping).
+static void membrane_triangle(const Shell* s, int t, const double x[9], const double* xdot, double grad[9]) {
   const double* Dinv = s->rest_inv + 4 * t;
+  const double* c = s->membrane;
   double e1[3], e2[3], F0[3], F1[3];
   for (int i = 0; i < 3; i++) {
     e1[i] = x[3 + i] - x[i];
@@ -238,16 +497,29 @@ static double membrane_triangle(const Shell* s, int t, const double x[9], double
     F0[i] = e1[i] * Dinv[0] + e2[i] * Dinv[2];
     F1[i] = e1[i] * Dinv[1] + e2[i] * Dinv[3];
   }
-  double E00 = 0.5 * (mju_dot3(F0, F0) - 1), E11 = 0.5 * (mju_dot3(F1, F1) - 1), E01 = 0.5 * mju_dot3(F0, F1);
-  double eps0 = E00, eps1 = E11, eps2 = 2 * E01;
-  double sig0 = s->s00 * eps0 + s->s01 * eps1, sig1 = s->s01 * eps0 + s->s11 * eps1, sig2 = s->s22 * eps2;
-  double scale = s->area[t] * s->thickness;
-  double energy = 0.5 * scale * (eps0 * sig0 + eps1 * sig1 + eps2 * sig2);
-  // dW/dF = scale * F P, P = [[sig0, sig2], [sig2, sig1]] (second Piola-Kirchhoff in Voigt order).
+  double eps0 = 0.5 * (mju_dot3(F0, F0) - 1), eps1 = 0.5 * (mju_dot3(F1, F1) - 1), eps2 = mju_dot3(F0, F1);
+  if (xdot) {
+    double r1[3], r2[3], Fd0[3], Fd1[3];
+    for (int i = 0; i < 3; i++) {
+      r1[i] = xdot[3 + i] - xdot[i];
+      r2[i] = xdot[6 + i] - xdot[i];
+    }
+    for (int i = 0; i < 3; i++) {
+      Fd0[i] = r1[i] * Dinv[0] + r2[i] * Dinv[2];
+      Fd1[i] = r1[i] * Dinv[1] + r2[i] * Dinv[3];
+    }
+    eps0 += s->damping * mju_dot3(F0, Fd0);
+    eps1 += s->damping * mju_dot3(F1, Fd1);
+    eps2 += s->damping * (mju_dot3(F0, Fd1) + mju_dot3(F1, Fd0));
+  }
+  double scale = s->area[t];
+  double sig0 = scale * (c[0] * eps0 + c[1] * eps1), sig1 = scale * (c[1] * eps0 + c[2] * eps1);
+  double sig2 = scale * c[3] * eps2;
+  // dW/dF = F P, P = [[sig0, sig2], [sig2, sig1]] (second Piola-Kirchhoff in Voigt order).
   double G0[3], G1[3];
   for (int i = 0; i < 3; i++) {
-    G0[i] = scale * (F0[i] * sig0 + F1[i] * sig2);
-    G1[i] = scale * (F0[i] * sig2 + F1[i] * sig1);
+    G0[i] = F0[i] * sig0 + F1[i] * sig2;
+    G1[i] = F0[i] * sig2 + F1[i] * sig1;
   }
   // dW/de1 = G Dinv^T row 0, dW/de2 = row 1.
   for (int i = 0; i < 3; i++) {
@@ -257,32 +529,145 @@ static double membrane_triangle(const Shell* s, int t, const double x[9], double
     grad[6 + i] += g2;
     grad[i] -= g1 + g2;
   }
-  return energy;
+}
+
+// Dihedral angle of hinge (x1 x2 o0 o1), positive when the sheet curves towards its normal, and
+// its gradient (4 x 3: x1, x2, o0, o1).
+static double hinge_angle(const double* x1, const double* x2, const double* o0, const double* o1, double g[12]) {
+  double e[3], a[3], b[3], nA[3], nB[3];
+  for (int i = 0; i < 3; i++) {
+    e[i] = x2[i] - x1[i];
+    a[i] = o0[i] - x1[i];
+    b[i] = o1[i] - x1[i];
+  }
+  mju_cross(nA, e, a);
+  mju_cross(nB, b, e);
+  double length = mju_norm3(e), cross[3];
+  mju_cross(cross, nB, nA);
+  double theta = atan2(mju_dot3(cross, e) / length, mju_dot3(nA, nB));
+  if (g) {
+    double qA = mju_dot3(nA, nA), qB = mju_dot3(nB, nB);
+    // Projections of the tips onto the edge, measured from x2 and from x1.
+    double pA2 = (mju_dot3(a, e) - length * length) / length, pB2 = (mju_dot3(b, e) - length * length) / length;
+    double pA1 = mju_dot3(a, e) / length, pB1 = mju_dot3(b, e) / length;
+    for (int i = 0; i < 3; i++) {
+      double gA = nA[i] / qA, gB = nB[i] / qB;
+      g[i] = pA2 * gA + pB2 * gB;
+      g[3 + i] = -pA1 * gA - pB1 * gB;
+      g[6 + i] = length * gA;
+      g[9 + i] = length * gB;
+    }
+  }
+  return theta;
+}
+
+// Bending forces: grad (nvert x 3, added to). x, xdot: (nvert x 3) positions and velocities (xdot
+// NULL without damping). Scratch: theta, rate, torque (nhinge each).
+static void bending_forces(const Shell* s, const double* x, const double* xdot, double* theta, double* rate,
+                           double* torque, double* grad) {
+  const double* dm = s->bending;
+  for (int h = 0; h < s->nhinge; h++) {
+    const int* v = s->hinge + 4 * h;
+    double g[12];
+    theta[h] = hinge_angle(x + 3 * v[0], x + 3 * v[1], x + 3 * v[2], x + 3 * v[3], xdot ? g : NULL);
+    rate[h] = 0;
+    if (xdot) {
+      for (int k = 0; k < 4; k++) rate[h] += mju_dot3(g + 3 * k, xdot + 3 * v[k]);
+    }
+    torque[h] = 0;
+  }
+  // dW/dtheta_e = sum over the triangles of e of A (h^3 B kappa) . d kappa / d theta_e.
+  for (int t = 0; t < s->ntri; t++) {
+    const int* hinge = s->tri_hinge + 3 * t;
+    const double* w = s->tri_weight + 9 * t;
+    if (hinge[0] < 0 && hinge[1] < 0 && hinge[2] < 0) continue;
+    double kappa[3] = {0, 0, 0};
+    for (int k = 0; k < 3; k++) {
+      if (hinge[k] < 0) continue;
+      double angle = theta[hinge[k]] + s->damping * rate[hinge[k]];
+      for (int i = 0; i < 3; i++) kappa[i] += angle * w[3 * k + i];
+    }
+    double moment[3] = {s->area[t] * (dm[0] * kappa[0] + dm[1] * kappa[1]),
+                        s->area[t] * (dm[1] * kappa[0] + dm[2] * kappa[1]), s->area[t] * dm[3] * kappa[2]};
+    for (int k = 0; k < 3; k++) {
+      if (hinge[k] >= 0) torque[hinge[k]] += mju_dot3(moment, w + 3 * k);
+    }
+  }
+  for (int h = 0; h < s->nhinge; h++) {
+    if (torque[h] == 0) continue;
+    const int* v = s->hinge + 4 * h;
+    double g[12];
+    hinge_angle(x + 3 * v[0], x + 3 * v[1], x + 3 * v[2], x + 3 * v[3], g);
+    for (int k = 0; k < 4; k++) {
+      for (int i = 0; i < 3; i++) grad[3 * v[k] + i] += torque[h] * g[3 * k + i];
+    }
+  }
 }
 
 static void shell_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   (void)capability_bit;
   const Shell* s = (const Shell*)d->plugin_data[instance];
   if (!s) return;
-  int f = s->flex, vadr = m->flex_vertadr[f], nvert = m->flex_vertnum[f];
+  int vadr = m->flex_vertadr[s->flex], nvert = s->nvert;
+  const mjtNum* x = d->flexvert_xpos + 3 * vadr;
   mj_markStack(d);
-  // Vertex forces first, then one Jacobian per vertex (not one per triangle corner).
-  mjtNum* force = mj_stackAllocNum(d, 3 * nvert);
-  mjtNum* jac = mj_stackAllocNum(d, 3 * m->nv);
-  mjtNum* qfrc = mj_stackAllocNum(d, m->nv);
-  mju_zero(force, 3 * nvert);
-  for (int t = 0; t < s->ntri; t++) {
-    double x[9], grad[9] = {0};
-    for (int k = 0; k < 3; k++) mju_copy3(x + 3 * k, d->flexvert_xpos + 3 * (vadr + s->tri[3 * t + k]));
-    membrane_triangle(s, t, x, grad);
-    for (int k = 0; k < 3; k++) {
-      for (int i = 0; i < 3; i++) force[3 * s->tri[3 * t + k] + i] -= grad[3 * k + i];
+  mjtNum* grad = mj_stackAllocNum(d, 3 * nvert);
+  mjtNum* jac = NULL;
+  mjtNum* qfrc = NULL;
+  mju_zero(grad, 3 * nvert);
+
+  // Vertex velocities, only for damping: sum of slide axes times joint speeds, or the Jacobian.
+  mjtNum* xdot = NULL;
+  if (s->damping > 0) {
+    xdot = mj_stackAllocNum(d, 3 * nvert);
+    for (int v = 0; v < nvert; v++) {
+      mjtNum* out = xdot + 3 * v;
+      mju_zero3(out);
+      if (s->slide_only[v]) {
+        for (int j = s->vert_dof[v]; j >= 0; j = m->dof_parentid[j]) {
+          mju_addToScl3(out, d->xaxis + 3 * m->dof_jntid[j], d->qvel[j]);
+        }
+      } else {
+        if (!jac) jac = mj_stackAllocNum(d, 3 * m->nv);
+        mj_jac(m, d, jac, NULL, x + 3 * v, m->flex_vertbodyid[vadr + v]);
+        mju_mulMatVec(out, jac, d->qvel, 3, m->nv);
+      }
     }
   }
+
+  for (int t = 0; t < s->ntri; t++) {
+    const int* v = s->tri + 3 * t;
+    double xt[9], vt[9], gt[9] = {0};
+    for (int k = 0; k < 3; k++) {
+      mju_copy3(xt + 3 * k, x + 3 * v[k]);
+      if (xdot) mju_copy3(vt + 3 * k, xdot + 3 * v[k]);
+    }
+    membrane_triangle(s, t, xt, xdot ? vt : NULL, gt);
+    for (int k = 0; k < 3; k++) mju_addTo3(grad + 3 * v[k], gt + 3 * k);
+  }
+  if (s->nhinge > 0) {
+    mjtNum* theta = mj_stackAllocNum(d, s->nhinge);
+    mjtNum* rate = mj_stackAllocNum(d, s->nhinge);
+    mjtNum* torque = mj_stackAllocNum(d, s->nhinge);
+    bending_forces(s, x, xdot, theta, rate, torque, grad);
+  }
+
+  // Forces (minus the gradient) into joint space: slide-only chains directly, others through the
+  // vertex Jacobian.
   for (int v = 0; v < nvert; v++) {
-    mj_jac(m, d, jac, NULL, d->flexvert_xpos + 3 * (vadr + v), m->flex_vertbodyid[vadr + v]);
-    mju_mulMatTVec(qfrc, jac, force + 3 * v, 3, m->nv);
-    mju_addTo(d->qfrc_passive, qfrc, m->nv);
+    const mjtNum* g = grad + 3 * v;
+    if (s->vert_dof[v] < 0) continue;
+    if (s->slide_only[v]) {
+      for (int j = s->vert_dof[v]; j >= 0; j = m->dof_parentid[j]) {
+        d->qfrc_passive[j] -= mju_dot3(d->xaxis + 3 * m->dof_jntid[j], g);
+      }
+    } else {
+      if (!jac) jac = mj_stackAllocNum(d, 3 * m->nv);
+      if (!qfrc) qfrc = mj_stackAllocNum(d, m->nv);
+      mj_jac(m, d, jac, NULL, x + 3 * v, m->flex_vertbodyid[vadr + v]);
+      mju_mulMatTVec(qfrc, jac, g, 3, m->nv);
+      mju_subFrom(d->qfrc_passive, qfrc, m->nv);
+    }
   }
   mj_freeStack(d);
 }
