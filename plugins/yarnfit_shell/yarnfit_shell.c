@@ -67,6 +67,13 @@ typedef struct {
   double* tri_weight;   // (ntri x 9) d kappa / d theta for each edge: l/(2A) (n0^2, n1^2, 2 n0 n1)
   int* vert_dof;        // (nvert) last dof of the vertex body's kinematic chain, -1 if none
   unsigned char* slide_only;  // (nvert) 1 if that chain has only slide joints (Jacobian = axes)
+  // Scratch for compute (plugin data is per mjData, so one thread each): kept off the mjData
+  // stack, which a large cloth would overflow in a model with a small <size memory>.
+  double* grad;         // (nvert x 3) energy gradient
+  double* xdot;         // (nvert x 3) vertex velocities
+  double* theta;        // (nhinge) dihedral angles, then theta + damping * d(theta)/dt
+  double* torque;       // (nhinge) dW / d theta
+  double* hinge_grad;   // (nhinge x 12) d theta / d (x1, x2, o0, o1)
 } Shell;
 
 // Configuration errors use mju_error: during compilation (where MuJoCo first runs init) it becomes
@@ -182,6 +189,11 @@ static void shell_free(Shell* s) {
   free(s->tri_weight);
   free(s->vert_dof);
   free(s->slide_only);
+  free(s->grad);
+  free(s->xdot);
+  free(s->theta);
+  free(s->torque);
+  free(s->hinge_grad);
   free(s);
 }
 
@@ -472,6 +484,16 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
     return -1;
   }
   classify_vertices(m, s);
+  int nh = s->nhinge > 0 ? s->nhinge : 1;
+  s->grad = malloc(sizeof(double) * 3 * s->nvert);
+  s->xdot = malloc(sizeof(double) * 3 * s->nvert);
+  s->theta = malloc(sizeof(double) * nh);
+  s->torque = malloc(sizeof(double) * nh);
+  s->hinge_grad = malloc(sizeof(double) * 12 * nh);
+  if (!s->grad || !s->xdot || !s->theta || !s->torque || !s->hinge_grad) {
+    shell_free(s);
+    return -1;
+  }
   d->plugin_data[instance] = (uintptr_t)s;
   return 0;
 }
@@ -561,20 +583,20 @@ static double hinge_angle(const double* x1, const double* x2, const double* o0, 
   return theta;
 }
 
-// Bending forces: grad (nvert x 3, added to). x, xdot: (nvert x 3) positions and velocities (xdot
-// NULL without damping). Scratch: theta, rate, torque (nhinge each).
-static void bending_forces(const Shell* s, const double* x, const double* xdot, double* theta, double* rate,
-                           double* torque, double* grad) {
+// Bending forces: s->grad (nvert x 3) is added to. x, xdot: (nvert x 3) positions and velocities
+// (xdot NULL without damping).
+static void bending_forces(Shell* s, const double* x, const double* xdot) {
   const double* dm = s->bending;
   for (int h = 0; h < s->nhinge; h++) {
     const int* v = s->hinge + 4 * h;
-    double g[12];
-    theta[h] = hinge_angle(x + 3 * v[0], x + 3 * v[1], x + 3 * v[2], x + 3 * v[3], xdot ? g : NULL);
-    rate[h] = 0;
+    double* g = s->hinge_grad + 12 * h;
+    s->theta[h] = hinge_angle(x + 3 * v[0], x + 3 * v[1], x + 3 * v[2], x + 3 * v[3], g);
     if (xdot) {
-      for (int k = 0; k < 4; k++) rate[h] += mju_dot3(g + 3 * k, xdot + 3 * v[k]);
+      double rate = 0;
+      for (int k = 0; k < 4; k++) rate += mju_dot3(g + 3 * k, xdot + 3 * v[k]);
+      s->theta[h] += s->damping * rate;
     }
-    torque[h] = 0;
+    s->torque[h] = 0;
   }
   // dW/dtheta_e = sum over the triangles of e of A (h^3 B kappa) . d kappa / d theta_e.
   for (int t = 0; t < s->ntri; t++) {
@@ -584,42 +606,37 @@ static void bending_forces(const Shell* s, const double* x, const double* xdot, 
     double kappa[3] = {0, 0, 0};
     for (int k = 0; k < 3; k++) {
       if (hinge[k] < 0) continue;
-      double angle = theta[hinge[k]] + s->damping * rate[hinge[k]];
-      for (int i = 0; i < 3; i++) kappa[i] += angle * w[3 * k + i];
+      for (int i = 0; i < 3; i++) kappa[i] += s->theta[hinge[k]] * w[3 * k + i];
     }
     double moment[3] = {s->area[t] * (dm[0] * kappa[0] + dm[1] * kappa[1]),
                         s->area[t] * (dm[1] * kappa[0] + dm[2] * kappa[1]), s->area[t] * dm[3] * kappa[2]};
     for (int k = 0; k < 3; k++) {
-      if (hinge[k] >= 0) torque[hinge[k]] += mju_dot3(moment, w + 3 * k);
+      if (hinge[k] >= 0) s->torque[hinge[k]] += mju_dot3(moment, w + 3 * k);
     }
   }
   for (int h = 0; h < s->nhinge; h++) {
-    if (torque[h] == 0) continue;
     const int* v = s->hinge + 4 * h;
-    double g[12];
-    hinge_angle(x + 3 * v[0], x + 3 * v[1], x + 3 * v[2], x + 3 * v[3], g);
-    for (int k = 0; k < 4; k++) {
-      for (int i = 0; i < 3; i++) grad[3 * v[k] + i] += torque[h] * g[3 * k + i];
-    }
+    const double* g = s->hinge_grad + 12 * h;
+    for (int k = 0; k < 4; k++) mju_addToScl3(s->grad + 3 * v[k], g + 3 * k, s->torque[h]);
   }
 }
 
 static void shell_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   (void)capability_bit;
-  const Shell* s = (const Shell*)d->plugin_data[instance];
+  Shell* s = (Shell*)d->plugin_data[instance];
   if (!s) return;
   int vadr = m->flex_vertadr[s->flex], nvert = s->nvert;
   const mjtNum* x = d->flexvert_xpos + 3 * vadr;
+  mjtNum* grad = s->grad;
+  mju_zero(grad, 3 * nvert);
   mj_markStack(d);
-  mjtNum* grad = mj_stackAllocNum(d, 3 * nvert);
   mjtNum* jac = NULL;
   mjtNum* qfrc = NULL;
-  mju_zero(grad, 3 * nvert);
 
   // Vertex velocities, only for damping: sum of slide axes times joint speeds, or the Jacobian.
   mjtNum* xdot = NULL;
   if (s->damping > 0) {
-    xdot = mj_stackAllocNum(d, 3 * nvert);
+    xdot = s->xdot;
     for (int v = 0; v < nvert; v++) {
       mjtNum* out = xdot + 3 * v;
       mju_zero3(out);
@@ -645,12 +662,7 @@ static void shell_compute(const mjModel* m, mjData* d, int instance, int capabil
     membrane_triangle(s, t, xt, xdot ? vt : NULL, gt);
     for (int k = 0; k < 3; k++) mju_addTo3(grad + 3 * v[k], gt + 3 * k);
   }
-  if (s->nhinge > 0) {
-    mjtNum* theta = mj_stackAllocNum(d, s->nhinge);
-    mjtNum* rate = mj_stackAllocNum(d, s->nhinge);
-    mjtNum* torque = mj_stackAllocNum(d, s->nhinge);
-    bending_forces(s, x, xdot, theta, rate, torque, grad);
-  }
+  if (s->nhinge > 0) bending_forces(s, x, xdot);
 
   // Forces (minus the gradient) into joint space: slide-only chains directly, others through the
   // vertex Jacobian.
