@@ -89,6 +89,50 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--name", help="label for the output files (default: preset, pattern or file name)")
     fit.add_argument("-o", "--output", metavar="MATERIAL.json", help="material file (default: <name>.json)")
     fit.add_argument("--rerun", metavar="FILE.rrd", help="Rerun recording of the fit (default: logs/<name>-fit.rrd)")
+
+    from .mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE,
+                         DEFAULT_TIMESTEP, INTEGRATORS, SCENES)
+
+    export = commands.add_parser(
+        "export",
+        help="write a MuJoCo scene (MJCF) that uses a fitted material",
+        description=(
+            "Write a MuJoCo scene with a material file's cloth: cloth (hanging from two corners), stretch (a FAB "
+            "strip between two clamps, the right one driven by the position actuator 'pull'), sphere (dropped on a "
+            "sphere) or wall (dropped across a wall's top edge). The flex carries MuJoCo's built-in isotropic "
+            "elasticity (stretch, integrated implicitly under the discrete integrator) at least half as stiff as "
+            "the material in every direction, and the yarnfit.shell plugin adds the orthotropic rest and all the "
+            "bending. --fallback writes a plugin-free scene with one isotropic material instead. Lengths in m, "
+            "times in s."
+        ),
+    )
+    export.add_argument("material", metavar="MATERIAL.json", help="a material file written by `yarnfit fit`")
+    export.add_argument("--scene", required=True, choices=SCENES, help="which scene")
+    export.add_argument("-o", "--output", metavar="SCENE.xml",
+                        help="the scene file (default: <fabric>-<scene>.xml, <fabric>-<scene>-fallback.xml)")
+    export.add_argument("--resolution", type=int, metavar="N",
+                        help=f"vertices per side (stretch: along the strip); default {DEFAULT_RESOLUTION['cloth']}, "
+                             f"stretch {DEFAULT_RESOLUTION['stretch']}")
+    export.add_argument("--size", type=float, metavar="M", help="side length in m (stretch: strip length); "
+                        f"default {DEFAULT_SIZE['cloth']:g}, stretch {DEFAULT_SIZE['stretch']:g}")
+    export.add_argument("--width", type=float, metavar="M", help="strip width in m, stretch only (default 0.05)")
+    export.add_argument("--timestep", type=float, default=DEFAULT_TIMESTEP, metavar="S",
+                        help=f"time step in s (default {DEFAULT_TIMESTEP:g})")
+    export.add_argument("--integrator", default=DEFAULT_INTEGRATOR, choices=list(INTEGRATORS),
+                        help=f"MuJoCo integrator (default {DEFAULT_INTEGRATOR}: the built-in part is implicit)")
+    export.add_argument("--friction", type=float, default=DEFAULT_FRICTION, metavar="MU",
+                        help=f"sliding friction of cloth and obstacles (default {DEFAULT_FRICTION:g})")
+    export.add_argument("--damping", type=float, default=DEFAULT_DAMPING, metavar="S",
+                        help=f"stiffness-proportional damping time in s (default {DEFAULT_DAMPING:g})")
+    export.add_argument("--angle", type=float, default=0.0, metavar="DEG",
+                        help="weft direction in degrees from world x (stretch: 0 weft strip, 90 warp, 45 bias)")
+    export.add_argument("--gsm", type=float, metavar="G", help="areal density in g/m² (default: the material file's)")
+    export.add_argument("--fallback", action="store_true",
+                        help="no plugin: MuJoCo's built-in isotropic elasticity alone (stretch and bending) with the "
+                             "material's isotropic fallback")
+    export.add_argument("--self-collision", action="store_true", help="let the cloth collide with itself (slower)")
+    export.add_argument("--check", type=float, metavar="SECONDS",
+                        help="then step the scene this long and report stability and ms/step (exit 1 if unstable)")
     return parser
 
 
@@ -309,6 +353,59 @@ def cmd_fit(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    from .mujoco.scenes import SceneMaterial, export_scene
+
+    if args.resolution is not None and args.resolution < 2:
+        raise UsageError(f"--resolution must be at least 2 vertices per side, got {args.resolution}")
+    for option, value in (("--size", args.size), ("--width", args.width), ("--timestep", args.timestep),
+                          ("--gsm", args.gsm), ("--check", args.check)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise UsageError(f"{option} must be positive, got {value:g}")
+    for option, value in (("--friction", args.friction), ("--damping", args.damping)):
+        if not (math.isfinite(value) and value >= 0):
+            raise UsageError(f"{option} must be zero or positive, got {value:g}")
+    if not math.isfinite(args.angle):
+        raise UsageError(f"--angle must be a finite number of degrees, got {args.angle:g}")
+    if args.width is not None and args.scene != "stretch":
+        raise UsageError("--width is the stretch strip's width: give it with --scene stretch only")
+    material = SceneMaterial.from_file(args.material, None if args.gsm is None else args.gsm * 1e-3)
+    suffix = "-fallback" if args.fallback else ""
+    output = Path(args.output) if args.output else Path(f"{material.name}-{args.scene}{suffix}.xml")
+    strip = {} if args.width is None else {"width": args.width}
+    built = export_scene(material, args.scene, output, resolution=args.resolution, size=args.size, **strip,
+                         timestep=args.timestep, integrator=args.integrator, friction=args.friction,
+                         damping=args.damping, angle=math.radians(args.angle), fallback=args.fallback,
+                         self_collision=args.self_collision)
+    print(export_summary(built, material, output, args))
+    if args.check is not None:
+        from .mujoco.run import run_scene
+
+        report = run_scene(output, args.check)
+        print(f"  check           {report}")
+        if not report.stable:
+            print(f"yarnfit export: the scene became unstable after {report.simulated_s:.3g} s: try a smaller "
+                  "--timestep or --integrator discrete", file=sys.stderr)
+            return EXIT_FAILED
+    return 0
+
+
+def export_summary(built, material, output, args) -> str:
+    spec = built.spec
+    lines = [f"{material.name}: {built.scene} scene{' (isotropic fallback, no plugin)' if built.fallback else ''}, "
+             f"{spec.flexes[0].name} flex of {len(spec.flexes[0].vertbody)} vertices, "
+             f"{material.areal_density_kg_m2 * 1e3:.4g} g/m², {args.integrator} Δt = {args.timestep:g} s"]
+    part = "elastic2d both: stretch and bending" if built.fallback else "elastic2d stretch: implicit under discrete"
+    lines.append(f"  built-in        E = {built.young_pa:.6g} Pa, ν = {built.poisson:.6g}, "
+                 f"h = {built.thickness_m * 1e3:.4g} mm ({part})")
+    if not built.fallback:
+        lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest and all bending), "
+                     f"weft at {args.angle:g}° from x")
+    lines += [f"  note            {note}" for note in built.notes]
+    lines.append(f"  scene           {output}")
+    return "\n".join(lines)
+
+
 def fit_summary(fitted, output, recording_path) -> str:
     from .shell import GF_CM2_PER_CM
 
@@ -369,7 +466,8 @@ def _plural(count: int, noun: str) -> str:
     return f"{count} {noun}{'' if count == 1 else 's'}"
 
 
-COMMANDS = {"materials": cmd_materials, "patterns": cmd_patterns, "relax": cmd_relax, "fit": cmd_fit}
+COMMANDS = {"materials": cmd_materials, "patterns": cmd_patterns, "relax": cmd_relax, "fit": cmd_fit,
+            "export": cmd_export}
 
 
 def main(argv: list[str] | None = None) -> int:

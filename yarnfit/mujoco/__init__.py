@@ -1,2 +1,26 @@
 """MuJoCo side of yarnfit: the ``yarnfit.shell`` engine plugin (loaded by ``plugin.load``, which
-``import mujoco`` calls through the ``mujoco.plugins`` entry point)."""
+``import mujoco`` calls through the ``mujoco.plugins`` entry point), the split of a fitted
+material between MuJoCo's built-in elasticity and the plugin (``split``), scenes built with
+``mujoco.MjSpec`` (``scenes``) and a stability check that steps them (``run``).
+
+This file imports nothing: ``import mujoco`` imports it through the entry point, and the command
+line builds its parser from the scene names and defaults below without importing ``mujoco``.
+"""
+
+SCENES = ("cloth", "stretch", "sphere", "wall")
+# MuJoCo's integrators a flex with elasticity runs under, by MJCF name, lower case. MuJoCo 4.0
+# refuses the others at the first step: "flex elasticity is no longer integrated implicitly under
+# integrator='implicit' and 'implicitfast': set integrator='discrete', or 'Euler' with a small
+# timestep".
+INTEGRATORS = ("discrete", "euler", "rk4")
+# Measured (README, "Export to MuJoCo"): discrete keeps the built-in part implicit in position.
+DEFAULT_INTEGRATOR = "discrete"
+DEFAULT_TIMESTEP = 1e-3  # s
+# Vertices per side (stretch: along the strip). 40 resolves a 0.5 m cloth at 12.8 mm; the strip's
+# 25 × 16 grid resolves the 8 × 5 cm FAB strip at 3.3 mm, where its uniform part is exact for
+# linear triangles anyway.
+DEFAULT_RESOLUTION = {"cloth": 40, "stretch": 25, "sphere": 40, "wall": 40}
+# Side length (m); the strip's length. FAB strips are 8 × 5 cm (and 2 × 5 cm) clamped on the short sides.
+DEFAULT_SIZE = {"cloth": 0.5, "stretch": 0.08, "sphere": 0.5, "wall": 0.5}
+DEFAULT_FRICTION = 0.5  # cloth on the obstacles: cotton on wood or plastic lies around 0.3–0.6
+DEFAULT_DAMPING = 1e-3  # s

@@ -1,0 +1,427 @@
+"""MuJoCo scenes for a fitted material, built with ``mujoco.MjSpec``.
+
+A scene is one square (or strip) of cloth as a 2D flex built the way MuJoCo's ``<flexcomp
+type="grid">`` builds it: one body per free vertex with three world-axis slide joints, pinned
+vertices on the world or a clamp body, triangles ``(v00, v10, v11), (v00, v11, v01)`` per grid
+cell. Vertex masses are the material's areal density times a third of the adjacent triangles'
+area (the total is the cloth's mass; pinned vertices' mass is dropped).
+
+Elasticity, default (the split of :mod:`yarnfit.mujoco.split`): MuJoCo's built-in isotropic
+``<elasticity elastic2d="stretch">`` carries ``S_iso ⪰ S/2``, integrated implicitly under the
+``discrete`` integrator, and the ``yarnfit.shell`` plugin, configured with the full material,
+its weft angle and ``builtin_*`` keys repeating that ``<elasticity>``, adds the orthotropic
+remainder and all the bending. With ``fallback=True`` the scene has no plugin: MuJoCo's
+``elastic2d="both"`` with :func:`~yarnfit.mujoco.split.isotropic_fallback`. One damping time
+(s) goes to both parts, so the total damping is that time times the full material's stiffness.
+
+Scenes (:data:`SCENES`), z up, weft along world x unless ``angle`` turns it:
+
+* ``cloth``: a horizontal square hanging from its two corners at ``x = −size/2``; it swings
+  down under gravity. No contacts.
+* ``stretch``: a FAB-style strip, ``size`` long along x and ``width`` wide, clamped on its short
+  sides; the ``x = 0`` clamp is the world, the ``x = size`` clamp a body on a slide joint
+  ``pull`` driven by the position actuator ``pull`` (control = clamp displacement in m, range
+  0 to ``max_strain × size``). Sensors ``pull_force`` (actuator force, N) and ``pull_extension``
+  (m). No gravity, no contacts: an in-plane test.
+* ``sphere``: a horizontal square dropped onto a sphere of radius ``0.3 size`` on the floor.
+* ``wall``: a horizontal square dropped centred across the top edge of a thin wall (a box
+  ``0.02 × 1.2 size × 0.6 size``, thicker if the grid spacing exceeds 1.3 cm) on the floor.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from ..jsonfile import read_json
+from ..shell import ShellMaterial
+from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE,
+               DEFAULT_TIMESTEP, INTEGRATORS, SCENES)
+from .plugin import PLUGIN_NAME
+from .split import MJCF_DIGITS, builtin_elasticity, isotropic_fallback
+
+__all__ = [
+    "DEFAULT_DAMPING",
+    "DEFAULT_FRICTION",
+    "DEFAULT_INTEGRATOR",
+    "DEFAULT_RESOLUTION",
+    "DEFAULT_SIZE",
+    "DEFAULT_TIMESTEP",
+    "INTEGRATORS",
+    "SCENES",
+    "BuiltScene",
+    "SceneMaterial",
+    "build_scene",
+    "export_scene",
+]
+
+DEFAULT_STRIP_WIDTH = 0.05  # m
+DEFAULT_MAX_STRAIN = 0.1  # the pull actuator's range: 10 % engineering strain
+# MJCF integrator names (``yarnfit.mujoco.INTEGRATORS``) to MuJoCo's enum.
+INTEGRATOR_ENUM = {"discrete": mujoco.mjtIntegrator.mjINT_DISCRETE, "euler": mujoco.mjtIntegrator.mjINT_EULER,
+                   "rk4": mujoco.mjtIntegrator.mjINT_RK4}
+# Collision radius of the flex (m): a few cloth thicknesses, small against the grid spacing
+# (12.8 mm at the defaults) so the cloth does not float visibly above what it lies on.
+FLEX_RADIUS = 2e-3
+# Half the wall's thickness (m), unless the grid is coarser (see the wall scene).
+WALL_HALF_THICKNESS = 0.01
+# Gap between the dropped cloth and the obstacle's top at the start (m).
+DROP_GAP = 0.02
+# Stretch clamp: its mass (kg), and the servo stiffness over the strip's own (the clamp then lags
+# its target by about 1 % of the extension under load).
+CLAMP_MASS = 0.1
+SERVO_STIFFNESS_RATIO = 100.0
+
+# MuJoCo 4.0.0 warns "flex ... is not rigid and has no equality constraints or passive forces" for a
+# flex whose only elasticity is elastic2d="stretch", although it has passive forces (measured: the
+# same flex with elastic2d="both" does not warn). Silenced where we compile our own scenes.
+_SPURIOUS_FLEX_WARNING = r"flex '.*' is not rigid and has no equality constraints or passive forces"
+
+
+@dataclass(frozen=True)
+class SceneMaterial:
+    """What a scene needs from a material file.
+
+    Attributes:
+        name: the fabric's name (``inputs.fabric``) or the file's stem.
+        shell: the fitted shell.
+        areal_density_kg_m2: mass per area (kg/m²).
+    """
+
+    name: str
+    shell: ShellMaterial
+    areal_density_kg_m2: float
+
+    def __post_init__(self):
+        density = self.areal_density_kg_m2
+        if isinstance(density, bool) or not isinstance(density, (int, float)) or not (math.isfinite(density)
+                                                                                     and density > 0):
+            raise ValueError(f"areal density must be a positive number of kg/m², got {density!r}")
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike, areal_density_kg_m2: float | None = None) -> SceneMaterial:
+        """Read a material file (``yarnfit fit`` output; at least ``shell`` and an areal density).
+
+        The areal density is ``areal_density_kg_m2`` if given, else the file's
+        ``inputs.areal_density_kg_m2``, else its ``yarn.areal_density_kg_m2`` (the relaxed
+        repeat's).
+
+        Raises:
+            ValueError: ``<file>: ...`` for an unreadable or malformed file, a missing ``shell``,
+                or no usable areal density.
+        """
+        where, data = read_json(path, "material file")
+        if not isinstance(data, dict):
+            raise ValueError(f"{where}: expected a JSON object with key 'shell', got a {type(data).__name__}")
+        if "shell" not in data:
+            raise ValueError(f"{where}: missing key 'shell' (the fitted shell material)")
+        shell = ShellMaterial.from_dict(data["shell"], f"{where}: shell")
+        try:
+            shell.check_positive_definite()
+        except ValueError as exc:
+            raise ValueError(f"{where}: shell: {exc}") from None
+        inputs = data.get("inputs") if isinstance(data.get("inputs"), dict) else {}
+        if areal_density_kg_m2 is None:
+            yarn = data.get("yarn") if isinstance(data.get("yarn"), dict) else {}
+            for key, block in (("inputs", inputs), ("yarn", yarn)):
+                if block.get("areal_density_kg_m2") is not None:
+                    areal_density_kg_m2 = block["areal_density_kg_m2"]
+                    try:
+                        return cls(_name(inputs, where), shell, areal_density_kg_m2)
+                    except ValueError as exc:
+                        raise ValueError(f"{where}: {key}.areal_density_kg_m2: {exc}") from None
+            raise ValueError(f"{where}: no areal density (inputs.areal_density_kg_m2 or yarn.areal_density_kg_m2); "
+                             "give one")
+        return cls(_name(inputs, where), shell, areal_density_kg_m2)
+
+
+def _name(inputs: dict, where: str) -> str:
+    name = inputs.get("fabric")
+    return name if isinstance(name, str) and name.strip() else Path(where).stem
+
+
+@dataclass(frozen=True)
+class BuiltScene:
+    """A scene and what went into its elasticity.
+
+    Attributes:
+        spec: the scene (``spec.compile()`` or ``spec.to_xml()``).
+        scene: its name, one of :data:`SCENES`.
+        fallback: True for the plugin-free isotropic scene.
+        young_pa, poisson, thickness_m: the flex's ``<elasticity>`` (the built-in part of the
+            split, or the fallback material).
+        notes: what the fallback cannot carry over (empty with the plugin).
+    """
+
+    spec: mujoco.MjSpec
+    scene: str
+    fallback: bool
+    young_pa: float
+    poisson: float
+    thickness_m: float
+    notes: tuple[str, ...]
+
+
+def build_scene(
+    material: SceneMaterial,
+    scene: str,
+    *,
+    resolution: int | None = None,
+    size: float | None = None,
+    timestep: float = DEFAULT_TIMESTEP,
+    integrator: str = DEFAULT_INTEGRATOR,
+    friction: float = DEFAULT_FRICTION,
+    damping: float = DEFAULT_DAMPING,
+    angle: float = 0.0,
+    fallback: bool = False,
+    self_collision: bool = False,
+    width: float = DEFAULT_STRIP_WIDTH,
+    max_strain: float = DEFAULT_MAX_STRAIN,
+) -> BuiltScene:
+    """Build one of :data:`SCENES` for ``material`` (see the module docstring).
+
+    Args:
+        resolution: vertices per side (stretch: along the strip), ≥ 2; default
+            :data:`DEFAULT_RESOLUTION`.
+        size: side length (m) (stretch: strip length); default :data:`DEFAULT_SIZE`.
+        timestep: Δt (s).
+        integrator: one of :data:`INTEGRATORS` (case-insensitive).
+        friction: sliding friction of cloth and obstacles.
+        damping: stiffness-proportional damping time (s) of the built-in part and the plugin.
+        angle: weft direction (rad) from world x, about z (the plugin's ``angle``).
+        fallback: no plugin; MuJoCo's isotropic ``elastic2d="both"`` with the fallback material.
+        self_collision: let the cloth collide with itself (MuJoCo's ``selfcollide="auto"``).
+        width: the strip's width (m), stretch only.
+        max_strain: upper end of the pull actuator's range as engineering strain, stretch only.
+
+    Raises:
+        ValueError: an unknown scene or integrator, a non-positive resolution, size, timestep,
+            width or max_strain, a negative friction or damping.
+    """
+    if scene not in SCENES:
+        raise ValueError(f"unknown scene {scene!r}; scenes: {', '.join(SCENES)}")
+    resolution = DEFAULT_RESOLUTION[scene] if resolution is None else resolution
+    size = DEFAULT_SIZE[scene] if size is None else size
+    if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) or resolution < 2:
+        raise ValueError(f"resolution must be an integer of at least 2 vertices per side, got {resolution!r}")
+    for name, value in (("size", size), ("timestep", timestep), ("width", width), ("max_strain", max_strain)):
+        _require(value, name, positive=True)
+    for name, value in (("friction", friction), ("damping", damping), ("angle", abs(angle))):
+        _require(value, name, positive=False)
+    key = integrator.lower()
+    if key not in INTEGRATOR_ENUM:
+        raise ValueError(f"unknown integrator {integrator!r}; integrators: {', '.join(INTEGRATORS)}")
+
+    spec = mujoco.MjSpec()
+    spec.modelname = f"yarnfit {scene}: {material.name}" + (" (isotropic fallback)" if fallback else "")
+    spec.option.timestep = timestep
+    spec.option.integrator = INTEGRATOR_ENUM[key]
+    spec.worldbody.add_light(pos=[0, 0, 3 * size + 1], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    if scene == "stretch":
+        layout = _strip(spec, material.shell, resolution, size, width, max_strain)
+    else:
+        layout = _square(spec, scene, resolution, size, friction)
+
+    if fallback:
+        iso = isotropic_fallback(material.shell)
+        young, poisson, thickness, notes = iso.young_pa, iso.poisson, iso.thickness_m, iso.notes
+        plugin = None
+    else:
+        split = builtin_elasticity(material.shell)
+        young, poisson, thickness, notes = split.young_pa, split.poisson, split.thickness_m, ()
+        plugin = _plugin(spec, material.shell, split, angle, damping)
+
+    flex = _cloth(spec, layout, material.areal_density_kg_m2, plugin)
+    flex.young, flex.poisson, flex.thickness, flex.damping = young, poisson, thickness, damping
+    flex.elastic2d = 3 if fallback else 2  # both / stretch (mjtElastic2D: none, bend, stretch, both)
+    flex.friction = [friction, 0.005, 0.0001]
+    flex.contype = flex.conaffinity = 1 if layout.collide else 0
+    flex.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_AUTO if self_collision else mujoco.mjtFlexSelf.mjFLEXSELF_NONE
+    return BuiltScene(spec, scene, fallback, young, poisson, thickness, notes)
+
+
+def export_scene(material: SceneMaterial | str | os.PathLike, scene: str, output: str | os.PathLike,
+                 **options) -> BuiltScene:
+    """Build a scene (``options`` as for :func:`build_scene`), check that it compiles, and write it
+    to ``output`` as MJCF (directories created). ``material`` is a :class:`SceneMaterial` or a
+    material file. The file loads with ``mujoco.MjModel.from_xml_path`` once ``mujoco`` is
+    imported (our entry point registers the plugin)."""
+    if not isinstance(material, SceneMaterial):
+        material = SceneMaterial.from_file(material)
+    built = build_scene(material, scene, **options)
+    compile_quietly(built.spec)  # a scene that does not compile is never written
+    path = Path(output)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(built.spec.to_xml())
+    return built
+
+
+def compile_quietly(spec: mujoco.MjSpec) -> mujoco.MjModel:
+    """``spec.compile()`` without MuJoCo's spurious warning for stretch-only flexes."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=_SPURIOUS_FLEX_WARNING)
+        return spec.compile()
+
+
+# -- pieces ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Layout:
+    """Rest positions ``(n, 3)`` (m), triangles ``(m, 3)``, the vertices pinned to each holder body
+    (name → mask ``(n,)``) and whether the cloth collides at all."""
+
+    points: np.ndarray
+    triangles: np.ndarray
+    holders: dict[str, np.ndarray]
+    collide: bool
+
+
+def _square(spec: mujoco.MjSpec, scene: str, resolution: int, size: float, friction: float) -> _Layout:
+    """The cloth, sphere and wall scenes: a horizontal square and what it hangs from or falls on."""
+    points, triangles = _grid(resolution, resolution, size, size)
+    geom_friction = [friction, 0.005, 0.0001]
+    if scene == "cloth":
+        points[:, 2] = size + 0.1
+        corners = np.zeros(len(points), bool)
+        corners[[0, resolution - 1]] = True  # (x, y) = (−size/2, ∓size/2)
+        return _Layout(points, triangles, {"world": corners}, collide=False)
+    spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[2 * size, 2 * size, 0.1],
+                            friction=geom_friction, rgba=[0.8, 0.8, 0.8, 1])
+    if scene == "sphere":
+        radius = 0.3 * size
+        spec.worldbody.add_geom(name="sphere", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[radius, 0, 0],
+                                pos=[0, 0, radius], friction=geom_friction, rgba=[0.6, 0.6, 0.65, 1])
+        points[:, 2] = 2 * radius + DROP_GAP
+    else:  # wall
+        height = 0.6 * size
+        # MuJoCo collides a flex with geoms through spheres of its radius at the vertices (measured:
+        # every contact lies within the radius of a vertex), so a wall thinner than the grid spacing
+        # can slip between two vertex columns: a 20-vertex cloth fell through a 2 cm wall. At 1.5
+        # spacings at least one column always lands on top.
+        half_thickness = max(WALL_HALF_THICKNESS, 0.75 * size / (resolution - 1))
+        spec.worldbody.add_geom(name="wall", type=mujoco.mjtGeom.mjGEOM_BOX, size=[half_thickness, 0.6 * size,
+                                0.5 * height], pos=[0, 0, 0.5 * height], friction=geom_friction,
+                                rgba=[0.6, 0.6, 0.65, 1])
+        points[:, 2] = height + DROP_GAP
+    return _Layout(points, triangles, {}, collide=True)
+
+
+def _strip(spec: mujoco.MjSpec, shell: ShellMaterial, resolution: int, length: float, width: float,
+           max_strain: float) -> _Layout:
+    """The stretch scene: a strip from x = 0 to ``length``, its left edge on the world, its right
+    edge on the clamp; no gravity."""
+    spec.option.gravity = [0.0, 0.0, 0.0]
+    ny = max(2, round((resolution - 1) * width / length) + 1)
+    points, triangles = _grid(resolution, ny, length, width)
+    points[:, 0] += 0.5 * length
+    points[:, 2] = 0.1
+    column = np.arange(len(points)) // ny
+    left, right = column == 0, column == resolution - 1
+    clamp = _clamp(spec, shell, length, width, max_strain, position=[length, 0.0, 0.1])
+    return _Layout(points, triangles, {"world": left, clamp.name: right}, collide=False)
+
+
+def _grid(nx: int, ny: int, lx: float, ly: float) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices ``(nx ny, 3)`` of an ``lx × ly`` grid centred at the origin (vertex ``ix ny + iy``)
+    and its triangles ``(2 (nx−1)(ny−1), 3)``, counter-clockwise seen from +z (flexcomp's order)."""
+    x, y = np.meshgrid(np.linspace(-0.5 * lx, 0.5 * lx, nx), np.linspace(-0.5 * ly, 0.5 * ly, ny), indexing="ij")
+    points = np.column_stack([x.ravel(), y.ravel(), np.zeros(nx * ny)])
+    a = (np.arange(nx - 1)[:, None] * ny + np.arange(ny - 1)[None, :]).ravel()
+    triangles = np.concatenate([np.stack([a, a + ny, a + ny + 1], 1), np.stack([a, a + ny + 1, a + 1], 1)])
+    return points, triangles
+
+
+def _lumped_mass(points: np.ndarray, triangles: np.ndarray, areal_density: float) -> np.ndarray:
+    """Mass per vertex (kg): a third of each adjacent triangle's mass."""
+    e1 = points[triangles[:, 1]] - points[triangles[:, 0]]
+    e2 = points[triangles[:, 2]] - points[triangles[:, 0]]
+    area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+    mass = np.zeros(len(points))
+    np.add.at(mass, triangles.ravel(), np.repeat(areal_density * area / 3.0, 3))
+    return mass
+
+
+def _cloth(spec: mujoco.MjSpec, layout: _Layout, areal_density: float, plugin) -> mujoco.MjsFlex:
+    """Vertex bodies (three world-axis slide joints each) and the flex. Pinned vertices sit on their
+    holder at their rest position; every body holding a vertex carries the plugin, as flexcomp does."""
+    points = layout.points
+    mass = _lumped_mass(points, layout.triangles, areal_density)
+    body_of = ["" for _ in points]
+    offsets = np.zeros_like(points)
+    for name, mask in layout.holders.items():
+        holder = spec.worldbody if name == "world" else spec.body(name)
+        origin = np.zeros(3) if name == "world" else np.asarray(holder.pos)
+        for v in np.flatnonzero(mask):
+            body_of[v], offsets[v] = name, points[v] - origin
+        if plugin is not None:
+            holder.plugin = plugin
+    for v, point in enumerate(points):
+        if body_of[v]:
+            continue
+        body = spec.worldbody.add_body(name=f"cloth_{v}", pos=point)
+        # Slide joints only: the inertia never enters, but MuJoCo wants it positive. A sphere of the
+        # collision radius.
+        body.explicitinertial = True
+        body.mass, body.ipos, body.iquat = mass[v], [0, 0, 0], [1, 0, 0, 0]
+        body.inertia = [0.4 * mass[v] * FLEX_RADIUS**2] * 3
+        for axis in np.eye(3):
+            body.add_joint(type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
+        if plugin is not None:
+            body.plugin = plugin
+        body_of[v] = body.name
+    return spec.add_flex(name="cloth", dim=2, radius=FLEX_RADIUS, vertbody=body_of, vert=offsets.ravel(),
+                         elem=layout.triangles.ravel(), rgba=[0.85, 0.45, 0.3, 1.0])
+
+
+def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damping: float):
+    """The ``yarnfit.shell`` instance: the full material, its angle and damping, and ``builtin_*``
+    written exactly as the ``<elasticity>`` attributes are (``MJCF_DIGITS`` digits)."""
+    spec.activate_plugin(PLUGIN_NAME)
+    plugin = spec.add_plugin(name="shell", plugin_name=PLUGIN_NAME, active=True)
+    config = {name: repr(value) for name, value in shell.parameters.items()}
+    config["thickness"] = repr(shell.thickness)
+    config["angle"] = repr(float(angle))
+    config["damping"] = repr(float(damping))
+    for key, value in (("builtin_young", split.young_pa), ("builtin_poisson", split.poisson),
+                       ("builtin_thickness", split.thickness_m)):
+        config[key] = f"{value:.{MJCF_DIGITS}g}"
+    plugin.config = config
+    return plugin
+
+
+def _clamp(spec: mujoco.MjSpec, shell: ShellMaterial, length: float, width: float, max_strain: float,
+           position: list[float]):
+    """The moving clamp of the stretch scene: a body on slide joint ``pull`` (x), position actuator
+    ``pull`` and sensors ``pull_force`` (N) and ``pull_extension`` (m)."""
+    eng = shell.engineering()
+    # The strip's axial stiffness (N/m) along its stiffer material direction, whichever way it is cut.
+    strip = max(eng["weft_stretch_n_per_m"], eng["warp_stretch_n_per_m"]) * width / length
+    clamp = spec.worldbody.add_body(name="clamp", pos=position)
+    clamp.explicitinertial = True
+    clamp.mass, clamp.ipos, clamp.iquat = CLAMP_MASS, [0, 0, 0], [1, 0, 0, 0]
+    clamp.inertia = [CLAMP_MASS * width**2 / 12] * 3
+    clamp.add_joint(name="pull", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
+    clamp.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.002, 0.5 * width + 0.002, 0.002], contype=0,
+                   conaffinity=0, rgba=[0.3, 0.3, 0.35, 1], mass=0)
+    actuator = spec.add_actuator(name="pull", target="pull", trntype=mujoco.mjtTrn.mjTRN_JOINT)
+    actuator.set_to_position(kp=SERVO_STIFFNESS_RATIO * strip, dampratio=1.0)
+    actuator.ctrllimited = True
+    actuator.ctrlrange = [0.0, max_strain * length]
+    spec.add_sensor(name="pull_force", type=mujoco.mjtSensor.mjSENS_ACTUATORFRC,
+                    objtype=mujoco.mjtObj.mjOBJ_ACTUATOR, objname="pull")
+    spec.add_sensor(name="pull_extension", type=mujoco.mjtSensor.mjSENS_JOINTPOS,
+                    objtype=mujoco.mjtObj.mjOBJ_JOINT, objname="pull")
+    return clamp
+
+
+def _require(value, name: str, positive: bool) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+            or not math.isfinite(value) or value < 0 or (positive and value == 0):
+        raise ValueError(f"{name} must be a {'positive' if positive else 'non-negative'} finite number, got {value!r}")

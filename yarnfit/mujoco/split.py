@@ -1,0 +1,231 @@
+"""Isotropic parts of an orthotropic shell for MuJoCo's built-in flex elasticity.
+
+MuJoCo's 2D flexes have one elastic law of their own: isotropic plane-stress StVK with Green strain
+(``<elasticity young poisson thickness elastic2d>``). In the convention of
+:mod:`yarnfit.shell` (energy per area ``(h/2) εᵀ S ε``, ``ε = (E00, E11, 2 E01)``) its membrane is
+
+    S_iso(E, ν) = E C(ν),   C(ν) = [[1, ν, 0], [ν, 1, 0], [0, 0, (1 − ν)/2]] / (1 − ν²)
+
+(``λ* + 2μ = E/(1 − ν²)``, ``λ* = Eν/(1 − ν²)``, ``μ = E/(2(1 + ν))``), and its bending stores
+``D κ²/2`` per area for a cylindrical bend, ``D = E h³/(12(1 − ν²))``.
+
+Two uses, one function each:
+
+* :func:`builtin_isotropic` — the **split**. The ``yarnfit.shell`` plugin's forces are explicit
+  under every integrator, MuJoCo's own elasticity is implicit under ``discrete``. One degree of
+  freedom of mass ``m`` under semi-implicit stepping with implicit stiffness ``k_b`` and explicit
+  stiffness ``k_r`` is stable iff ``−k_b ≤ k_r ≤ k_b + 4m/Δt²``, for every ``Δt`` iff
+  ``|k_r| ≤ k_b``. So the built-in part carries ``S_iso ⪰ S/2``: the explicit remainder
+  ``S − S_iso`` then lies between ``−S_iso`` and ``+S_iso`` whatever the material's anisotropy.
+  Among those, the one of least trace (least added stiffness).
+* :func:`isotropic_fallback` — the **fallback** for hosts without the plugin: one isotropic
+  material (E, ν, h) that matches the geometric means of the weft and warp tensile and bending
+  stiffnesses.
+* :func:`builtin_elasticity` — the split rounded to what an MJCF file can hold (``spec.to_xml()``
+  writes 6 significant digits), rounded so that ``S_iso ⪰ S/2`` still holds exactly.
+
+Nothing here imports ``mujoco``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from scipy.linalg import eigvalsh
+from scipy.optimize import minimize_scalar
+
+from ..shell import ShellMaterial
+
+__all__ = [
+    "MJCF_DIGITS",
+    "MUJOCO_POISSON_MAX",
+    "POISSON_LIMIT",
+    "BuiltinElasticity",
+    "IsotropicFallback",
+    "IsotropicPart",
+    "builtin_elasticity",
+    "builtin_isotropic",
+    "isotropic_fallback",
+    "isotropic_stiffness",
+]
+
+# MuJoCo 4.0 rejects a Poisson ratio outside [0, 0.5) ("Poisson ratio must be in [0, 0.5)",
+# measured: 0.4999999 compiles, 0.5 and -0.1 do not). The bound is the 3D one (λ diverges at 0.5);
+# plane stress stays finite there, but a ratio a hair below 0.5 would sit on MuJoCo's own check.
+MUJOCO_POISSON_MAX = 0.5
+# Largest ratio the split and the fallback use: clearly inside MuJoCo's range, and the plane-stress
+# ratio λ*/μ = 2ν/(1 − ν) = 1.92 at 0.49 is already close to its limit of 2 at 0.5, so a larger
+# bound would change the split's trace by well under a percent.
+POISSON_LIMIT = 0.49
+# Significant digits mujoco.MjSpec.to_xml writes for a real attribute (%g; measured on 4.0.0:
+# young=123456.789 is written as "123457").
+MJCF_DIGITS = 6
+# The split's objective is scanned on this many Poisson ratios before a bounded minimisation
+# refines the best one: the objective is a maximum of smooth functions of ν (kinks where the
+# binding eigenvalue changes), so a local search alone could stop in the wrong branch. 1/200 of the
+# range brackets every branch of the 3×3 problem.
+POISSON_SCAN = 201
+# Poisson ratio tolerance of the refinement: far below anything the 6-digit file resolves.
+POISSON_XATOL = 1e-10
+# A weft/warp ratio or a shear stiffness within 1 % of the fallback's is reported as matched: the
+# fit's own standard errors are rarely below a percent.
+ANISOTROPY_NOTE_RTOL = 0.01
+
+
+class IsotropicPart(NamedTuple):
+    """Isotropic material for MuJoCo's built-in elasticity, at the material's thickness."""
+
+    young_pa: float
+    poisson: float
+
+
+class BuiltinElasticity(NamedTuple):
+    """``<elasticity young poisson thickness>`` of the split, exactly representable in an MJCF file."""
+
+    young_pa: float
+    poisson: float
+    thickness_m: float
+
+
+class IsotropicFallback(NamedTuple):
+    """Isotropic stand-in for an orthotropic material (MuJoCo's ``elastic2d="both"`` alone).
+
+    Attributes:
+        young_pa: E (Pa).
+        poisson: ν, within ``[0, POISSON_LIMIT]``.
+        thickness_m: h (m).
+        notes: what the isotropic material cannot carry over, in words: a limited Poisson ratio,
+            the weft/warp anisotropy lost, a shear stiffness that differs from the material's.
+    """
+
+    young_pa: float
+    poisson: float
+    thickness_m: float
+    notes: tuple[str, ...]
+
+
+def isotropic_stiffness(young_pa: float, poisson: float) -> np.ndarray:
+    """``S_iso (3, 3)`` (Pa) of MuJoCo's plane-stress membrane in yarnfit's Voigt convention."""
+    return young_pa * _unit_stiffness(poisson)
+
+
+def builtin_isotropic(material: ShellMaterial) -> IsotropicPart:
+    """The isotropic part MuJoCo's implicit built-in elasticity should carry (see the module
+    docstring): ``S_iso(E, ν) ⪰ S/2`` of least trace, ``ν ∈ [0, POISSON_LIMIT]``, thickness the
+    material's.
+
+    For each ν the least admissible E is the largest generalized eigenvalue of ``(S/2, C(ν))``;
+    the trace ``E(ν) tr C(ν)`` is then minimised over ν. An isotropic material ``S = E0 C(ν0)``
+    (ν0 within the bound) gives ``(E0/2, ν0)``: a PSD difference has non-negative trace, so
+    ``tr S_iso ≥ tr S/2`` with equality only at ``S_iso = S/2``.
+
+    Raises:
+        ValueError: the membrane block is not positive definite.
+    """
+    if not material.membrane_positive_definite:
+        material.check_positive_definite()  # raises, naming the entries
+    half = 0.5 * material.S
+
+    def trace(poisson: float) -> float:
+        unit = _unit_stiffness(poisson)
+        return _least_young(half, unit) * float(np.trace(unit))
+
+    grid = np.linspace(0.0, POISSON_LIMIT, POISSON_SCAN)
+    values = [trace(nu) for nu in grid]
+    best = int(np.argmin(values))
+    low, high = grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]
+    refined = minimize_scalar(trace, bounds=(low, high), method="bounded", options={"xatol": POISSON_XATOL})
+    poisson = float(refined.x) if refined.fun < values[best] else float(grid[best])
+    return IsotropicPart(_least_young(half, _unit_stiffness(poisson)), poisson)
+
+
+def builtin_elasticity(material: ShellMaterial, digits: int = MJCF_DIGITS) -> BuiltinElasticity:
+    """:func:`builtin_isotropic` with every value exactly representable in ``digits`` significant
+    digits, so the ``<elasticity>`` attributes and the plugin's ``builtin_*`` keys written to an
+    MJCF file are the same numbers. Thickness and ν are rounded to nearest, then E is the least
+    admissible modulus for them (``h_b E_b C(ν_b) ⪰ h S/2``), rounded **up**: rounding keeps the
+    built-in part at least half the material."""
+    part = builtin_isotropic(material)
+    thickness = _round(material.thickness, digits)
+    poisson = min(_round(part.poisson, digits), _round_down(POISSON_LIMIT, digits))
+    young = _least_young(0.5 * material.S * (material.thickness / thickness), _unit_stiffness(poisson))
+    return BuiltinElasticity(_round_up(young, digits), poisson, thickness)
+
+
+def isotropic_fallback(material: ShellMaterial) -> IsotropicFallback:
+    """One isotropic (E, ν, h) for MuJoCo's built-in elasticity alone (no plugin).
+
+    Matches, with the engineering constants of ``docs/design.md`` §3:
+
+    * tensile stiffness: ``E h = √(weft_stretch · warp_stretch)`` (N/m; isotropic uniaxial
+      stiffness with free width is ``E h``);
+    * bending: ``E h³/(12(1 − ν²)) = √(bending_weft · bending_warp)`` (N·m; MuJoCo stores
+      ``D κ²/2`` per area for a cylindrical bend, ours ``½ bending κ²``);
+    * ``ν = √(poisson_weft · poisson_warp)``, limited to ``[0, POISSON_LIMIT]``: a limited ratio
+      is said so in ``notes``, never silently.
+
+    Hence ``h = √(12 (1 − ν²) D / (E h))`` and ``E = (E h)/h``. An isotropic material whose
+    bending is Kirchhoff's (``b00 = b11 = E/(12(1 − ν²))``) returns itself.
+
+    Raises:
+        ValueError: ``S`` or ``B`` is not positive definite.
+    """
+    eng = material.engineering()  # raises for an indefinite material
+    stretch = math.sqrt(eng["weft_stretch_n_per_m"] * eng["warp_stretch_n_per_m"])
+    bending = math.sqrt(eng["bending_weft_nm"] * eng["bending_warp_nm"])
+    notes = []
+    product = eng["poisson_weft"] * eng["poisson_warp"]  # = s01²/(s00 s11) ≥ 0; s01 < 0 flips both
+    requested = math.copysign(math.sqrt(product), material.s01)
+    poisson = min(max(requested, 0.0), POISSON_LIMIT)
+    if poisson != requested:
+        notes.append(f"Poisson ratio limited: the material's geometric mean √(ν_weft ν_warp) = {requested:.4g} "
+                     f"is outside [0, {POISSON_LIMIT}] (MuJoCo accepts [0, {MUJOCO_POISSON_MAX})); used {poisson:g}")
+    thickness = math.sqrt(12.0 * (1.0 - poisson**2) * bending / stretch)
+    young = stretch / thickness
+    ratios = {
+        "weft/warp tensile stiffness": eng["weft_stretch_n_per_m"] / eng["warp_stretch_n_per_m"],
+        "weft/warp bending": eng["bending_weft_nm"] / eng["bending_warp_nm"],
+    }
+    for what, ratio in ratios.items():
+        if not math.isclose(ratio, 1.0, rel_tol=ANISOTROPY_NOTE_RTOL):
+            notes.append(f"anisotropy lost: {what} is {ratio:.3g} in the material, 1 in the fallback")
+    shear = young * thickness / (2.0 * (1.0 + poisson))
+    if not math.isclose(shear, eng["shear_n_per_m"], rel_tol=ANISOTROPY_NOTE_RTOL):
+        notes.append(f"shear stiffness {shear:.4g} N/m in the fallback against {eng['shear_n_per_m']:.4g} N/m "
+                     "in the material")
+    return IsotropicFallback(young, poisson, thickness, tuple(notes))
+
+
+
+def _unit_stiffness(poisson: float) -> np.ndarray:
+    """``C(ν) = S_iso / E`` (dimensionless)."""
+    d = 1.0 / (1.0 - poisson**2)
+    return np.array([[d, poisson * d, 0.0], [poisson * d, d, 0.0], [0.0, 0.0, 0.5 / (1.0 + poisson)]])
+
+
+def _least_young(half: np.ndarray, unit: np.ndarray) -> float:
+    """Least ``E`` with ``E unit ⪰ half``: the largest generalized eigenvalue of ``(half, unit)``."""
+    return float(eigvalsh(half, unit)[-1])
+
+
+def _round(value: float, digits: int) -> float:
+    return float(f"{value:.{digits}g}")
+
+
+def _ulp_of_digits(value: float, digits: int) -> float:
+    """One unit in the last of ``digits`` significant digits of ``value`` (> 0)."""
+    return 10.0 ** (math.floor(math.log10(value)) - digits + 1)
+
+
+def _round_up(value: float, digits: int) -> float:
+    """Least number with ``digits`` significant digits that is ≥ ``value`` (> 0)."""
+    rounded = _round(value, digits)
+    return rounded if rounded >= value else _round(rounded + _ulp_of_digits(rounded, digits), digits)
+
+
+def _round_down(value: float, digits: int) -> float:
+    """Largest number with ``digits`` significant digits that is ≤ ``value`` (> 0)."""
+    rounded = _round(value, digits)
+    return rounded if rounded <= value else _round(rounded - _ulp_of_digits(rounded, digits), digits)
