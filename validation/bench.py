@@ -1,6 +1,6 @@
 """Benchmarks of yarnfit, one section per stage.
 
-    python validation/bench.py [engine] [relax] [fit]
+    python validation/bench.py [engine] [relax] [fit] [mujoco]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -229,7 +229,77 @@ def bench_fit() -> None:
                     report(f"{key}_r2_{family}", quality["r2"], "")
 
 
-SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit}
+# -- mujoco ---------------------------------------------------------------------------------------
+
+# Simulated time per measured run (s): long enough to average over the cloth's swing or landing.
+MUJOCO_BENCH_SECONDS = 0.5
+
+
+def _without_plugin(spec):
+    """A copy of an exported scene with the yarnfit.shell plugin removed: the built-in isotropic
+    part alone, same mesh, masses, contacts, integrator and Δt."""
+    bare = spec.copy()
+    for body in bare.bodies:
+        if body.plugin.active:
+            body.plugin.active = False
+    for plugin in list(bare.plugins):
+        bare.delete(plugin)
+    return bare
+
+
+def bench_mujoco() -> None:
+    """A 40×40 cloth as ``yarnfit export --scene cloth`` and ``--scene sphere`` write it (their
+    integrator and Δt), with the plugin and without it (the same scene, plugin removed), and the
+    plugin's own compute at the same states: mj_passive with the plugin minus without it."""
+    from pathlib import Path
+
+    import mujoco
+
+    from yarnfit.mujoco.scenes import SceneMaterial, build_scene
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from fabric_shell import FABRIC  # a realistic medium-weight woven
+
+    material = SceneMaterial("medium woven", FABRIC, 0.2)
+    for scene in ("cloth", "sphere"):
+        built = build_scene(material, scene, resolution=40)
+        models = {"with": built.spec.compile(), "without": _without_plugin(built.spec).compile()}
+        steps = round(MUJOCO_BENCH_SECONDS / models["with"].opt.timestep)
+        ms_per_step, states = {}, []
+        for variant, model in models.items():
+            data = mujoco.MjData(model)
+            mujoco.mj_step(model, data, nstep=10)
+            start = time.perf_counter()
+            for step in range(steps):
+                mujoco.mj_step(model, data)
+                if variant == "with" and step % (steps // 10) == 0:
+                    states.append((data.qpos.copy(), data.qvel.copy()))
+            ms_per_step[variant] = 1e3 * (time.perf_counter() - start) / steps
+            if data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+                print(f"warning: {scene} {variant} the plugin became unstable", file=sys.stderr)
+        passive_ms = {}
+        for variant, model in models.items():
+            data = mujoco.MjData(model)
+            total = 0.0
+            for qpos, qvel in states:
+                data.qpos[:], data.qvel[:] = qpos, qvel
+                mujoco.mj_forward(model, data)
+                start = time.perf_counter()
+                for _ in range(20):
+                    mujoco.mj_passive(model, data)
+                total += (time.perf_counter() - start) / 20
+            passive_ms[variant] = 1e3 * total / len(states)
+        plugin_ms = passive_ms["with"] - passive_ms["without"]
+        key = f"mujoco_{scene}_40x40"
+        integrator = mujoco.mjtIntegrator(models["with"].opt.integrator).name.removeprefix("mjINT_").lower()
+        info = f"{models['with'].opt.timestep:g} s step, {integrator}"
+        report(f"{key}_ms_per_step_with_plugin", ms_per_step["with"], f"ms ({info})")
+        report(f"{key}_ms_per_step_without_plugin", ms_per_step["without"], "ms")
+        report(f"{key}_plugin_compute_ms", plugin_ms, "ms per step")
+        report(f"{key}_plugin_compute_fraction", plugin_ms / ms_per_step["without"], "of the step without it")
+
+
+SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco}
 
 
 def main(argv: list[str] | None = None) -> int:
