@@ -1,0 +1,10 @@
+"""The validation suite (``yarnfit validate``, issue 6): a fitted material in FAB-style stretch
+tests, against an explicit yarn-level swatch, in sphere and wall drapes and in garments on a moving
+body, each scene recorded to ``logs/<material>/<scene>.rrd`` and summarised in ``summary.json``.
+
+One module per scene; each exposes ``run_<scene>(material, *, quick=False, recording_path=None,
+progress=None) -> dict`` whose keys carry their units (SI) and whose values are JSON numbers,
+lists or dicts. This file imports nothing heavy: the command line builds its parser from it.
+"""
+
+SCENES = ("stretch", "yarn", "sphere", "wall", "body")
