@@ -1,0 +1,108 @@
+"""The suite's FAB-style stretch test in MuJoCo (yarnfit.validate.stretch) and measured reference
+curves (yarnfit.validate.reference)."""
+
+import math
+
+import numpy as np
+import pytest
+import rerun as rr
+
+from fabric_shell import FABRIC
+from yarnfit.mujoco.scenes import SceneMaterial
+from yarnfit.shell import ShellMaterial
+from yarnfit.validate.reference import read_reference
+from yarnfit.validate.stretch import DIRECTIONS, pull_strip, run_stretch, uniaxial_law
+
+# The issue's bound for the scene against the shell law at small strain. Measured on the quick 9 ×
+# 6 strip at 0.2 % strain: Poisson 0, +0.2 % (Green strain's own stiffening); the woven, weft
+# +0.2 %, warp −0.1 % (ν = 0.2 and 0.12 held at the clamps).
+LAW_RTOL = 0.03
+# Areal density of the test materials (kg/m²).
+DENSITY = 0.2
+
+WOVEN = SceneMaterial("woven", FABRIC, DENSITY)
+# Isotropic, Poisson 0: clamped ends hold nothing back, the strip is in uniaxial tension.
+H = 3.0e-4
+E = 1.0e3 / H
+NO_POISSON = SceneMaterial("no-poisson", ShellMaterial(thickness=H, s00=E, s01=0.0, s11=E, s22=E / 2,
+                                                        b00=1e-5 / H**3, b01=0.0, b11=1e-5 / H**3, b22=5e-6 / H**3),
+                           DENSITY)
+
+
+@pytest.mark.parametrize("material, direction", [(NO_POISSON, "weft"), (WOVEN, "weft"), (WOVEN, "warp")])
+def test_small_strain_force_follows_the_shell_law(material, direction):
+    result = pull_strip(material, "8x5", direction, quick=True, max_strain=0.01)
+    assert result.settled.all()
+    stiffness, _ = uniaxial_law(material, DIRECTIONS[direction])
+    assert result.force_per_width_n_per_m[0] / result.strain[0] == pytest.approx(stiffness, rel=LAW_RTOL)
+    # Measured strain, not the servo's target: within the servo's ~1 % lag of the nominal level.
+    assert result.strain[0] == pytest.approx(0.002, rel=0.02)
+
+
+def test_no_poisson_strip_keeps_its_width_and_the_woven_narrows():
+    flat = pull_strip(NO_POISSON, "8x5", "weft", quick=True, max_strain=0.05)
+    assert np.abs(flat.compression_ratio - 1).max() < 1e-6
+    woven = pull_strip(WOVEN, "8x5", "weft", quick=True, max_strain=0.05)
+    assert np.all(np.diff(woven.compression_ratio) < 0) and woven.compression_ratio[-1] < 1
+
+
+def test_bias_strips_of_a_woven_are_softer_than_weft_and_warp():
+    """The paper's check (a): shear-soft wovens give way on the bias."""
+    force = {d: pull_strip(WOVEN, "8x5", d, quick=True, max_strain=0.02).force_per_width_n_per_m[-1]
+             for d in DIRECTIONS}
+    assert force["bias"] < min(force["weft"], force["warp"])
+
+
+def entity_paths(path):
+    return {chunk.entity_path for chunk in rr.chunk.RrdReader(path).stream()}
+
+
+def test_run_writes_the_documented_recording_and_compares_a_reference(tmp_path):
+    reference_csv = tmp_path / "measured.csv"
+    # A "measurement" that is our own weft curve times 1.1, in N/cm and percent.
+    ours = pull_strip(WOVEN, "8x5", "weft", quick=True, max_strain=0.05)
+    rows = [f"weft,{100 * float(e)!r},{1.1 * float(f) / 100!r}" for e, f in zip(ours.strain, ours.force_per_width_n_per_m)]
+    reference_csv.write_text("# made up from our own curve\ndirection,strain [%],force per width [N/cm]\n"
+                             + "\n".join(rows) + "\n")
+    reference = read_reference(reference_csv)
+    path = tmp_path / "logs" / "woven" / "stretch.rrd"
+    summary = run_stretch(WOVEN, quick=True, recording_path=path, reference=reference, max_strain=0.05)
+    assert set(summary["strips"]) == {f"8x5_{d}" for d in DIRECTIONS}
+    comparison = summary["reference"]["weft"]
+    assert comparison["points"] == len(ours.strain)
+    np.testing.assert_allclose(comparison["relative_difference"], 1 / 1.1 - 1, rtol=1e-9)
+    paths = entity_paths(path)
+    expected = {"/stretch/summary", "/stretch/plots/reference_force/weft"}
+    expected |= {f"/stretch/8x5_{d}/cloth" for d in DIRECTIONS}
+    expected |= {f"/stretch/plots/{kind}/8x5_{d}" for kind in ("force", "compression") for d in DIRECTIONS}
+    assert expected <= paths
+
+
+BAD_CSV = {
+    "no units": ("direction,strain,force per width [N/m]\nweft,0.01,10\n", "column 'strain' has no unit"),
+    "unknown unit": ("direction,strain [1],force per width [lbf/in]\nweft,0.01,10\n", r"has unit \[lbf/in\]"),
+    "bad direction": ("direction,strain [1],force per width [N/m]\nwarpish,0.01,10\n", "direction 'warpish'"),
+    "not a number": ("direction,strain [1],force per width [N/m]\nweft,0.01,ten\n", "'ten' is not a number"),
+    "missing column": ("direction,strain [1]\nweft,0.01\n", "missing column 'force per width"),
+    "empty": ("# nothing\n", "no header row"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CSV))
+def test_bad_reference_files_fail_with_one_line(case, tmp_path):
+    text, message = BAD_CSV[case]
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message) as error:
+        read_reference(path)
+    assert "\n" not in str(error.value) and str(path) in str(error.value)
+
+
+def test_reference_units_are_converted_to_si(tmp_path):
+    path = tmp_path / "units.csv"
+    path.write_text("direction,strain [%],force per width [gf/cm],compression ratio [1]\n"
+                    "warp,2,100,0.99\nwarp,1,50,\n")
+    curve = read_reference(path).curves["warp"]
+    np.testing.assert_allclose(curve.strain, [0.01, 0.02])
+    np.testing.assert_allclose(curve.force_per_width, [50 * 0.980665, 100 * 0.980665])
+    assert math.isnan(curve.compression_ratio[0]) and curve.compression_ratio[1] == 0.99
