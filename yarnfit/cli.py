@@ -92,6 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE,
                          DEFAULT_TIMESTEP, INTEGRATORS, SCENES)
+    from .validate import SCENES as VALIDATION_SCENES
 
     export = commands.add_parser(
         "export",
@@ -133,6 +134,23 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--self-collision", action="store_true", help="let the cloth collide with itself (slower)")
     export.add_argument("--check", type=float, metavar="SECONDS",
                         help="then step the scene this long and report stability and ms/step (exit 1 if unstable)")
+    validate = commands.add_parser(
+        "validate",
+        help="run the validation suite on a fitted material (stretch tests, drapes, yarn swatch, body)",
+        description=(
+            "Run the validation scenes on a material file: stretch (FAB strips 8x5 and 2x5 cm along weft, warp "
+            "and bias in MuJoCo), yarn (the same pull on an explicit yarn swatch), sphere and wall (drapes), "
+            "body (garments on a moving humanoid). Each scene is recorded to <logs>/<fabric>/<scene>.rrd and "
+            "every figure goes to <logs>/<fabric>/summary.json, in SI units."
+        ),
+    )
+    validate.add_argument("material", metavar="MATERIAL.json", help="a material file written by `yarnfit fit`")
+    validate.add_argument("--scenes", default=",".join(VALIDATION_SCENES), metavar="LIST",
+                          help=f"comma-separated scenes (default: {','.join(VALIDATION_SCENES)})")
+    validate.add_argument("--quick", action="store_true", help="coarse meshes and short runs (for CI)")
+    validate.add_argument("--reference", metavar="CURVES.csv",
+                          help="measured stretch curves to compare with (CSV with units in the header; see README)")
+    validate.add_argument("--logs", default="logs", metavar="DIR", help="where recordings and summary.json go")
     return parser
 
 
@@ -466,8 +484,31 @@ def _plural(count: int, noun: str) -> str:
     return f"{count} {noun}{'' if count == 1 else 's'}"
 
 
+def cmd_validate(args: argparse.Namespace) -> int:
+    from .validate import SCENES as VALIDATION_SCENES
+    from .validate.reference import read_reference
+    from .validate.suite import run_suite
+
+    scenes = [scene.strip() for scene in args.scenes.split(",") if scene.strip()]
+    unknown = [scene for scene in scenes if scene not in VALIDATION_SCENES]
+    if unknown or not scenes:
+        raise UsageError(f"--scenes: unknown scene {', '.join(unknown) or '(none given)'}; "
+                         f"scenes: {', '.join(VALIDATION_SCENES)}")
+    reference = read_reference(args.reference) if args.reference else None
+
+    def progress(message: str) -> None:
+        print(f"  {message}", file=sys.stderr, flush=True)
+
+    summary, path = run_suite(args.material, scenes, quick=args.quick, logs=args.logs, reference=reference,
+                              progress=progress)
+    print(f"validated {summary['material']['name']}: {path}")
+    for scene, seconds in summary["wall_seconds"].items():
+        print(f"  {scene:<8} {seconds:7.1f} s  {path.parent / (scene + '.rrd')}")
+    return 0
+
+
 COMMANDS = {"materials": cmd_materials, "patterns": cmd_patterns, "relax": cmd_relax, "fit": cmd_fit,
-            "export": cmd_export}
+            "export": cmd_export, "validate": cmd_validate}
 
 
 def main(argv: list[str] | None = None) -> int:

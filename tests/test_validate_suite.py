@@ -1,0 +1,122 @@
+"""The drapes (yarnfit.validate.drape) and the `yarnfit validate` suite: summaries, recordings,
+bad input."""
+
+import dataclasses
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rerun as rr
+
+import yarnfit
+from fabric_shell import FABRIC
+from yarnfit.mujoco.scenes import SceneMaterial
+from yarnfit.validate.drape import SIZE, fold_count, projected_area, run_drape
+
+DENSITY = 0.2  # kg/m²
+WOVEN = SceneMaterial("woven", FABRIC, DENSITY)
+# The raster of projected_area resolves a square to a cell row along each edge: 1/400 per side.
+AREA_RTOL = 0.01
+
+
+def material_file(folder: Path, shell=FABRIC, name="woven", version=yarnfit.__version__) -> Path:
+    path = folder / f"{name}.json"
+    path.write_text(json.dumps({"yarnfit_version": version,
+                                "inputs": {"fabric": name, "areal_density_kg_m2": DENSITY},
+                                "shell": shell.to_dict(), "engineering": shell.engineering()}))
+    return path
+
+
+def test_projected_area_of_flat_and_folded_squares():
+    x, y = np.meshgrid(np.linspace(0, 1, 11), np.linspace(0, 1, 11), indexing="ij")
+    points = np.column_stack([x.ravel(), y.ravel(), np.zeros(121)])
+    a = (np.arange(10)[:, None] * 11 + np.arange(10)[None, :]).ravel()
+    triangles = np.concatenate([np.stack([a, a + 11, a + 12], 1), np.stack([a, a + 12, a + 1], 1)])
+    assert projected_area(points, triangles) == pytest.approx(1.0, rel=AREA_RTOL)
+    folded = points.copy()
+    over = folded[:, 0] > 0.5
+    folded[over, 0] = 1.0 - folded[over, 0]  # folded in half along x = 0.5
+    folded[over, 2] = 0.01
+    assert projected_area(folded, triangles) == pytest.approx(0.5, rel=AREA_RTOL)
+
+
+def test_fold_count_counts_the_lobes_of_a_hem():
+    angle = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+    radius = 0.15 + 0.02 * np.cos(6 * angle)
+    hem = np.column_stack([radius * np.cos(angle), radius * np.sin(angle), np.zeros_like(angle)])
+    assert fold_count(hem, np.arange(len(hem)), SIZE) == 6
+
+
+def entity_paths(path):
+    return {chunk.entity_path for chunk in rr.chunk.RrdReader(path).stream()}
+
+
+@pytest.mark.parametrize("scene", ["sphere", "wall"])
+def test_drape_settles_and_records(scene, tmp_path):
+    path = tmp_path / f"{scene}.rrd"
+    summary = run_drape(WOVEN, scene, quick=True, recording_path=path)
+    assert summary["settled"] and summary["bad_qacc"] == 0
+    assert 0 < summary["drape_coefficient"] < 1
+    assert summary["lowest_point_m"] > -0.005  # the floor (less the flex radius)
+    paths = entity_paths(path)
+    assert {f"/{scene}/cloth", f"/{scene}/bodies/obstacle", f"/{scene}/plots/kinetic_energy",
+            f"/{scene}/plots/lowest_point", f"/{scene}/summary"} <= paths
+    if scene == "sphere":
+        assert summary["fold_count"] >= 2
+    else:
+        assert 0 < summary["max_distance_from_wall_m"] < SIZE
+
+
+def test_stiffer_fabrics_drape_differently_on_the_sphere():
+    """The paper's check (c), in kind: the same construction, a fibre 5× stiffer in bending,
+    stands out further (a larger drape coefficient)."""
+    stiff = dataclasses.replace(FABRIC, b00=5 * FABRIC.b00, b01=5 * FABRIC.b01, b11=5 * FABRIC.b11,
+                                b22=5 * FABRIC.b22)
+    soft = run_drape(WOVEN, "sphere", quick=True)["drape_coefficient"]
+    hard = run_drape(SceneMaterial("stiff", stiff, DENSITY), "sphere", quick=True)["drape_coefficient"]
+    assert hard > soft + 0.02
+
+
+def yarnfit_cli(*args):
+    script = Path(sys.executable).with_name("yarnfit")
+    return subprocess.run([str(script), *args], capture_output=True, text=True, timeout=300)
+
+
+def test_cli_validate_writes_recordings_and_a_summary(tmp_path):
+    material = material_file(tmp_path)
+    logs = tmp_path / "logs"
+    done = yarnfit_cli("validate", str(material), "--scenes", "stretch,sphere,wall", "--quick", "--logs", str(logs))
+    assert done.returncode == 0, done.stderr
+    folder = logs / "woven"
+    summary = json.loads((folder / "summary.json").read_text())
+    assert set(summary["scenes"]) == {"stretch", "sphere", "wall"} and summary["quick"] is True
+    for scene in summary["scenes"]:
+        assert (folder / f"{scene}.rrd").is_file()
+        assert summary["wall_seconds"][scene] > 0
+    assert "stretch: done" in done.stderr  # progress
+
+
+@pytest.mark.parametrize("case", ["missing keys", "old version", "reference without units", "unknown scene"])
+def test_cli_validate_bad_input_is_one_line(case, tmp_path):
+    material = material_file(tmp_path)
+    args = [str(material), "--scenes", "stretch", "--quick", "--logs", str(tmp_path / "logs")]
+    if case == "missing keys":
+        material.write_text(json.dumps({"yarnfit_version": yarnfit.__version__, "shell": FABRIC.to_dict()}))
+        message = "missing keys inputs, engineering"
+    elif case == "old version":
+        material_file(tmp_path, version="0.0.3")
+        message = "written by yarnfit '0.0.3'"
+    elif case == "reference without units":
+        csv = tmp_path / "ref.csv"
+        csv.write_text("direction,strain,force per width\nweft,0.01,10\n")
+        args += ["--reference", str(csv)]
+        message = "column 'strain' has no unit"
+    else:
+        args[2] = "stretch,drape"
+        message = "unknown scene drape"
+    done = yarnfit_cli("validate", *args)
+    assert done.returncode == 2
+    assert message in done.stderr and len(done.stderr.strip().splitlines()) == 1

@@ -1,0 +1,102 @@
+"""``yarnfit validate``: run the validation scenes on one material file, record each to
+``<logs>/<material>/<scene>.rrd`` and write every figure to ``<logs>/<material>/summary.json``.
+
+``summary.json``: ``yarnfit_version``, ``material`` (file, name), ``quick``, ``scenes`` (scene →
+its runner's summary, keys carrying their units) and ``wall_seconds`` (scene → s).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Callable
+
+from .. import __version__
+from ..jsonfile import read_json
+from . import SCENES
+
+
+class IncompatibleMaterial(ValueError):
+    """A material file this version cannot use (missing keys, another major version)."""
+
+
+REQUIRED_KEYS = ("yarnfit_version", "inputs", "shell", "engineering")
+
+
+def check_material_file(path: str | Path) -> dict:
+    """Read a material file and check it is one this version can validate; returns its data.
+    Raises :class:`IncompatibleMaterial` (one line, naming the problem)."""
+    where, data = read_json(path, "material file")
+    if not isinstance(data, dict):
+        raise IncompatibleMaterial(f"{where}: expected a JSON object (a `yarnfit fit` material file)")
+    missing = [key for key in REQUIRED_KEYS if key not in data]
+    if missing:
+        raise IncompatibleMaterial(f"{where}: missing key{'s' if len(missing) > 1 else ''} "
+                                   f"{', '.join(missing)} (write it with `yarnfit fit`)")
+    version = data["yarnfit_version"]
+    if not isinstance(version, str) or version.split(".")[:2] != __version__.split(".")[:2]:
+        raise IncompatibleMaterial(f"{where}: written by yarnfit {version!r}, this is {__version__}: refit it "
+                                   "with `yarnfit fit` (the file format follows the minor version)")
+    return data
+
+
+def _runner(scene: str) -> Callable:
+    if scene == "stretch":
+        from .stretch import run_stretch
+        return run_stretch
+    if scene in ("sphere", "wall"):
+        from .drape import run_drape
+        return lambda material, **options: run_drape(material, scene, **options)
+    if scene == "yarn":
+        from .swatch import run_yarn
+        return run_yarn
+    if scene == "body":
+        from .body import run_body
+        return run_body
+    raise ValueError(f"unknown scene {scene!r}; scenes: {', '.join(SCENES)}")
+
+
+def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, logs: str | Path = "logs",
+              reference=None, progress: Callable[[str], None] | None = None) -> tuple[dict, Path]:
+    """Run ``scenes`` on the material file; returns the summary and the path of ``summary.json``."""
+    data = check_material_file(material_path)
+    from ..mujoco.scenes import SceneMaterial
+
+    material = SceneMaterial.from_file(material_path)
+    folder = Path(logs) / material.name
+    folder.mkdir(parents=True, exist_ok=True)
+    summary = {"yarnfit_version": __version__, "material": {"file": str(material_path), "name": material.name},
+               "quick": quick, "scenes": {}, "wall_seconds": {}}
+    for scene in scenes:
+        runner = _runner(scene)
+        if progress:
+            progress(f"{scene}: running")
+        options = {"quick": quick, "recording_path": folder / f"{scene}.rrd", "progress": progress}
+        if scene == "stretch" and reference is not None:
+            options["reference"] = reference
+        start = time.perf_counter()
+        source = material_path if scene in ("yarn",) else material
+        summary["scenes"][scene] = runner(source, **options)
+        summary["wall_seconds"][scene] = time.perf_counter() - start
+        if progress:
+            progress(f"{scene}: done in {summary['wall_seconds'][scene]:.1f} s")
+    del data
+    path = folder / "summary.json"
+    path.write_text(json.dumps(summary, indent=2, default=_jsonable) + "\n")
+    return summary, path
+
+
+def _jsonable(value):
+    try:
+        import numpy as np
+
+        if isinstance(value, np.generic):
+            return value.item()
+        if isinstance(value, np.ndarray):
+            return value.tolist()
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
