@@ -1,0 +1,149 @@
+"""The yarn-level stretch test (``yarnfit.validate.swatch``): a strip of straight parallel weft
+yarns cut from a synthetic periodic repeat against the closed form, the jaw reaction against the
+yarns' internal forces, a small real weave (global balance with contacts), and the recording read
+back with its documented paths."""
+
+import math
+import re
+
+import numpy as np
+import pytest
+import rerun as rr
+
+import yarnfit.validate.swatch as swatch_module
+from yarnfit.engine import Rod, RodMaterial, RodModel
+from yarnfit.validate.swatch import STRAIN_TIMELINE, cut_swatch, stretch_repeat, stretch_swatch
+
+E = 1e9  # Pa
+RADIUS = 1e-4  # m
+PX, PY = 1e-3, 1.2e-3  # repeat size (m); two weft yarns per repeat, so spacing PY / 2
+NODES = 8  # per yarn per repeat (even: the jaw lines at multiples of PX / 2 fall on nodes)
+# The solves stop at force residual 1e-6 of the force scale (EA/l0 · strain-sized displacements),
+# so the reaction is known to ~1e-6 relative; the closed form is exact for the discrete rod
+# (the axial strain |e|/l0 − 1 of a straight edge is the yarn strain), so only that is left.
+FORCE_RTOL = 1e-5
+
+
+def straight_weft_repeat(hardening: float = 0.0):
+    """Two straight periodic weft yarns per PX × PY repeat, at y = PY/4 and 3PY/4."""
+    material = RodMaterial(E, poisson_ratio=0.3, density=1500.0, hardening_tension=hardening,
+                           hardening_compression=hardening)
+    rods = []
+    for y in (0.25 * PY, 0.75 * PY):
+        points = np.stack([np.arange(NODES) * PX / NODES, np.full(NODES, y), np.zeros(NODES)], axis=1)
+        tiles = np.zeros((NODES, 2), dtype=int)
+        tiles[-1] = (1, 0)
+        rods.append(Rod(points=points, radius=RADIUS, material=material, closed=True, tile_offsets=tiles))
+    model = RodModel.from_rods(rods, lattice=[[PX, 0, 0], [0, PY, 0]])
+    return model, material
+
+
+def axial_force(strain: float, hardening: float = 0.0) -> float:
+    """Yarn tension at axial strain ε: N = A (E ε + ½ k ε²) (docs/design.md §4), N."""
+    area = math.pi * RADIUS**2
+    return area * (E * strain + 0.5 * hardening * strain**2)
+
+
+@pytest.mark.parametrize("hardening", [0.0, 5e9])
+def test_straight_wefts_match_closed_form(hardening):
+    # Force per unit width of n parallel yarns at spacing s: N(ε) / s, ε the gauge strain (the
+    # jaws hold everything outside the gauge rigidly); no Poisson contraction (rods do not neck).
+    model, material = straight_weft_repeat(hardening)
+    swatch = cut_swatch(model, model.node_rest_position, material, direction="weft", gauge=4 * PX, width=2 * PY,
+                        clamp=PX)
+    assert swatch.model.n_rods == 4  # yarns at y = ±PY/4, ±3PY/4
+    out = stretch_swatch(swatch, (0.02, 0.05, 0.10))
+    assert out["converged"]
+    spacing = PY / 2
+    for point in out["points"][1:]:
+        expected = axial_force(point["strain"], hardening) / spacing
+        assert point["force_n_per_m"] == pytest.approx(expected, rel=FORCE_RTOL)
+        assert point["fixed_force_n_per_m"] == pytest.approx(expected, rel=FORCE_RTOL)
+        assert point["compression_ratio"] == pytest.approx(1.0, abs=1e-9)
+        assert point["residual"]["force"] <= 1e-6
+
+
+def test_jaw_reaction_equals_sum_of_yarn_forces():
+    # The pull on the moving jaw is the sum over the yarns crossing mid-length of their internal
+    # axial force EA (|e| / l0 − 1) there (free body of the strip's right half).
+    model, material = straight_weft_repeat()
+    swatch = cut_swatch(model, model.node_rest_position, material, direction="weft", gauge=3 * PX, width=2 * PY,
+                        clamp=PX / 2)
+    states = {}
+    out = stretch_swatch(swatch, (0.03,), on_step=lambda k, e, pos, point: states.__setitem__(k, pos.copy()))
+    position = states[1]
+    m = swatch.model
+    ends = position[m.edge_nodes[:, 1]]
+    starts = position[m.edge_nodes[:, 0]]
+    crossing = (starts[:, 0] < 0.0) & (ends[:, 0] >= 0.0)
+    assert crossing.sum() == m.n_rods
+    length = np.linalg.norm(ends - starts, axis=1)
+    tension = m.edge_stretch_stiffness * (length / m.edge_rest_length - 1.0)
+    direction_x = (ends - starts)[:, 0] / length
+    cut_force = float(np.sum((tension * direction_x)[crossing]))
+    assert out["points"][1]["force_n_per_m"] * swatch.width == pytest.approx(cut_force, rel=FORCE_RTOL)
+
+
+def test_bias_strip_rotates_the_repeat():
+    # A bias strip is the repeat turned by 45° (material x goes to world (1, -1)/√2): the straight
+    # wefts are cut into diagonal pieces across the strip.
+    model, material = straight_weft_repeat()
+    swatch = cut_swatch(model, model.node_rest_position, material, direction="bias", gauge=4 * PX, width=2 * PY,
+                        clamp=PX)
+    # Every piece lies at 45° in the strip frame: direction (1, -1)/√2 or its opposite.
+    m = swatch.model
+    edge = swatch.position[m.edge_nodes[:, 1]] - swatch.position[m.edge_nodes[:, 0]]
+    edge /= np.linalg.norm(edge, axis=1, keepdims=True)
+    assert np.allclose(np.abs(edge[:, 0]), math.sqrt(0.5), atol=1e-12)
+    assert np.allclose(edge[:, 0] * edge[:, 1], -0.5, atol=1e-12)
+
+
+def test_small_weave_balances_with_contacts():
+    # A real relaxed plain weave in a tiny strip: the moving and the fixed jaw pull equally (global
+    # balance, contacts included), the weave is softer than its straightened yarns, and it necks.
+    from yarnfit.fabric import Fabric
+    from yarnfit.materials import get_fiber
+    from yarnfit.relax import relax, rod_material
+
+    fabric = Fabric(name="plain", fiber=get_fiber("cotton"), structure="plain", areal_density=0.2)
+    relaxed = relax(fabric)
+    out = stretch_repeat(relaxed.model, relaxed.state.node_position, rod_material(fabric.fiber), name="plain",
+                         directions=("weft",), strains=(0.02,), size={"gauge": 1.5, "width": 1.0, "clamp": 0.5})
+    point = out["directions"]["weft"]["points"][1]
+    assert point["converged"]
+    assert point["fixed_force_n_per_m"] == pytest.approx(point["force_n_per_m"], rel=1e-4)
+    assert 0.0 < point["force_n_per_m"]
+    assert point["compression_ratio"] < 1.0
+
+
+def documented_paths(directions):
+    templates = re.findall(r"``(yarn(?:/[\w<>]+)*)``", swatch_module.__doc__)
+    return {t.replace("<direction>", d) for t in templates for d in (directions if "<direction>" in t else [""])}
+
+
+def test_recording_reads_back(tmp_path):
+    model, material = straight_weft_repeat()
+    path = tmp_path / "straight" / "yarn.rrd"
+    strains = (0.02, 0.05)
+    out = stretch_repeat(model, model.node_rest_position, material, name="straight", directions=("weft",),
+                         strains=strains, size={"gauge_m": 2 * PX, "width_m": PY, "clamp_m": PX / 2},
+                         recording_path=path)
+    reader = rr.chunk.RrdReader(str(path))
+    rows, timelines = {}, {}
+    for chunk in reader.stream():
+        batch = chunk.to_record_batch()
+        names = batch.schema.names
+        steps = batch.column(STRAIN_TIMELINE).to_pylist() if STRAIN_TIMELINE in names else [None] * batch.num_rows
+        entity = rows.setdefault(chunk.entity_path.lstrip("/"), {})
+        for name in (n for n in names if ":" in n):
+            entity.setdefault(name, {}).update(zip(steps, batch.column(name).to_pylist()))
+        timelines.setdefault(chunk.entity_path.lstrip("/"), set()).update(chunk.timeline_names)
+    paths = {p for p in rows if not p.startswith("__")}
+    assert paths == documented_paths(["weft"])
+    force = rows["yarn/plots/force_weft"]
+    (column,) = [c for c in force if c.endswith("scalars")]
+    logged = [force[column][k][0] for k in range(len(strains) + 1)]
+    assert np.allclose(logged, out["directions"]["weft"]["force_n_per_m"], rtol=1e-6)
+    assert STRAIN_TIMELINE in timelines["yarn/swatch/yarns"]
+    text = [v for c, v in rows["yarn/summary"].items() if c.endswith(":text")]
+    assert "force (N/m)" in str(text[0][None])

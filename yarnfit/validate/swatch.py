@@ -1,0 +1,530 @@
+"""The full yarn-level stretch test (issue 6, item 2): a FAB-style strip cut from an explicit yarn
+swatch, pulled quasi-statically in the yarn engine, no periodicity.
+
+How the swatch is made (:func:`cut_swatch`): every yarn of the relaxed repeat is unrolled along
+its period (node j of copy m at ``x_j + (C_j + m P + T) @ lattice``, ``C_j`` its chain tile, ``P``
+the yarn's period, ``T`` the tile of the copy), copies at every tile that is not the same yarn
+shifted along itself, and cut by a rectangle of the fabric plane whose long axis ``u`` makes the
+angle of the strip's direction with the weft (0° weft, 90° warp, 45° bias). Each run of
+consecutive nodes inside the rectangle becomes an **open rod** (yarn ends cut at the boundary);
+runs shorter than half the repeat's smaller side are dropped (clipped loop fragments would float
+free). Rest lengths and frames are the relaxed repeat's, so the rest shape of every piece is its
+relaxed shape and the uncut swatch at zero strain is force-free (contacts just touching). The
+swatch is then turned so that ``u`` is world x, ``v`` (across) world y; z is the fabric normal.
+
+The test (:func:`stretch_swatch`): nodes within ``clamp`` of either short end are pinned (and the
+frames of edges with both nodes pinned: the jaws hold the yarn), the ``+u`` jaw is moved by
+``strain × gauge`` (``gauge`` = strip length minus both bands) along x, and each strain is a
+converged Newton solve (:class:`yarnfit.engine.QuasiStaticSolver`, stopping on force/torque
+residuals, energy change and contact penetration; never a fixed iteration count, see
+``docs/design.md`` §5), warm-started from the previous strain's equilibrium stretched affinely
+between the jaws (an x-stretch never brings two segments closer, so the guess adds no overlap).
+
+Outputs per direction and strain:
+
+- ``force_n_per_m``: the pull on the moving jaw (the x component of the sum over its pinned nodes
+  of ∂Π/∂x, Π the rod energy plus the contact potential: the force the jaw must apply) divided by
+  the initial strip width; ``fixed_force_n_per_m`` the same on the fixed jaw (minus sign: it pulls
+  back), equal and opposite at equilibrium; ``rod_force_n_per_m`` the rods' part alone
+  (``contact_share`` the rest).
+- ``compression_ratio``: width at mid-length over the initial width, the width being the span of
+  the node centrelines across the strip within half a repeat of mid-length, plus one diameter.
+- the solver's residuals, iterations and wall time.
+
+Recording (:class:`SwatchRecording`, one ``rr.RecordingStream`` per file as in
+:mod:`yarnfit.record`, application id ``yarnfit``), default ``logs/<material>/yarn.rrd``.
+Timeline ``strain`` (sequence): step k is the k-th solved strain of a direction, counting on
+across directions (0 is the unstrained swatch of the first direction). Entity paths (m, 3D: x
+the pull, y across, z the fabric normal):
+
+- ``yarn``: ``ViewCoordinates`` right-handed, z up (static).
+- ``yarn/swatch/yarns``: ``LineStrips3D``, one strip per cut yarn piece, radius = yarn radius,
+  pinned pieces and free ones coloured per direction, at each step.
+- ``yarn/plots/force_<direction>``: ``Scalars``, pull per unit width (N/m) at that direction's
+  steps.
+- ``yarn/plots/compression_<direction>``: ``Scalars``, compression ratio (dimensionless).
+- ``yarn/plots/strain``: ``Scalars``, the nominal strain of the step (dimensionless).
+- ``yarn/summary``: ``TextDocument`` (markdown), the table of results (static, by ``finish``).
+
+``<direction>`` is each of ``weft``, ``warp``, ``bias`` that was run.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..engine import (
+    ConvergenceWarning,
+    QuasiStaticOptions,
+    QuasiStaticSolver,
+    Rod,
+    RodMaterial,
+    RodModel,
+    RodState,
+    energy_gradient,
+)
+
+# Strip directions: angle of the pull axis u from the weft (x) axis, degrees.
+DIRECTIONS = {"weft": 0.0, "warp": 90.0, "bias": 45.0}
+# The strains the FAB-style test reports (nominal engineering strain of the gauge).
+STRAINS = (0.02, 0.05, 0.10)
+# Strip size in repeats of the larger repeat side: gauge length, width and each jaw's band. A full
+# run (about 10 × 6 repeats of a twill between jaws) costs minutes on two cores; quick is for CI.
+FULL_SIZE = {"gauge": 6.0, "width": 4.0, "clamp": 1.0}
+QUICK_SIZE = {"gauge": 2.0, "width": 1.5, "clamp": 0.5}
+# Pieces shorter than this fraction of the repeat's smaller side are dropped (clipped fragments).
+MIN_PIECE_FRACTION = 0.5
+# A node within this fraction of an edge length outside the jaw line still counts as clamped
+# (round-off of the unrolled positions).
+CLAMP_SLACK = 1e-9
+# Newton iterations per strain; a solve that needs more is reported as not converged.
+MAX_ITERATIONS = 400
+# Tolerances of the swatch solves: the solver's defaults except the force and torque imbalance,
+# which at 1e-8 sat below the round-off floor of a cut swatch (many contacts, ~1e4 nodes); 1e-6 of
+# the force scale is still six digits on the reaction.
+SWATCH_OPTIONS = dict(force_tolerance=1e-6, torque_tolerance=1e-6, energy_tolerance=1e-10,
+                      penetration_tolerance=1e-4, max_iterations=MAX_ITERATIONS)
+
+
+@dataclass(frozen=True)
+class Swatch:
+    """A strip cut from an unrolled repeat, in world coordinates (x pull, y across, z normal).
+
+    Attributes:
+        model: open rods (one per cut yarn piece), jaw nodes pinned.
+        position: ``(N, 3)`` the rest (relaxed, unstrained) positions (m).
+        moving: node indices of the +x jaw; ``fixed``: of the −x jaw.
+        length, width, gauge, clamp: strip length, width, free length between the jaws and the
+            band of each jaw (m).
+        radius: yarn radius (m).
+        direction: ``weft``, ``warp``, ``bias`` or an angle name.
+        angle_deg: angle of the pull from the weft (degrees).
+    """
+
+    model: RodModel
+    position: np.ndarray
+    moving: np.ndarray
+    fixed: np.ndarray
+    length: float
+    width: float
+    gauge: float
+    clamp: float
+    radius: float
+    direction: str
+    angle_deg: float
+
+
+def _unrolled_yarns(model: RodModel, position: np.ndarray, half_extent: np.ndarray):
+    """Yield ``(points (n, 3), rest_lengths (n−1,), frames (n−1, 4), radius, material)`` of every copy
+    of every yarn of a flat periodic ``model`` that passes within ``half_extent`` (x, y half sizes,
+    m) of the origin, unrolled over as many periods as that takes (open polylines)."""
+    lattice = model.lattice
+    px, py = np.linalg.norm(lattice[0]), np.linalg.norm(lattice[1])
+    reach = np.ceil(half_extent / np.array([px, py])).astype(int) + 2
+    for r in range(model.n_rods):
+        nodes = np.arange(model.rod_node_start[r], model.rod_node_start[r + 1])
+        edges = np.arange(model.rod_edge_start[r], model.rod_edge_start[r + 1])
+        period = model.rod_period[r]
+        if not model.rod_closed[r] or not np.any(period):
+            raise ValueError(f"rod {r}: only closed yarns that run through the tiles can be unrolled")
+        if period[0] != 0 and period[1] != 0:
+            raise ValueError(f"rod {r}: a yarn must run along a tile vector, its period is {period.tolist()}")
+        axis = 0 if period[0] != 0 else 1
+        step = int(abs(period[axis]))
+        chain = model.edge_chain_tile[edges]
+        n = len(nodes)
+        # Copies: along the yarn's axis, `step` distinct phases; across it, every tile in reach.
+        across = 1 - axis
+        periods = int(np.ceil((reach[axis] + 1) / step)) + 1
+        m = np.arange(-periods, periods + 1)
+        for phase in range(step):
+            for t in range(-reach[across], reach[across] + 1):
+                tile = np.zeros(2, dtype=np.int64)
+                tile[axis] = phase
+                tile[across] = t
+                cells = (chain[None, :, :] + m[:, None, None] * period[None, None, :] + tile).reshape(-1, 2)
+                points = np.tile(position[nodes], (len(m), 1)) + cells @ lattice
+                if np.all(np.abs(points[:, across]) > half_extent[across] + 2 * max(px, py)):
+                    continue
+                rest = np.tile(model.edge_rest_length[edges], len(m))[:-1]
+                frames = np.tile(model.edge_rest_quaternion[edges], (len(m), 1))[:-1]
+                yield points, rest, frames, float(model.edge_radius[edges[0]]), n
+
+
+def cut_swatch(model: RodModel, position: np.ndarray, material: RodMaterial, *, direction: str = "weft",
+               gauge: float, width: float, clamp: float) -> Swatch:
+    """Cut a strip from the flat periodic ``model`` at ``position`` (its relaxed rest state, frames
+    its rest frames): ``gauge`` × ``width`` between the jaws plus a ``clamp`` band at each end (m),
+    pulled along ``direction`` (a key of :data:`DIRECTIONS`). See the module docstring."""
+    if direction not in DIRECTIONS:
+        raise ValueError(f"direction must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
+    for value, what in ((gauge, "gauge"), (width, "width"), (clamp, "clamp")):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{what} must be a positive length in m, got {value!r}")
+    angle = math.radians(DIRECTIONS[direction])
+    c, s = math.cos(angle), math.sin(angle)
+    # World (x along the pull u, y across v) from material coordinates, about the repeat's centre.
+    rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    lattice = model.lattice
+    centre = 0.5 * (lattice[0] + lattice[1])
+    centre[2] = float(np.mean(position[:, 2]))
+    length = gauge + 2.0 * clamp
+    corners = np.array([[su * length / 2, sv * width / 2, 0.0] for su in (-1, 1) for sv in (-1, 1)]) @ rotation
+    half_extent = np.abs(corners[:, :2]).max(axis=0)
+    min_piece = MIN_PIECE_FRACTION * min(np.linalg.norm(lattice[0]), np.linalg.norm(lattice[1]))
+    rods = []
+    for points, rest, frames, radius, _ in _unrolled_yarns(model, position - centre, half_extent):
+        world = points @ rotation.T
+        inside = (np.abs(world[:, 0]) <= length / 2) & (np.abs(world[:, 1]) <= width / 2)
+        if not inside.any():
+            continue
+        # Runs of consecutive inside nodes.
+        flags = np.concatenate([[False], inside, [False]]).astype(np.int8)
+        starts = np.flatnonzero(np.diff(flags) == 1)
+        stops = np.flatnonzero(np.diff(flags) == -1)
+        for a, b in zip(starts, stops):
+            if b - a < 3 or rest[a:b - 1].sum() < min_piece:
+                continue
+            pts = world[a:b]
+            frames_world = _rotate_quaternions(frames[a:b - 1], angle)
+            x = pts[:, 0]
+            slack = CLAMP_SLACK * length
+            pinned = np.flatnonzero((x <= -gauge / 2 + slack) | (x >= gauge / 2 - slack))
+            both = np.flatnonzero(np.isin(np.arange(b - a - 1), pinned) & np.isin(np.arange(1, b - a), pinned))
+            rods.append(Rod(points=pts, radius=radius, material=material, frames=frames_world,
+                            rest_lengths=rest[a:b - 1], pinned_nodes=pinned.tolist(), pinned_frames=both.tolist(),
+                            name=f"piece {len(rods)}"))
+    if not rods:
+        raise ValueError("the strip contains no yarn")
+    built = RodModel.from_rods(rods)
+    x = built.node_rest_position[:, 0]
+    moving = np.flatnonzero(built.node_pinned & (x > 0))
+    fixed = np.flatnonzero(built.node_pinned & (x < 0))
+    if moving.size == 0 or fixed.size == 0:
+        raise ValueError("no yarn reaches into both jaws: the strip transmits no force")
+    return Swatch(model=built, position=np.array(built.node_rest_position), moving=moving, fixed=fixed,
+                  length=length, width=width, gauge=gauge, clamp=clamp,
+                  radius=float(built.edge_radius.max()), direction=direction, angle_deg=DIRECTIONS[direction])
+
+
+def _rotate_quaternions(q: np.ndarray, angle: float) -> np.ndarray:
+    """``r ⊗ q`` for the rotation r by ``−angle`` about z (material → world, as positions)."""
+    h = -0.5 * angle
+    rw, rz = math.cos(h), math.sin(h)
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    out = np.stack([rw * w - rz * z, rw * x - rz * y, rw * y + rz * x, rw * z + rz * w], axis=1)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+class _ReactionSolver(QuasiStaticSolver):
+    """The quasi-static solver, keeping the full gradient of its last evaluation (rods and
+    contacts, pinned nodes included: the jaws' reactions)."""
+
+    last_gradient: np.ndarray | None = None
+
+    def _evaluate(self, work, memory, node_force, moment, energy_change):
+        ev = super()._evaluate(work, memory, node_force, moment, energy_change)
+        self.last_gradient = ev.gradient
+        return ev
+
+
+def mid_width(swatch: Swatch, position: np.ndarray, band: float) -> float:
+    """Width (m) at mid-length: span in y of the nodes within ``band`` of the jaws' midpoint in x
+    (the moving jaw has moved: the midpoint is taken between the jaws' current positions), plus one
+    yarn diameter."""
+    mid = 0.5 * (position[swatch.moving, 0].min() + position[swatch.fixed, 0].max())
+    near = np.abs(position[:, 0] - mid) <= band
+    y = position[near, 1]
+    return float(y.max() - y.min() + 2.0 * swatch.radius)
+
+
+def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
+                   options: QuasiStaticOptions | None = None, width_band: float | None = None,
+                   on_step: Callable[[int, float, np.ndarray, dict], None] | None = None,
+                   progress: Callable[[str], None] | None = None) -> dict:
+    """Pull ``swatch`` to each of ``strains`` (ascending, > 0) in turn, each a converged solve
+    warm-started from the previous one. ``on_step(k, strain, position, point)`` is called after
+    each solve (k = 0 for the unstrained state, then 1, 2, ...). ``width_band`` (m, default a
+    quarter of the strip width) is the half-length of the mid-length slab the width is measured
+    in. Returns a JSON-able dict (see the module docstring)."""
+    strains = [float(e) for e in strains]
+    if not strains or any(not (math.isfinite(e) and e > 0) for e in strains) or strains != sorted(strains):
+        raise ValueError(f"strains must be positive and ascending, got {strains!r}")
+    model = swatch.model
+    options = options or QuasiStaticOptions(**SWATCH_OPTIONS)
+    solver = _ReactionSolver(model, options)
+    band = 0.25 * swatch.width if width_band is None else float(width_band)
+    rest = swatch.position
+    width0 = mid_width(swatch, rest, band)
+    state = RodState.from_model(model)
+    jaw0, jaw1 = -swatch.gauge / 2, swatch.gauge / 2
+    points = [{"strain": 0.0, "force_n_per_m": 0.0, "fixed_force_n_per_m": 0.0, "rod_force_n_per_m": 0.0,
+               "compression_ratio": 1.0, "width_m": width0, "converged": True, "iterations": 0, "seconds": 0.0,
+               "residual": None}]
+    if on_step is not None:
+        on_step(0, 0.0, rest, points[0])
+    previous = 0.0
+    for k, strain in enumerate(strains, start=1):
+        start = time.perf_counter()
+        # Warm start: the last equilibrium stretched affinely between the jaws; the moving jaw's
+        # nodes go exactly to their new place (rigid translation, frames unchanged).
+        x = state.node_position.copy()
+        factor = (1.0 + strain) / (1.0 + previous)
+        free = ~model.node_pinned
+        x[free, 0] = jaw0 + (x[free, 0] - jaw0) * factor
+        x[swatch.moving, 0] = rest[swatch.moving, 0] + strain * swatch.gauge
+        guess = replace(state, node_position=x)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            result = solver.solve(guess)
+        state = result.state
+        gradient = solver.last_gradient[: 3 * model.n_nodes].reshape(-1, 3)
+        _, rod_gradient, _ = energy_gradient(model, state)
+        pull = float(gradient[swatch.moving, 0].sum())
+        back = float(gradient[swatch.fixed, 0].sum())
+        rod_pull = float(rod_gradient[swatch.moving, 0].sum())
+        width = mid_width(swatch, state.node_position, band)
+        r = result.residual
+        point = {
+            "strain": strain,
+            "force_n_per_m": pull / swatch.width,
+            "fixed_force_n_per_m": -back / swatch.width,
+            "rod_force_n_per_m": rod_pull / swatch.width,
+            "contact_share": 0.0 if pull == 0 else 1.0 - rod_pull / pull,
+            "compression_ratio": width / width0,
+            "width_m": width,
+            "converged": bool(result.converged),
+            "iterations": int(result.iterations),
+            "seconds": time.perf_counter() - start,
+            "residual": {"force": float(r.force), "torque": float(r.torque), "energy_change": float(r.energy_change),
+                         "penetration": float(r.penetration), "force_floor": float(r.force_floor),
+                         "torque_floor": float(r.torque_floor)},
+            "energy_j": result.energy.internal,
+            "contact_pairs": int(len(result.contact_pairs)),
+        }
+        points.append(point)
+        previous = strain
+        if progress is not None:
+            progress(f"{swatch.direction} {100 * strain:g} %: {point['force_n_per_m']:.5g} N/m, compression "
+                     f"{point['compression_ratio']:.4f}, {'converged' if result.converged else 'NOT converged'} "
+                     f"in {result.iterations} iterations ({point['seconds']:.1f} s; {r})")
+        if on_step is not None:
+            on_step(k, strain, state.node_position, point)
+    return {
+        "direction": swatch.direction,
+        "angle_deg": swatch.angle_deg,
+        "gauge_m": swatch.gauge,
+        "width_m": swatch.width,
+        "clamp_m": swatch.clamp,
+        "nodes": int(model.n_nodes),
+        "pieces": int(model.n_rods),
+        "pinned_nodes": int(model.node_pinned.sum()),
+        "strain": [p["strain"] for p in points],
+        "force_n_per_m": [p["force_n_per_m"] for p in points],
+        "compression_ratio": [p["compression_ratio"] for p in points],
+        "converged": all(p["converged"] for p in points),
+        "points": points,
+        "seconds": float(sum(p["seconds"] for p in points)),
+    }
+
+
+def stretch_repeat(model: RodModel, position: np.ndarray, material: RodMaterial, *, name: str = "swatch",
+                   directions: Sequence[str] = ("weft", "warp"), strains: Sequence[float] = STRAINS,
+                   size: dict | None = None, quick: bool = False, recording_path=None,
+                   progress: Callable[[str], None] | None = None, options: QuasiStaticOptions | None = None) -> dict:
+    """The stretch test on strips cut from a relaxed flat periodic repeat (``model`` its rest model,
+    ``position`` its rest positions, ``material`` the yarns'). ``size``: gauge, width and clamp in
+    repeats of the larger repeat side (default :data:`FULL_SIZE`, or :data:`QUICK_SIZE` with
+    ``quick``), or in metres with keys ``gauge_m``, ``width_m``, ``clamp_m``. Returns a JSON-able
+    dict: per direction the curves of :func:`stretch_swatch`."""
+    start = time.perf_counter()
+    repeat = max(np.linalg.norm(model.lattice[0]), np.linalg.norm(model.lattice[1]))
+    size = dict(size or (QUICK_SIZE if quick else FULL_SIZE))
+    if {"gauge_m", "width_m", "clamp_m"} <= size.keys():
+        dims = {k: float(size[f"{k}_m"]) for k in ("gauge", "width", "clamp")}
+    else:
+        dims = {k: float(size[k]) * repeat for k in ("gauge", "width", "clamp")}
+    recording = None if recording_path is None else SwatchRecording(name, recording_path)
+    out = {"name": name, "strains": list(strains), "directions": {}}
+    step = 0
+    try:
+        for direction in directions:
+            swatch = cut_swatch(model, position, material, direction=direction, **dims)
+            if progress is not None:
+                progress(f"{direction}: {swatch.model.n_nodes} nodes in {swatch.model.n_rods} pieces, "
+                         f"{1e3 * swatch.gauge:.3g} × {1e3 * swatch.width:.3g} mm between the jaws")
+            base = step
+
+            def on_step(k, strain, pos, point, swatch=swatch, base=base):
+                if recording is not None:
+                    recording.step(base + k, swatch, pos, strain, point)
+
+            out["directions"][direction] = stretch_swatch(swatch, strains, options=options, on_step=on_step,
+                                                          progress=progress)
+            step = base + len(strains) + 1
+        out["seconds"] = time.perf_counter() - start
+        if recording is not None:
+            recording.finish(out)
+    finally:
+        if recording is not None:
+            recording.close()
+    return out
+
+
+def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Callable[[str], None] | None = None,
+             directions: Sequence[str] | None = None) -> dict:
+    """The yarn-level stretch test of a material file (path or its decoded dict): rebuild the fabric
+    from its ``inputs``, relax its repeat, cut strips along weft and warp (and bias unless
+    ``quick``) and pull each to 2, 5 and 10 %. ``recording_path`` defaults to
+    ``logs/<material>/yarn.rrd`` (``False``: no recording). Returns a JSON-able dict with the
+    curves per direction (see :func:`stretch_swatch`) and the relaxation."""
+    from ..relax import relax, rod_material
+
+    data, where = _material_data(material)
+    fabric = fabric_from_inputs(data.get("inputs"), where)
+    start = time.perf_counter()
+    relaxed = relax(fabric)
+    relax_seconds = time.perf_counter() - start
+    if not relaxed.valid:
+        raise ValueError(f"{where}: the relaxation of {fabric.name!r} is not usable ({relaxed.residual})")
+    if recording_path is None:
+        recording_path = Path("logs") / fabric.name / "yarn.rrd"
+    elif recording_path is False:
+        recording_path = None
+    directions = directions or (("weft", "warp") if quick else ("weft", "warp", "bias"))
+    out = stretch_repeat(relaxed.model, relaxed.state.node_position, rod_material(fabric.fiber), name=fabric.name,
+                         directions=directions, quick=quick, recording_path=recording_path, progress=progress)
+    out["material"] = fabric.name
+    out["quick"] = bool(quick)
+    out["relaxation"] = {"converged": relaxed.converged, "iterations": relaxed.iterations,
+                         "seconds": relax_seconds, "radius_m": relaxed.radius,
+                         "repeat_size_m": [float(v) for v in relaxed.repeat_size]}
+    out["recording"] = None if recording_path is None else str(recording_path)
+    return out
+
+
+def _material_data(material) -> tuple[dict, str]:
+    if isinstance(material, dict):
+        return material, "material"
+    from ..jsonfile import read_json
+
+    where, data = read_json(material, "material file")
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: expected a JSON object")
+    return data, where
+
+
+def fabric_from_inputs(inputs, where: str = "material"):
+    """The :class:`yarnfit.fabric.Fabric` a material file's ``inputs`` block describes."""
+    from ..fabric import Fabric, named_patterns
+    from ..materials import FiberMaterial
+
+    if not isinstance(inputs, dict):
+        raise ValueError(f"{where}: missing 'inputs' (the fabric the material was fitted for)")
+    try:
+        fiber = inputs["fiber"]
+        fiber = FiberMaterial(**{k: fiber[k] for k in ("name", "density_kg_m3", "young_min_pa", "young_max_pa",
+                                                        "breaking_strain", "poisson", "friction")},
+                              **({"source": fiber["source"]} if "source" in fiber else {}))
+        pattern = inputs["pattern"]
+        counts = inputs.get("counts_per_m")
+        structure = pattern if pattern in named_patterns() else None
+        return Fabric(name=str(inputs.get("fabric") or "fabric"), fiber=fiber, structure=structure,
+                      areal_density=inputs.get("areal_density_kg_m2"),
+                      counts=None if counts is None else (float(counts[0]), float(counts[1])),
+                      pattern_file=None if structure is not None else pattern)
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"{where}: inputs: cannot rebuild the fabric ({exc!r})") from None
+
+
+# -- recording ---------------------------------------------------------------------------------
+
+
+STRAIN_TIMELINE = "strain"
+
+
+class SwatchRecording:
+    """Writes a yarn-level stretch run to one ``.rrd`` file (see the module docstring)."""
+
+    def __init__(self, name: str, path) -> None:
+        import rerun as rr
+
+        from ..record import APPLICATION_ID
+
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._rr = rr
+        self._rec = rr.RecordingStream(APPLICATION_ID)
+        self._rec.save(self.path)
+        self._rec.send_recording_name(name)
+        self._rec.send_blueprint(blueprint())
+        self._rec.log("yarn", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+
+    def step(self, k: int, swatch: Swatch, position: np.ndarray, strain: float, point: dict) -> None:
+        rr, rec = self._rr, self._rec
+        rec.set_time(STRAIN_TIMELINE, sequence=k)
+        m = swatch.model
+        strips = [position[m.rod_node_start[r]:m.rod_node_start[r + 1]] for r in range(m.n_rods)]
+        colors = np.where(m.node_pinned[m.rod_node_start[:-1]][:, None], [[150, 150, 150]], [[60, 120, 220]])
+        rec.log("yarn/swatch/yarns", rr.LineStrips3D(strips, radii=swatch.radius, colors=colors))
+        rec.log(f"yarn/plots/force_{swatch.direction}", rr.Scalars(point["force_n_per_m"]))
+        rec.log(f"yarn/plots/compression_{swatch.direction}", rr.Scalars(point["compression_ratio"]))
+        rec.log("yarn/plots/strain", rr.Scalars(strain))
+
+    def finish(self, out: dict) -> None:
+        rr = self._rr
+        self._rec.log("yarn/summary", rr.TextDocument(summary_markdown(out), media_type=rr.MediaType.MARKDOWN),
+                      static=True)
+
+    def close(self) -> None:
+        self._rec.flush()
+        self._rec.disconnect()
+
+
+def blueprint():
+    """The swatch in 3D on the left; force and compression plots and the summary on the right;
+    time panel on the ``strain`` timeline."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="yarn/swatch", name="swatch"),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="yarn/plots", name="force (N/m) and compression ratio"),
+                rrb.TextDocumentView(origin="yarn/summary", name="summary"),
+            ),
+            column_shares=[3, 2],
+        ),
+        rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="expanded", timeline=STRAIN_TIMELINE),
+    )
+
+
+def summary_markdown(out: dict) -> str:
+    """Markdown table of a run: per direction and strain, force per width, compression ratio,
+    convergence, iterations, residuals and wall time."""
+    lines = [f"# yarn-level stretch: {out.get('name', '')}", "",
+             "| direction | strain | force (N/m) | compression ratio | converged | iterations | force residual | seconds |",
+             "|---|---|---|---|---|---|---|---|"]
+    for direction, curve in out["directions"].items():
+        for p in curve["points"][1:]:
+            res = p["residual"]["force"] if p["residual"] else float("nan")
+            lines.append(f"| {direction} | {100 * p['strain']:g} % | {p['force_n_per_m']:.5g} | "
+                         f"{p['compression_ratio']:.4f} | {'yes' if p['converged'] else '**no**'} | {p['iterations']} | "
+                         f"{res:.2e} | {p['seconds']:.1f} |")
+    for direction, curve in out["directions"].items():
+        lines.append(f"\n{direction}: {curve['nodes']} nodes, {curve['pieces']} yarn pieces, gauge "
+                     f"{1e3 * curve['gauge_m']:.3g} mm × width {1e3 * curve['width_m']:.3g} mm")
+    return "\n".join(lines) + "\n"
+
+
+def default_recording_path(material_name: str) -> str:
+    return os.path.join("logs", material_name, "yarn.rrd")
