@@ -57,6 +57,7 @@ __all__ = [
     "SCENES",
     "BuiltScene",
     "SceneMaterial",
+    "add_cloth_flex",
     "build_scene",
     "export_scene",
 ]
@@ -348,9 +349,10 @@ def _lumped_mass(points: np.ndarray, triangles: np.ndarray, areal_density: float
     return mass
 
 
-def _cloth(spec: mujoco.MjSpec, layout: _Layout, areal_density: float, plugin) -> mujoco.MjsFlex:
-    """Vertex bodies (three world-axis slide joints each) and the flex. Pinned vertices sit on their
-    holder at their rest position; every body holding a vertex carries the plugin, as flexcomp does."""
+def _cloth(spec: mujoco.MjSpec, layout: _Layout, areal_density: float, plugin, name: str = "cloth") -> mujoco.MjsFlex:
+    """Vertex bodies ``<name>_<v>`` (three world-axis slide joints each) and the flex ``name``. Pinned
+    vertices sit on their holder at their rest position; every body holding a vertex carries the
+    plugin, as flexcomp does."""
     points = layout.points
     mass = _lumped_mass(points, layout.triangles, areal_density)
     body_of = ["" for _ in points]
@@ -365,7 +367,7 @@ def _cloth(spec: mujoco.MjSpec, layout: _Layout, areal_density: float, plugin) -
     for v, point in enumerate(points):
         if body_of[v]:
             continue
-        body = spec.worldbody.add_body(name=f"cloth_{v}", pos=point)
+        body = spec.worldbody.add_body(name=f"{name}_{v}", pos=point)
         # Slide joints only: the inertia never enters, but MuJoCo wants it positive. A sphere of the
         # collision radius.
         body.explicitinertial = True
@@ -376,15 +378,15 @@ def _cloth(spec: mujoco.MjSpec, layout: _Layout, areal_density: float, plugin) -
         if plugin is not None:
             body.plugin = plugin
         body_of[v] = body.name
-    return spec.add_flex(name="cloth", dim=2, radius=FLEX_RADIUS, vertbody=body_of, vert=offsets.ravel(),
+    return spec.add_flex(name=name, dim=2, radius=FLEX_RADIUS, vertbody=body_of, vert=offsets.ravel(),
                          elem=layout.triangles.ravel(), rgba=[0.85, 0.45, 0.3, 1.0])
 
 
-def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damping: float):
-    """The ``yarnfit.shell`` instance: the full material, its angle and damping, and ``builtin_*``
-    written exactly as the ``<elasticity>`` attributes are (``MJCF_DIGITS`` digits)."""
+def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damping: float, name: str = "shell"):
+    """The ``yarnfit.shell`` instance ``name``: the full material, its angle and damping, and
+    ``builtin_*`` written exactly as the ``<elasticity>`` attributes are (``MJCF_DIGITS`` digits)."""
     spec.activate_plugin(PLUGIN_NAME)
-    plugin = spec.add_plugin(name="shell", plugin_name=PLUGIN_NAME, active=True)
+    plugin = spec.add_plugin(name=name, plugin_name=PLUGIN_NAME, active=True)
     config = {name: repr(value) for name, value in shell.parameters.items()}
     config["thickness"] = repr(shell.thickness)
     config["angle"] = repr(float(angle))
@@ -425,3 +427,23 @@ def _require(value, name: str, positive: bool) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
             or not math.isfinite(value) or value < 0 or (positive and value == 0):
         raise ValueError(f"{name} must be a {'positive' if positive else 'non-negative'} finite number, got {value!r}")
+
+
+def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles: np.ndarray,
+                   material: SceneMaterial, *, damping: float = DEFAULT_DAMPING, friction: float = DEFAULT_FRICTION,
+                   angle: float = 0.0, contype: int = 1, conaffinity: int = 1) -> mujoco.MjsFlex:
+    """One free 2D flex ``name`` with rest positions ``points (n, 3)`` (m) and ``triangles (m, 3)``,
+    built as :func:`build_scene` builds its cloth (vertex bodies ``<name>_<v>`` with three slide
+    joints, the split's built-in ``elastic2d="stretch"`` and a ``yarnfit.shell`` instance
+    ``<name>_shell`` with the full material). The plugin's rest shape is the flex at ``qpos0`` in
+    the frame of triangle 0's plane: give it a flat (planar) panel."""
+    split = builtin_elasticity(material.shell)
+    plugin = _plugin(spec, material.shell, split, angle, damping, name=f"{name}_shell")
+    layout = _Layout(np.asarray(points, float), np.asarray(triangles, int), {}, collide=True)
+    flex = _cloth(spec, layout, material.areal_density_kg_m2, plugin, name=name)
+    flex.young, flex.poisson, flex.thickness, flex.damping = split.young_pa, split.poisson, split.thickness_m, damping
+    flex.elastic2d = 2  # stretch
+    flex.friction = [friction, 0.005, 0.0001]
+    flex.contype, flex.conaffinity = contype, conaffinity
+    flex.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_NONE
+    return flex

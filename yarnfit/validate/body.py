@@ -1,0 +1,382 @@
+"""Full-body scene (issue 6): a T-shirt and pants of fitted materials on a humanoid whose joints
+follow a scripted motion.
+
+The body is ``mjcf/humanoid.xml`` (capsules, position actuators, gravity compensated; see the
+file's comments for joints and motion). The garments are **flat panels** sewn together, as a
+tailor makes them: each garment is a front and a back panel cut from the same pattern (a regular
+triangle grid of spacing :data:`SPACING` / :data:`QUICK_SPACING`, built with ``trimesh``), the
+front in the plane ``x = +d``, the back in ``x = −d``, around the body in its T-pose rest. Each
+panel is its own flat 2D flex with the ``yarnfit.shell`` plugin (built by
+:func:`yarnfit.mujoco.scenes.add_cloth_flex`): its rest shape is the flat pattern, its bending rest
+is flat, so there is no prestress from the construction. Seams are MuJoCo ``connect`` equalities
+between a site on each front seam vertex and the back vertex cut at the same pattern point
+(softened by :data:`SEAM_SOLREF`): in the first :data:`SETTLE_S` seconds, with the body at rest,
+they pull the panels together around the body ("virtual sewing"); the motion starts afterwards.
+
+* Shirt: a T-shaped pattern (torso and sleeves), sewn along the sides, under the sleeves and over
+  the shoulders and sleeves; open at the hem, the neck and the sleeve ends. Weft horizontal.
+* Pants: a Π-shaped pattern (waist, two legs apart below the crotch), sewn along the outer sides
+  and the inseams; open at the waist and the leg ends. The waistband's middle (|y| <
+  :data:`WAIST_PIN_HALF_WIDTH`) is held on the pelvis by ``connect`` equalities (a belt).
+  Weft horizontal.
+
+Why panels and not a tube mesh: the plugin's rest frame is triangle 0's plane and every
+triangle's rest edges are projected into it, so a curved rest mesh gets a wrong rest metric (a
+tube's triangles turned 90° from triangle 0 would be degenerate). Single-flex garments need the
+plugin to take per-triangle rest coordinates from the pattern (e.g. the flex's texture
+coordinates).
+
+Checks (after :data:`SETTLE_S`): MuJoCo's bad-QACC warning count and non-finite positions;
+penetration = largest depth of a garment vertex inside any capsule (m; target
+:data:`PENETRATION_TARGET`); distance = largest distance of a garment vertex from the body
+surface, i.e. from its nearest capsule (m; target :data:`DISTANCE_TARGET`); wall time, ms/step.
+
+Recording (``recording_path``, e.g. ``logs/<material>/body.rrd``; one ``RecordingStream``,
+application id ``"yarnfit"``), timeline ``sim_time`` (s), one frame every :data:`FRAME_S`:
+
+- ``body``: ``ViewCoordinates`` right-handed, z up (static).
+- ``body/cloth/shirt``, ``body/cloth/pants``: ``Mesh3D``, triangles and colour static, vertex
+  positions (m) per frame (both panels of the garment in one mesh: front vertices first).
+- ``body/bodies/<geom name>``: ``Capsules3D``, one per humanoid capsule (``pelvis``, ``torso``,
+  ``head``, ``l_upper_arm`` …), per frame.
+- ``body/plots/penetration``, ``body/plots/distance``: ``Scalars`` (m), the largest penetration
+  and distance of the frame.
+- ``body/summary``: ``TextDocument`` (markdown), the results (at the end).
+
+The blueprint opens on the 3D view of ``body`` beside the two plots and the summary.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import trimesh
+
+from ..mujoco.scenes import FLEX_RADIUS, SceneMaterial, add_cloth_flex, compile_quietly
+
+__all__ = ["MOTION", "HUMANOID", "build_body_scene", "garment_panel", "motion_targets", "run_body"]
+
+HUMANOID = Path(__file__).resolve().parents[2] / "mjcf" / "humanoid.xml"
+TIMESTEP = 1e-3  # s, the export's default (design notes §7)
+SPACING = 0.025  # m, pattern grid spacing (full run)
+QUICK_SPACING = 0.05  # m (quick run)
+SETTLE_S = 1.0  # s of sewing and settling with the body at rest; the checks start after it
+QUICK_SECONDS = 2.0  # s: the quick run stops after the arms come down
+FRAME_S = 1.0 / 30  # s between recorded frames
+PENETRATION_TARGET = 0.01  # m
+DISTANCE_TARGET = 0.15  # m
+# Seams: soft connect equalities, time constant 50 ms, critically damped: the panels meet within
+# a few tenths of a second without a jolt (MuJoCo's default 20 ms closes 0.3 m gaps violently).
+SEAM_SOLREF = (0.05, 1.0)
+WAIST_PIN_HALF_WIDTH = 0.12  # m
+FRICTION = 0.5
+DAMPING = 1e-3  # s, the export's default
+
+# Panel placement (m): the planes x = ±d of the front and back panels.
+SHIRT_DEPTH = 0.16
+PANTS_DEPTH = 0.14
+# Patterns as unions of rectangles (y0, y1, z0, z1) in m, in the panel plane (y left, z up).
+SHIRT_PATTERN = ((-0.24, 0.24, 0.96, 1.52), (-0.50, 0.50, 1.33, 1.52))
+SHIRT_NECK_HALF_WIDTH = 0.09
+PANTS_PATTERN = ((-0.26, 0.26, 0.14, 1.00),)
+PANTS_CROTCH = 0.80  # below it the legs are apart (a gap of two grid cells at y = 0)
+
+# Scripted motion: keyframes (time s, joint targets rad or m); joints not named are at 0.
+_ARMS_DOWN = {"l_shoulder": -math.radians(60), "r_shoulder": -math.radians(60),
+              "l_elbow": math.radians(30), "r_elbow": math.radians(30)}
+_SQUAT = {"root_z": -0.2, "l_hip": -math.radians(60), "r_hip": -math.radians(60), "l_knee": math.radians(90),
+          "r_knee": math.radians(90)}
+MOTION = ((0.0, {}), (1.0, {}), (2.0, _ARMS_DOWN),
+          (3.0, {"l_shoulder": math.radians(40), "r_shoulder": math.radians(40)}), (3.5, {}),
+          (4.5, {"abdomen": math.radians(30)}), (5.5, {"abdomen": -math.radians(30)}), (6.0, {}),
+          (7.0, _SQUAT), (8.0, {}))
+
+
+def motion_targets(t: float) -> dict[str, float]:
+    """Joint targets at time ``t`` (s): cosine easing between the keyframes of :data:`MOTION`."""
+    for (t0, a), (t1, b) in zip(MOTION, MOTION[1:]):
+        if t <= t1:
+            s = 0.5 - 0.5 * math.cos(math.pi * min(max((t - t0) / (t1 - t0), 0.0), 1.0))
+            return {k: (1 - s) * a.get(k, 0.0) + s * b.get(k, 0.0) for k in set(a) | set(b)}
+    return dict(MOTION[-1][1])
+
+
+def garment_panel(kind: str, spacing: float) -> tuple[trimesh.Trimesh, np.ndarray]:
+    """A garment's pattern in its plane: a ``trimesh.Trimesh`` with vertices ``(0, y, z)`` (m) on
+    a regular grid of ``spacing`` (cells kept whose centre lies inside the pattern, grid lines at
+    multiples of ``spacing``) and a mask ``(n,)`` of the seam vertices (boundary vertices not on
+    an opening)."""
+    rects = SHIRT_PATTERN if kind == "shirt" else PANTS_PATTERN
+    y0, y1 = min(r[0] for r in rects), max(r[1] for r in rects)
+    z0, z1 = min(r[2] for r in rects), max(r[3] for r in rects)
+    iy = np.arange(math.floor(y0 / spacing), math.ceil(y1 / spacing) + 1)
+    iz = np.arange(math.floor(z0 / spacing), math.ceil(z1 / spacing) + 1)
+    ny, nz = len(iy), len(iz)
+    y, z = np.meshgrid(iy * spacing, iz * spacing, indexing="ij")
+    cy, cz = 0.5 * (y[:-1, :-1] + y[1:, 1:]), 0.5 * (z[:-1, :-1] + z[1:, 1:])
+    inside = np.zeros(cy.shape, bool)
+    for a, b, c, d in rects:
+        inside |= (cy > a) & (cy < b) & (cz > c) & (cz < d)
+    if kind == "pants":
+        inside &= ~((np.abs(cy) < spacing) & (cz < PANTS_CROTCH))
+    i, j = np.nonzero(inside)
+    v00 = i * nz + j
+    faces = np.concatenate([np.stack([v00, v00 + nz, v00 + nz + 1], 1), np.stack([v00, v00 + nz + 1, v00 + 1], 1)])
+    vertices = np.column_stack([np.zeros(ny * nz), y.ravel(), z.ravel()])
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    mesh.remove_unreferenced_vertices()
+    boundary_edges = mesh.edges_sorted[trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1)]
+    boundary = np.zeros(len(mesh.vertices), bool)
+    boundary[boundary_edges.ravel()] = True
+    py, pz = mesh.vertices[:, 1], mesh.vertices[:, 2]
+    eps = 1e-9
+    top, bottom, side = pz.max(), pz.min(), np.abs(py).max()
+    if kind == "shirt":
+        torso_side = np.abs(py[pz < pz.min() + 0.5 * spacing]).max()
+        sleeve_low = pz[np.abs(py) > side - eps].min()
+        opening = ((pz < bottom + eps) & (np.abs(py) < torso_side - eps)) \
+            | ((np.abs(py) > side - eps) & (pz > sleeve_low + eps) & (pz < top - eps)) \
+            | ((pz > top - eps) & (np.abs(py) < SHIRT_NECK_HALF_WIDTH - eps))
+    else:
+        inner = np.abs(py[pz < bottom + eps]).min()
+        opening = ((pz > top - eps) & (np.abs(py) < side - eps)) \
+            | ((pz < bottom + eps) & (np.abs(py) > inner + eps) & (np.abs(py) < side - eps))
+    return mesh, boundary & ~opening
+
+
+def build_body_scene(material_shirt: SceneMaterial, material_pants: SceneMaterial, *, spacing: float = SPACING,
+                     timestep: float = TIMESTEP) -> tuple[mujoco.MjSpec, dict]:
+    """The humanoid with both garments (see the module docstring). Returns the spec and, per
+    garment, its panel flex names and vertex counts."""
+    spec = mujoco.MjSpec.from_file(str(HUMANOID))
+    spec.option.timestep = timestep
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
+    spec.worldbody.add_light(pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    garments = {}
+    for kind, material, depth in (("shirt", material_shirt, SHIRT_DEPTH), ("pants", material_pants, PANTS_DEPTH)):
+        mesh, seam = garment_panel(kind, spacing)
+        base = np.asarray(mesh.vertices)
+        faces = np.asarray(mesh.faces)
+        for side, sign in (("front", 1.0), ("back", -1.0)):
+            name = f"{kind}_{side}"
+            points = base + [sign * depth, 0.0, 0.0]
+            # Opposite orientations so both panels' normals point away from the body once sewn.
+            add_cloth_flex(spec, name, points, faces if sign > 0 else faces[:, ::-1], material, damping=DAMPING,
+                           friction=FRICTION, contype=1, conaffinity=0)
+            for v in np.flatnonzero(seam):
+                spec.body(f"{name}_{v}").add_site(name=f"{name}_seam_{v}", size=[FLEX_RADIUS] * 3)
+            if kind == "pants":
+                waist = np.flatnonzero((base[:, 2] > base[:, 2].max() - 1e-9)
+                                       & (np.abs(base[:, 1]) < WAIST_PIN_HALF_WIDTH))
+                for v in waist:
+                    eq = spec.add_equality(name=f"{name}_belt_{v}", type=mujoco.mjtEq.mjEQ_CONNECT,
+                                           objtype=mujoco.mjtObj.mjOBJ_BODY, name1=f"{name}_{v}", name2="pelvis")
+                    eq.data[:3] = 0.0
+        for v in np.flatnonzero(seam):
+            eq = spec.add_equality(name=f"{kind}_seam_{v}", type=mujoco.mjtEq.mjEQ_CONNECT,
+                                   objtype=mujoco.mjtObj.mjOBJ_SITE, name1=f"{kind}_front_seam_{v}",
+                                   name2=f"{kind}_back_seam_{v}")
+            eq.solref = list(SEAM_SOLREF)
+        garments[kind] = {"flexes": [f"{kind}_front", f"{kind}_back"], "vertices": 2 * len(base),
+                          "triangles": 2 * len(faces), "seams": int(seam.sum())}
+    return spec, garments
+
+
+def _capsules(model: mujoco.MjModel, data: mujoco.MjData, geoms: np.ndarray):
+    """Capsule end points ``a, b (G, 3)`` and radii ``(G,)`` (m)."""
+    axis = data.geom_xmat[geoms][:, [2, 5, 8]]
+    half = model.geom_size[geoms, 1][:, None]
+    centre = data.geom_xpos[geoms]
+    return centre - half * axis, centre + half * axis, model.geom_size[geoms, 0]
+
+
+def surface_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Signed distance ``(N,)`` (m) of each point from the union of capsules (negative inside)."""
+    ab = b - a
+    t = np.clip(np.einsum("ngk,gk->ng", points[:, None, :] - a[None], ab) / np.einsum("gk,gk->g", ab, ab), 0, 1)
+    nearest = a[None] + t[..., None] * ab[None]
+    return (np.linalg.norm(points[:, None, :] - nearest, axis=2) - radius[None]).min(axis=1)
+
+
+def run_body(material_shirt, material_pants=None, *, quick: bool = False, recording_path=None,
+             progress=None) -> dict:
+    """Run the full-body scene (module docstring) and return its results (SI, JSON values).
+
+    Args:
+        material_shirt: a :class:`~yarnfit.mujoco.scenes.SceneMaterial` or a material file.
+        material_pants: the same for the pants; default the shirt's material.
+        quick: coarse panels (:data:`QUICK_SPACING`) and the motion cut at :data:`QUICK_SECONDS`.
+        recording_path: the ``.rrd`` file to write (directories created), or None.
+        progress: called as ``progress(message)`` once per simulated second.
+    """
+    shirt = material_shirt if isinstance(material_shirt, SceneMaterial) else SceneMaterial.from_file(material_shirt)
+    pants = shirt if material_pants is None else (
+        material_pants if isinstance(material_pants, SceneMaterial) else SceneMaterial.from_file(material_pants))
+    spacing = QUICK_SPACING if quick else SPACING
+    seconds = QUICK_SECONDS if quick else MOTION[-1][0]
+    spec, garments = build_body_scene(shirt, pants, spacing=spacing)
+    model = compile_quietly(spec)
+    data = mujoco.MjData(model)
+    actuators = {model.actuator(i).name: i for i in range(model.nu)}
+    geoms = np.array([g for g in range(model.ngeom) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE])
+    geom_names = [model.geom(g).name for g in geoms]
+    vert = {kind: np.concatenate([np.arange(model.flex_vertadr[_flex_id(model, f)],
+                                            model.flex_vertadr[_flex_id(model, f)] + model.flex_vertnum[_flex_id(model, f)])
+                                  for f in g["flexes"]]) for kind, g in garments.items()}
+    recording = _Recording(recording_path, shirt.name, model, garments, geom_names) if recording_path else None
+
+    steps = round(seconds / model.opt.timestep)
+    frame_every = max(1, round(FRAME_S / model.opt.timestep))
+    warning = int(mujoco.mjtWarning.mjWARN_BADQACC)
+    max_pen, max_dist, nonfinite, taken = 0.0, 0.0, False, 0
+    series = []
+    farthest = None
+    elapsed = 0.0
+    for step in range(steps + 1):
+        t = step * model.opt.timestep
+        if step % frame_every == 0 or step == steps:
+            mujoco.mj_forward(model, data)
+            points = data.flexvert_xpos
+            if not np.all(np.isfinite(points)):
+                nonfinite = True
+                break
+            a, b, r = _capsules(model, data, geoms)
+            signed = {kind: surface_distance(points[idx], a, b, r) for kind, idx in vert.items()}
+            pen = max(float(max(0.0, -s.min())) for s in signed.values())
+            dist = max(float(s.max()) for s in signed.values())
+            if t >= SETTLE_S - 1e-12:
+                max_pen = max(max_pen, pen)
+                if dist > max_dist:
+                    kind = max(signed, key=lambda k: signed[k].max())
+                    farthest = {"garment": kind, "time_s": t,
+                                "position_m": points[vert[kind][int(signed[kind].argmax())]].tolist()}
+                max_dist = max(max_dist, dist)
+            series.append((t, pen, dist))
+            if recording:
+                recording.frame(t, {k: points[idx] for k, idx in vert.items()}, a, r, b, pen, dist)
+        if step == steps:
+            break
+        if progress and step % 1000 == 0:
+            progress(f"body: {t:.1f}/{seconds:.1f} s simulated")
+        for joint, value in motion_targets(t + model.opt.timestep).items():
+            data.ctrl[actuators[joint]] = value
+        start = time.perf_counter()
+        mujoco.mj_step(model, data)
+        elapsed += time.perf_counter() - start
+        taken += 1
+        if data.warning[warning].number > 0 or not np.all(np.isfinite(data.qpos)):
+            nonfinite = nonfinite or not np.all(np.isfinite(data.qpos))
+            break
+    bad_qacc = int(data.warning[warning].number)
+    stable = bad_qacc == 0 and not nonfinite and taken == steps
+    result = {
+        "material_shirt": shirt.name,
+        "material_pants": pants.name,
+        "quick": bool(quick),
+        "spacing_m": spacing,
+        "timestep_s": float(model.opt.timestep),
+        "simulated_s": taken * float(model.opt.timestep),
+        "steps": taken,
+        "garments": garments,
+        "bad_qacc": bad_qacc,
+        "nonfinite": bool(nonfinite),
+        "stable": bool(stable),
+        "max_penetration_m": max_pen,
+        "max_distance_m": max_dist,
+        "farthest_vertex": farthest,
+        "penetration_target_m": PENETRATION_TARGET,
+        "distance_target_m": DISTANCE_TARGET,
+        "passed": bool(stable and max_pen < PENETRATION_TARGET and max_dist < DISTANCE_TARGET),
+        "wall_time_s": elapsed,
+        "ms_per_step": 1e3 * elapsed / max(taken, 1),
+        "checks_from_s": SETTLE_S,
+    }
+    if recording:
+        recording.finish(result)
+        result["recording"] = str(recording_path)
+    return result
+
+
+class _Recording:
+    """The ``.rrd`` file of one run (paths in the module docstring)."""
+
+    def __init__(self, path, name: str, model: mujoco.MjModel, garments: dict, geom_names: list[str]) -> None:
+        import rerun as rr
+        import rerun.blueprint as rrb
+
+        from ..record import APPLICATION_ID
+        self.rr = rr
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.rec = rr.RecordingStream(APPLICATION_ID)
+        self.rec.save(self.path)
+        self.rec.send_recording_name(f"body: {name}")
+        self.rec.send_blueprint(rrb.Blueprint(
+            rrb.Horizontal(
+                rrb.Spatial3DView(origin="body", name="body"),
+                rrb.Vertical(
+                    rrb.TimeSeriesView(origin="body/plots/penetration", name="penetration (m)"),
+                    rrb.TimeSeriesView(origin="body/plots/distance", name="distance (m)"),
+                    rrb.TextDocumentView(origin="body/summary", name="summary"),
+                ),
+                column_shares=[3, 1],
+            ),
+            rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
+            rrb.TimePanel(state="expanded", timeline="sim_time")))
+        self.rec.log("body", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        colors = {"shirt": [60, 110, 200], "pants": [70, 70, 80]}
+        for kind, g in garments.items():
+            triangles, offset = [], 0
+            for f in g["flexes"]:
+                fid = _flex_id(model, f)
+                adr, num = model.flex_elemdataadr[fid], model.flex_elemnum[fid]
+                triangles.append(model.flex_elem[adr:adr + 3 * num].reshape(-1, 3) + offset)
+                offset += model.flex_vertnum[fid]
+            self.rec.log(f"body/cloth/{kind}", rr.Mesh3D.from_fields(
+                triangle_indices=np.concatenate(triangles), albedo_factor=colors[kind]), static=True)
+        self.geom_names = geom_names
+
+    def frame(self, t, garments, a, radius, b, pen, dist) -> None:
+        rr = self.rr
+        self.rec.set_time("sim_time", duration=t)
+        for kind, points in garments.items():
+            self.rec.log(f"body/cloth/{kind}", rr.Mesh3D.from_fields(vertex_positions=points))
+        for g, name in enumerate(self.geom_names):
+            axis = b[g] - a[g]
+            length = float(np.linalg.norm(axis))
+            quat = _quat_z_to(axis / length if length > 0 else np.array([0.0, 0.0, 1.0]))
+            self.rec.log(f"body/bodies/{name}", rr.Capsules3D(lengths=[length], radii=[radius[g]], translations=[a[g]],
+                                                               quaternions=[rr.Quaternion(xyzw=quat)]))
+        self.rec.log("body/plots/penetration", rr.Scalars(pen))
+        self.rec.log("body/plots/distance", rr.Scalars(dist))
+
+    def finish(self, result: dict) -> None:
+        rows = [("stable", result["stable"]), ("bad QACC warnings", result["bad_qacc"]),
+                ("max penetration (m)", f"{result['max_penetration_m']:.4g} (target < {PENETRATION_TARGET:g})"),
+                ("max distance (m)", f"{result['max_distance_m']:.4g} (target < {DISTANCE_TARGET:g})"),
+                ("simulated (s)", f"{result['simulated_s']:.3g}"), ("ms/step", f"{result['ms_per_step']:.3g}"),
+                ("wall time (s)", f"{result['wall_time_s']:.3g}"), ("shirt", result["material_shirt"]),
+                ("pants", result["material_pants"]), ("panel grid spacing (m)", result["spacing_m"])]
+        text = "# full body\n\n| quantity | value |\n|---|---|\n" + "\n".join(f"| {k} | {v} |" for k, v in rows)
+        self.rec.log("body/summary", self.rr.TextDocument(text, media_type=self.rr.MediaType.MARKDOWN), static=True)
+        self.rec.flush()
+        self.rec.disconnect()
+
+
+def _flex_id(model: mujoco.MjModel, name: str) -> int:
+    return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, name)
+
+
+def _quat_z_to(direction: np.ndarray) -> list[float]:
+    """Quaternion ``(x, y, z, w)`` turning +z onto the unit vector ``direction``."""
+    z = np.array([0.0, 0.0, 1.0])
+    w = 1.0 + float(direction @ z)
+    if w < 1e-12:
+        return [1.0, 0.0, 0.0, 0.0]
+    xyz = np.cross(z, direction)
+    q = np.array([*xyz, w])
+    return list(q / np.linalg.norm(q))
