@@ -260,6 +260,16 @@ def test_builtin_elasticity_must_match_the_keys(case):
         mujoco.MjModel.from_xml_string(scene(builtin=builtin, extra=keys))
 
 
+def test_a_curved_rest_mesh_fails_compilation():
+    """A flexcomp cylinder: its triangles leave the plane of the first one."""
+    config = "".join(f'<config key="{k}" value="{v!r}"/>' for k, v in MATERIAL.items())
+    xml = ('<mujoco><extension><plugin plugin="yarnfit.shell"/></extension><worldbody>'
+           '<flexcomp name="tube" type="cylinder" count="8 8 3" spacing="0.1 0.1 0.1" dim="2" radius="0.001" mass="0.1">'
+           f'<plugin plugin="yarnfit.shell">{config}</plugin></flexcomp></worldbody></mujoco>')
+    with pytest.raises(ValueError, match="is not flat at qpos0"):
+        mujoco.MjModel.from_xml_string(xml)
+
+
 def test_a_plugin_on_a_1d_flex_fails_compilation():
     with pytest.raises(ValueError, match="needs a 2D flex"):
         mujoco.MjModel.from_xml_string(scene(count="6 1 1", dim=1))

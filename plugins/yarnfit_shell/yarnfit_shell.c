@@ -42,6 +42,9 @@
 // both are the same closed form in double precision, so they agree to ~1e-15; a mismatch a user
 // makes (a different modulus or Poisson ratio) is far larger.
 #define YF_BUILTIN_RTOL 1e-9
+// Out-of-plane offset of a rest triangle's edges, relative to their length, still called flat:
+// round-off of body frames composed at qpos0 is ~1e-16; a bent mesh is off by its angle.
+#define YF_FLAT_RTOL 1e-9
 
 static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
@@ -445,7 +448,7 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
     mju_copy3(axis0, w0);
     mju_copy3(axis1, w1);
   }
-  int bad = -1;
+  int bad = -1, flat = 1;
   for (int t = 0; t < s->ntri && bad < 0; t++) {
     const int* v = elem + 3 * t;
     for (int k = 0; k < 3; k++) s->tri[3 * t + k] = v[k];
@@ -454,6 +457,11 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
       e1[i] = x0[3 * v[1] + i] - x0[3 * v[0] + i];
       e2[i] = x0[3 * v[2] + i] - x0[3 * v[0] + i];
     }
+    // The rest shape must be flat: the material frame is one plane's, and the bending rest is flat.
+    // A vertex off the plane of triangle 0 by more than YF_FLAT_RTOL of the edge length is an error,
+    // not a silently foreshortened metric.
+    double out = fabs(mju_dot3(e1, normal)) + fabs(mju_dot3(e2, normal));
+    if (out > YF_FLAT_RTOL * (mju_norm3(e1) + mju_norm3(e2))) { bad = t; flat = 0; break; }
     // Rest edges in the material frame: D = [[e1.a0, e2.a0], [e1.a1, e2.a1]].
     double D00 = mju_dot3(e1, axis0), D01 = mju_dot3(e2, axis0);
     double D10 = mju_dot3(e1, axis1), D11 = mju_dot3(e2, axis1);
@@ -472,7 +480,12 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
   if (bad >= 0) {
     free(rest2d); free(tri_edge_local);
     shell_free(s);
-    mju_error(YF_NAME ": flex %d triangle %d has zero rest area", f, bad);
+    if (!flat) {
+      mju_error(YF_NAME ": flex %d is not flat at qpos0 (triangle %d leaves the plane of triangle 0); the "
+                "plugin needs a flat rest shape (cut garments as flat panels)", f, bad);
+    } else {
+      mju_error(YF_NAME ": flex %d triangle %d has zero rest area", f, bad);
+    }
     return -1;
   }
   int status = build_hinges(m, s, rest2d, tri_edge_local);
