@@ -147,3 +147,19 @@ def test_recording_reads_back(tmp_path):
     assert STRAIN_TIMELINE in timelines["yarn/swatch/yarns"]
     text = [v for c, v in rows["yarn/summary"].items() if c.endswith(":text")]
     assert "force (N/m)" in str(text[0][None])
+
+
+def test_fabric_from_inputs_rebuilds_the_preset():
+    # The material file's `inputs` block (yarnfit.material.FabricFit.to_dict) names the fabric the
+    # swatch is built from; for a preset it must give back that preset.
+    from dataclasses import asdict
+
+    from yarnfit.fabric import Fabric
+    from yarnfit.validate.swatch import fabric_from_inputs
+
+    preset = Fabric.preset("cotton-twill")
+    inputs = {"fabric": preset.name, "fiber": asdict(preset.fiber), "pattern": preset.structure, "family": "woven",
+              "counts_per_m": list(preset.counts), "areal_density_kg_m2": preset.areal_density}
+    assert fabric_from_inputs(inputs) == preset
+    with pytest.raises(ValueError, match="inputs"):
+        fabric_from_inputs({"fabric": "x"})
