@@ -100,7 +100,7 @@ def test_bias_strip_rotates_the_repeat():
 
 def test_small_weave_balances_with_contacts():
     # A real relaxed plain weave in a tiny strip: the moving and the fixed jaw pull equally (global
-    # balance, contacts included), the weave is softer than its straightened yarns, and it necks.
+    # balance, contacts included) and it does not widen.
     from yarnfit.fabric import Fabric
     from yarnfit.materials import get_fiber
     from yarnfit.relax import relax, rod_material
@@ -113,7 +113,8 @@ def test_small_weave_balances_with_contacts():
     assert point["converged"]
     assert point["fixed_force_n_per_m"] == pytest.approx(point["force_n_per_m"], rel=1e-4)
     assert 0.0 < point["force_n_per_m"]
-    assert point["compression_ratio"] < 1.0
+    assert point["compression_ratio"] <= 1.0 + 1e-9  # wefts crossing mid-length barely move across
+    assert point["extent_ratio"] < 1.0  # the cut warp ends do
 
 
 def documented_paths(directions):

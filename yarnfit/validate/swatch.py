@@ -27,8 +27,11 @@ Outputs per direction and strain:
   the initial strip width; ``fixed_force_n_per_m`` the same on the fixed jaw (minus sign: it pulls
   back), equal and opposite at equilibrium; ``rod_force_n_per_m`` the rods' part alone
   (``contact_share`` the rest).
-- ``compression_ratio``: width at mid-length over the initial width, the width being the span of
-  the node centrelines across the strip within half a repeat of mid-length, plus one diameter.
+- ``compression_ratio``: width at mid-length over the initial width, the width being the span
+  across the strip of the points where yarn centrelines cross the mid-length plane, plus one
+  diameter (:func:`mid_width`; loose cut ends at the long sides do not count);
+  ``extent_ratio`` the same from every node within a quarter width of mid-length
+  (:func:`extent_width`: cut ends splaying out count).
 - the solver's residuals, iterations and wall time.
 
 Recording (:class:`SwatchRecording`, one ``rr.RecordingStream`` per file as in
@@ -237,10 +240,23 @@ class _ReactionSolver(QuasiStaticSolver):
         return ev
 
 
-def mid_width(swatch: Swatch, position: np.ndarray, band: float) -> float:
-    """Width (m) at mid-length: span in y of the nodes within ``band`` of the jaws' midpoint in x
-    (the moving jaw has moved: the midpoint is taken between the jaws' current positions), plus one
-    yarn diameter."""
+def mid_width(swatch: Swatch, position: np.ndarray) -> float:
+    """Width (m) at mid-length: the span across the strip (y) of the points where yarn centrelines
+    cross the plane halfway between the jaws' current positions, plus one yarn diameter. Only the
+    yarns that pass through mid-length count, so loose cut ends at the long sides do not."""
+    mid = 0.5 * (position[swatch.moving, 0].min() + position[swatch.fixed, 0].max())
+    a = position[swatch.model.edge_nodes[:, 0]]
+    b = position[swatch.model.edge_nodes[:, 1]]
+    crossing = (a[:, 0] - mid) * (b[:, 0] - mid) <= 0.0
+    crossing &= a[:, 0] != b[:, 0]
+    t = (mid - a[crossing, 0]) / (b[crossing, 0] - a[crossing, 0])
+    y = a[crossing, 1] + t * (b[crossing, 1] - a[crossing, 1])
+    return float(y.max() - y.min() + 2.0 * swatch.radius)
+
+
+def extent_width(swatch: Swatch, position: np.ndarray, band: float) -> float:
+    """Width (m) from all nodes within ``band`` of mid-length in x: their span in y plus one
+    diameter (loose cut ends at the long sides included)."""
     mid = 0.5 * (position[swatch.moving, 0].min() + position[swatch.fixed, 0].max())
     near = np.abs(position[:, 0] - mid) <= band
     y = position[near, 1]
@@ -255,7 +271,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     warm-started from the previous one. ``on_step(k, strain, position, point)`` is called after
     each solve (k = 0 for the unstrained state, then 1, 2, ...). ``width_band`` (m, default a
     quarter of the strip width) is the half-length of the mid-length slab the width is measured
-    in. Returns a JSON-able dict (see the module docstring)."""
+    in (:func:`extent_width`). Returns a JSON-able dict (see the module docstring)."""
     strains = [float(e) for e in strains]
     if not strains or any(not (math.isfinite(e) and e > 0) for e in strains) or strains != sorted(strains):
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
@@ -264,11 +280,12 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     solver = _ReactionSolver(model, options)
     band = 0.25 * swatch.width if width_band is None else float(width_band)
     rest = swatch.position
-    width0 = mid_width(swatch, rest, band)
+    width0 = mid_width(swatch, rest)
+    extent0 = extent_width(swatch, rest, band)
     state = RodState.from_model(model)
     jaw0 = -swatch.gauge / 2
     points = [{"strain": 0.0, "force_n_per_m": 0.0, "fixed_force_n_per_m": 0.0, "rod_force_n_per_m": 0.0,
-               "compression_ratio": 1.0, "width_m": width0, "converged": True, "iterations": 0, "seconds": 0.0,
+               "compression_ratio": 1.0, "extent_ratio": 1.0, "width_m": width0, "converged": True, "iterations": 0, "seconds": 0.0,
                "residual": None}]
     if on_step is not None:
         on_step(0, 0.0, rest, points[0])
@@ -292,7 +309,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         pull = float(gradient[swatch.moving, 0].sum())
         back = float(gradient[swatch.fixed, 0].sum())
         rod_pull = float(rod_gradient[swatch.moving, 0].sum())
-        width = mid_width(swatch, state.node_position, band)
+        width = mid_width(swatch, state.node_position)
         r = result.residual
         point = {
             "strain": strain,
@@ -301,6 +318,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "rod_force_n_per_m": rod_pull / swatch.width,
             "contact_share": 0.0 if pull == 0 else 1.0 - rod_pull / pull,
             "compression_ratio": width / width0,
+            "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
             "width_m": width,
             "converged": bool(result.converged),
             "iterations": int(result.iterations),
@@ -381,12 +399,13 @@ def stretch_repeat(model: RodModel, position: np.ndarray, material: RodMaterial,
 
 
 def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Callable[[str], None] | None = None,
-             directions: Sequence[str] | None = None) -> dict:
+             directions: Sequence[str] | None = None, size: dict | None = None) -> dict:
     """The yarn-level stretch test of a material file (path or its decoded dict): rebuild the fabric
     from its ``inputs``, relax its repeat, cut strips along weft and warp (and bias unless
     ``quick``) and pull each to 2, 5 and 10 %. ``recording_path`` defaults to
     ``logs/<material>/yarn.rrd`` (``False``: no recording). Returns a JSON-able dict with the
-    curves per direction (see :func:`stretch_swatch`) and the relaxation."""
+    curves per direction (see :func:`stretch_swatch`) and the relaxation. ``size`` overrides the
+    strip size (see :func:`stretch_repeat`)."""
     from ..relax import relax, rod_material
 
     data, where = _material_data(material)
@@ -402,7 +421,8 @@ def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Ca
         recording_path = None
     directions = directions or (("weft", "warp") if quick else ("weft", "warp", "bias"))
     out = stretch_repeat(relaxed.model, relaxed.state.node_position, rod_material(fabric.fiber), name=fabric.name,
-                         directions=directions, quick=quick, recording_path=recording_path, progress=progress)
+                         directions=directions, size=size, quick=quick, recording_path=recording_path,
+                         progress=progress)
     out["material"] = fabric.name
     out["quick"] = bool(quick)
     out["relaxation"] = {"converged": relaxed.converged, "iterations": relaxed.iterations,
