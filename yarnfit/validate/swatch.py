@@ -28,8 +28,9 @@ Outputs per direction and strain:
   back), equal and opposite at equilibrium; ``rod_force_n_per_m`` the rods' part alone
   (``contact_share`` the rest).
 - ``compression_ratio``: width at mid-length over the initial width, the width being the span
-  across the strip of the points where yarn centrelines cross the mid-length plane, plus one
-  diameter (:func:`mid_width`; loose cut ends at the long sides do not count);
+  across the strip of the points where yarn centrelines cross the mid-length plane (at more than
+  30° from it), plus one diameter (:func:`mid_width`; yarns lying along the plane and their loose
+  cut ends at the long sides do not count);
   ``extent_ratio`` the same from every node within a quarter width of mid-length
   (:func:`extent_width`: cut ends splaying out count).
 - the solver's residuals, iterations and wall time.
@@ -89,6 +90,9 @@ MIN_PIECE_FRACTION = 0.5
 # A node within this fraction of an edge length outside the jaw line still counts as clamped
 # (round-off of the unrolled positions).
 CLAMP_SLACK = 1e-9
+# Edges count towards the mid-length width only if they cross the mid-length plane at more than
+# 30° from it (|Δx| ≥ sin 30° |e|); see mid_width.
+CROSSING_SLOPE = 0.5
 # Newton iterations per strain; a solve that needs more is reported as not converged.
 MAX_ITERATIONS = 400
 # Tolerances of the swatch solves: the solver's defaults except the force and torque imbalance,
@@ -242,12 +246,15 @@ class _ReactionSolver(QuasiStaticSolver):
 
 def mid_width(swatch: Swatch, position: np.ndarray) -> float:
     """Width (m) at mid-length: the span across the strip (y) of the points where yarn centrelines
-    cross the plane halfway between the jaws' current positions, plus one yarn diameter. Only the
-    yarns that pass through mid-length count, so loose cut ends at the long sides do not."""
+    pass through the plane halfway between the jaws' current positions, plus one yarn diameter.
+    Only edges crossing that plane at more than 30° from it count (``|Δx| ≥ |e| / 2``): yarns
+    lying along the plane (a weft strip's warps) would add their cut ends, which splay out at the
+    long sides as the strip is pulled (cotton twill, weft strip at 5 %: +6 % width with them)."""
     mid = 0.5 * (position[swatch.moving, 0].min() + position[swatch.fixed, 0].max())
     a = position[swatch.model.edge_nodes[:, 0]]
     b = position[swatch.model.edge_nodes[:, 1]]
     crossing = (a[:, 0] - mid) * (b[:, 0] - mid) <= 0.0
+    crossing &= np.abs(b[:, 0] - a[:, 0]) >= CROSSING_SLOPE * np.linalg.norm(b - a, axis=1)
     crossing &= a[:, 0] != b[:, 0]
     t = (mid - a[crossing, 0]) / (b[crossing, 0] - a[crossing, 0])
     y = a[crossing, 1] + t * (b[crossing, 1] - a[crossing, 1])
