@@ -120,3 +120,20 @@ def test_cli_validate_bad_input_is_one_line(case, tmp_path):
     done = yarnfit_cli("validate", *args)
     assert done.returncode == 2
     assert message in done.stderr and len(done.stderr.strip().splitlines()) == 1
+
+
+def test_shell_and_yarn_curves_are_compared_at_the_yarn_strains():
+    from yarnfit.validate.suite import compare_shell_yarn
+
+    stretch = {"strips": {"8x5_weft": {"strain": [0.01, 0.05, 0.1], "force_per_width_n_per_m": [10.0, 50.0, 100.0],
+                                       "compression_ratio": [1.0, 0.98, 0.96]}}}
+    yarn = {"directions": {"weft": {"strain": [0.02, 0.05, 0.2], "force_n_per_m": [25.0, 40.0, 1.0],
+                                    "compression_ratio": [0.99, 0.97, 0.9]},
+                           "warp": {"strain": [0.02], "force_n_per_m": [1.0], "compression_ratio": [1.0]}}}
+    result = compare_shell_yarn(stretch, yarn)
+    assert set(result) == {"weft"}  # no shell warp strip
+    weft = result["weft"]
+    assert weft["strain"] == [0.02, 0.05]  # 20 % lies beyond the shell's pull
+    np.testing.assert_allclose(weft["shell_force_n_per_m"], [20.0, 50.0])
+    np.testing.assert_allclose(weft["force_relative_difference"], [20 / 25 - 1, 50 / 40 - 1])
+    np.testing.assert_allclose(weft["shell_compression_ratio"], [0.995, 0.98])
