@@ -137,3 +137,15 @@ def test_shell_and_yarn_curves_are_compared_at_the_yarn_strains():
     np.testing.assert_allclose(weft["shell_force_n_per_m"], [20.0, 50.0])
     np.testing.assert_allclose(weft["force_relative_difference"], [20 / 25 - 1, 50 / 40 - 1])
     np.testing.assert_allclose(weft["shell_compression_ratio"], [0.995, 0.98])
+
+
+def test_a_yarn_point_just_past_the_shells_measured_strain_is_compared_by_extension():
+    from yarnfit.validate.suite import compare_shell_yarn
+
+    stretch = {"strips": {"8x5_warp": {"strain": [0.0495, 0.099], "force_per_width_n_per_m": [50.0, 100.0],
+                                       "compression_ratio": [0.99, 0.98]}}}
+    yarn = {"directions": {"warp": {"strain": [0.05, 0.1], "force_n_per_m": [50.0, 100.0],
+                                    "compression_ratio": [0.99, 0.98]}}}
+    warp = compare_shell_yarn(stretch, yarn)["warp"]
+    assert warp["strain"] == [0.05, 0.1]
+    np.testing.assert_allclose(warp["shell_force_n_per_m"], [50.0 + 0.0005 / 0.0495 * 50, 100.0 + 0.001 / 0.0495 * 50])

@@ -23,6 +23,9 @@ class IncompatibleMaterial(ValueError):
 
 
 REQUIRED_KEYS = ("yarnfit_version", "inputs", "shell", "engineering")
+# How far past the shell's last measured strain a yarn point may lie and still be compared
+# (relative): the servo leaves the measured strain ~1 % below the nominal level.
+SHELL_RANGE_SLACK = 0.02
 
 
 def check_material_file(path: str | Path) -> dict:
@@ -105,18 +108,34 @@ def compare_shell_yarn(stretch: dict, yarn: dict) -> dict:
             continue
         shell_strain = np.asarray(strip["strain"])
         strain = np.asarray(curve["strain"], float)
-        inside = (strain >= shell_strain[0]) & (strain <= shell_strain[-1])
-        shell_force = np.interp(strain[inside], shell_strain, strip["force_per_width_n_per_m"])
+        # The shell's measured strains fall ~1 % short of their nominal levels (the servo's lag), so
+        # the last segment is extended by SHELL_RANGE_SLACK to reach a yarn point at the same level.
+        top = shell_strain[-1] * (1 + SHELL_RANGE_SLACK)
+        inside = (strain >= shell_strain[0]) & (strain <= top)
+        shell_force = _interp_extend(strain[inside], shell_strain, strip["force_per_width_n_per_m"])
         yarn_force = np.asarray(curve["force_n_per_m"], float)[inside]
         out[direction] = {
             "strain": strain[inside].tolist(),
             "shell_force_n_per_m": shell_force.tolist(),
             "yarn_force_n_per_m": yarn_force.tolist(),
-            "shell_compression_ratio": np.interp(strain[inside], shell_strain, strip["compression_ratio"]).tolist(),
+            "shell_compression_ratio": _interp_extend(strain[inside], shell_strain, strip["compression_ratio"]).tolist(),
             "yarn_compression_ratio": np.asarray(curve["compression_ratio"], float)[inside].tolist(),
             "force_relative_difference": (shell_force / yarn_force - 1.0).tolist(),
         }
     return out
+
+
+def _interp_extend(x, xp, fp):
+    """Linear interpolation, continued linearly beyond the last point."""
+    import numpy as np
+
+    xp, fp = np.asarray(xp, float), np.asarray(fp, float)
+    y = np.interp(x, xp, fp)
+    beyond = x > xp[-1]
+    if beyond.any() and len(xp) > 1:
+        slope = (fp[-1] - fp[-2]) / (xp[-1] - xp[-2])
+        y[beyond] = fp[-1] + slope * (x[beyond] - xp[-1])
+    return y
 
 
 def _jsonable(value):
