@@ -54,8 +54,11 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
 import trimesh
 
+from ..record import _folded_panels, _markdown_table, _Recording
 from ..mujoco.scenes import FLEX_RADIUS, SceneMaterial, add_cloth_flex, compile_quietly
 
 __all__ = ["MOTION", "HUMANOID", "build_body_scene", "garment_panel", "motion_targets", "run_body"]
@@ -227,7 +230,7 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
     vert = {kind: np.concatenate([np.arange(model.flex_vertadr[_flex_id(model, f)],
                                             model.flex_vertadr[_flex_id(model, f)] + model.flex_vertnum[_flex_id(model, f)])
                                   for f in g["flexes"]]) for kind, g in garments.items()}
-    recording = _Recording(recording_path, shirt.name, model, garments, geom_names) if recording_path else None
+    recording = _BodyRecording(recording_path, shirt.name, model, garments, geom_names) if recording_path else None
 
     steps = round(seconds / model.opt.timestep)
     frame_every = max(1, round(FRAME_S / model.opt.timestep))
@@ -301,21 +304,11 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
     return result
 
 
-class _Recording:
+class _BodyRecording(_Recording):
     """The ``.rrd`` file of one run (paths in the module docstring)."""
 
     def __init__(self, path, name: str, model: mujoco.MjModel, garments: dict, geom_names: list[str]) -> None:
-        import rerun as rr
-        import rerun.blueprint as rrb
-
-        from ..record import APPLICATION_ID
-        self.rr = rr
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.rec = rr.RecordingStream(APPLICATION_ID)
-        self.rec.save(self.path)
-        self.rec.send_recording_name(f"body: {name}")
-        self.rec.send_blueprint(rrb.Blueprint(
+        layout = rrb.Blueprint(
             rrb.Horizontal(
                 rrb.Spatial3DView(origin="body", name="body"),
                 rrb.Vertical(
@@ -325,9 +318,9 @@ class _Recording:
                 ),
                 column_shares=[3, 1],
             ),
-            rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
-            rrb.TimePanel(state="expanded", timeline="sim_time")))
-        self.rec.log("body", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+            *_folded_panels("sim_time"))
+        super().__init__(f"body: {name}", path, layout, "body")
+        self.rec = self._rec
         colors = {"shirt": [60, 110, 200], "pants": [70, 70, 80]}
         for kind, g in garments.items():
             triangles, offset = [], 0
@@ -341,7 +334,6 @@ class _Recording:
         self.geom_names = geom_names
 
     def frame(self, t, garments, a, radius, b, pen, dist) -> None:
-        rr = self.rr
         self.rec.set_time("sim_time", duration=t)
         for kind, points in garments.items():
             self.rec.log(f"body/cloth/{kind}", rr.Mesh3D.from_fields(vertex_positions=points))
@@ -361,10 +353,8 @@ class _Recording:
                 ("simulated (s)", f"{result['simulated_s']:.3g}"), ("ms/step", f"{result['ms_per_step']:.3g}"),
                 ("wall time (s)", f"{result['wall_time_s']:.3g}"), ("shirt", result["material_shirt"]),
                 ("pants", result["material_pants"]), ("panel grid spacing (m)", result["spacing_m"])]
-        text = "# full body\n\n| quantity | value |\n|---|---|\n" + "\n".join(f"| {k} | {v} |" for k, v in rows)
-        self.rec.log("body/summary", self.rr.TextDocument(text, media_type=self.rr.MediaType.MARKDOWN), static=True)
-        self.rec.flush()
-        self.rec.disconnect()
+        self._log_markdown("body/summary", "# full body\n\n" + _markdown_table(rows), static=True)
+        self.close()
 
 
 def _flex_id(model: mujoco.MjModel, name: str) -> int:
