@@ -580,18 +580,16 @@ static double hinge_angle(const double* x1, const double* x2, const double* o0, 
   double length = mju_norm3(e), cross[3];
   mju_cross(cross, nB, nA);
   double theta = atan2(mju_dot3(cross, e) / length, mju_dot3(nA, nB));
-  if (g) {
-    double qA = mju_dot3(nA, nA), qB = mju_dot3(nB, nB);
-    // Projections of the tips onto the edge, measured from x2 and from x1.
-    double pA2 = (mju_dot3(a, e) - length * length) / length, pB2 = (mju_dot3(b, e) - length * length) / length;
-    double pA1 = mju_dot3(a, e) / length, pB1 = mju_dot3(b, e) / length;
-    for (int i = 0; i < 3; i++) {
-      double gA = nA[i] / qA, gB = nB[i] / qB;
-      g[i] = pA2 * gA + pB2 * gB;
-      g[3 + i] = -pA1 * gA - pB1 * gB;
-      g[6 + i] = length * gA;
-      g[9 + i] = length * gB;
-    }
+  double qA = mju_dot3(nA, nA), qB = mju_dot3(nB, nB);
+  // Projections of the tips onto the edge, measured from x1; from x2 they are less the length.
+  double pA1 = mju_dot3(a, e) / length, pB1 = mju_dot3(b, e) / length;
+  double pA2 = pA1 - length, pB2 = pB1 - length;
+  for (int i = 0; i < 3; i++) {
+    double gA = nA[i] / qA, gB = nB[i] / qB;
+    g[i] = pA2 * gA + pB2 * gB;
+    g[3 + i] = -pA1 * gA - pB1 * gB;
+    g[6 + i] = length * gA;
+    g[9 + i] = length * gB;
   }
   return theta;
 }
