@@ -39,7 +39,7 @@ import rerun.blueprint as rrb
 from scipy.signal import find_peaks
 
 from ..mujoco.scenes import SceneMaterial, build_scene, compile_quietly
-from ..record import _Recording
+from ..record import _markdown_table, _Recording
 
 SIZE = 0.3  # m: the swatch's side
 RESOLUTION = {False: 31, True: 13}  # vertices per side: 1 cm and 2.5 cm spacing
@@ -206,7 +206,6 @@ class _DrapeRecording(_Recording):
         self._rec.log(f"{self.scene}/plots/lowest_point", rr.Scalars(float(positions[:, 2].min())))
 
     def finish(self, summary: dict) -> None:
-        rows = ["| quantity | value |", "|---|---|"] + [f"| {k} | {v:.4g} |" if isinstance(v, float) else
-                                                       f"| {k} | {v} |" for k, v in summary.items()]
-        self._log_markdown(f"{self.scene}/summary", "\n".join(rows), static=True)
+        rows = [(k, f"{v:.4g}" if isinstance(v, float) else v) for k, v in summary.items()]
+        self._log_markdown(f"{self.scene}/summary", _markdown_table(rows), static=True)
         self.close()

@@ -40,7 +40,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ..record import _Recording
+from ..record import _markdown_table, _Recording
 from ..mujoco.scenes import SceneMaterial, build_scene, compile_quietly
 
 # FAB strips (m): length between the clamps × width.
@@ -228,9 +228,9 @@ class _StretchRecording(_Recording):
                                rr.Scalars(float(np.interp(strain, curve.strain, curve.force_per_width))))
 
     def finish(self, summary: dict) -> None:
-        rows = ["| strip | strain | N/m | compression | law N/m |", "|---|---|---|---|---|"]
-        for name, s in summary["strips"].items():
-            for e, f, c in zip(s["strain"], s["force_per_width_n_per_m"], s["compression_ratio"]):
-                rows.append(f"| {name} | {e:g} | {f:.4g} | {c:.4f} | {s['uniaxial_law_n_per_m'] * e:.4g} |")
-        self._log_markdown("stretch/summary", "\n".join(rows), static=True)
+        rows = [(name, f"{e:g}", f"{f:.4g}", f"{c:.4f}", f"{s['uniaxial_law_n_per_m'] * e:.4g}")
+                for name, s in summary["strips"].items()
+                for e, f, c in zip(s["strain"], s["force_per_width_n_per_m"], s["compression_ratio"])]
+        self._log_markdown("stretch/summary", _markdown_table(rows, ("strip", "strain", "N/m", "compression", "law N/m")),
+                           static=True)
         self.close()

@@ -64,7 +64,7 @@ def _runner(scene: str) -> Callable:
 def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, logs: str | Path = "logs",
               reference=None, progress: Callable[[str], None] | None = None) -> tuple[dict, Path]:
     """Run ``scenes`` on the material file; returns the summary and the path of ``summary.json``."""
-    data = check_material_file(material_path)
+    check_material_file(material_path)
     from ..mujoco.scenes import SceneMaterial
 
     material = SceneMaterial.from_file(material_path)
@@ -80,12 +80,12 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
         if scene == "stretch" and reference is not None:
             options["reference"] = reference
         start = time.perf_counter()
-        source = material_path if scene in ("yarn",) else material
+        # The yarn swatch rebuilds the fabric from the file's inputs (and names the file in its errors).
+        source = material_path if scene == "yarn" else material
         summary["scenes"][scene] = runner(source, **options)
         summary["wall_seconds"][scene] = time.perf_counter() - start
         if progress:
             progress(f"{scene}: done in {summary['wall_seconds'][scene]:.1f} s")
-    del data
     if "stretch" in summary["scenes"] and "yarn" in summary["scenes"]:
         summary["shell_vs_yarn"] = compare_shell_yarn(summary["scenes"]["stretch"], summary["scenes"]["yarn"])
     path = folder / "summary.json"
@@ -139,15 +139,12 @@ def _interp_extend(x, xp, fp):
 
 
 def _jsonable(value):
-    try:
-        import numpy as np
+    import numpy as np
 
-        if isinstance(value, np.generic):
-            return value.item()
-        if isinstance(value, np.ndarray):
-            return value.tolist()
-    except ImportError:  # pragma: no cover
-        pass
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
     if isinstance(value, Path):
         return str(value)
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")
