@@ -11,7 +11,7 @@ from fabric_shell import FABRIC
 from yarnfit.mujoco.scenes import SceneMaterial
 from yarnfit.shell import ShellMaterial
 from yarnfit.validate.reference import read_reference
-from yarnfit.validate.stretch import DIRECTIONS, pull_strip, run_stretch, uniaxial_law
+from yarnfit.validate.stretch import DIRECTIONS, pull_strip, run_stretch
 
 # The bound for the scene against the shell law at small strain. Measured on the quick 9 ×
 # 6 strip at 0.2 % strain: Poisson 0, +0.2 % (Green strain's own stiffening); the woven, weft
@@ -33,7 +33,7 @@ NO_POISSON = SceneMaterial("no-poisson", ShellMaterial(thickness=H, s00=E, s01=0
 def test_small_strain_force_follows_the_shell_law(material, direction):
     result = pull_strip(material, "8x5", direction, quick=True, max_strain=0.01)
     assert result.settled.all()
-    stiffness, _ = uniaxial_law(material, DIRECTIONS[direction])
+    stiffness, _ = material.shell.uniaxial_stiffness(DIRECTIONS[direction])
     assert result.force_per_width_n_per_m[0] / result.strain[0] == pytest.approx(stiffness, rel=LAW_RTOL)
     # Measured strain, not the servo's target: within the servo's ~1 % lag of the nominal level.
     assert result.strain[0] == pytest.approx(0.002, rel=0.02)

@@ -18,7 +18,7 @@ def main() -> None:
     print(f"{'direction':>9} {'N/m measured':>13} {'N/m law':>10} {'error':>9} {'poisson':>8} {'law':>7} {'error':>9}")
     for direction, angle in (("weft", 0.0), ("warp", math.pi / 2), ("bias", math.pi / 4)):
         tension, contraction = mechanics.patch_equilibrium(angle, mechanics.STRAIN)
-        stiffness, poisson = mechanics.small_strain_prediction(FABRIC, angle)
+        stiffness, poisson = FABRIC.uniaxial_stiffness(angle)
         measured_poisson = (1 - contraction) / mechanics.STRAIN
         print(f"{direction:>9} {tension / mechanics.STRAIN:13.2f} {stiffness:10.2f} {tension / mechanics.STRAIN / stiffness - 1:+9.2e}"
               f" {measured_poisson:8.4f} {poisson:7.4f} {measured_poisson / poisson - 1:+9.2e}")

@@ -312,6 +312,17 @@ class ShellMaterial:
         W = W + 0.5 * h**3 * np.einsum("...i,ij,...j->...", kap, self.B, kap)
         return float(W) if single else W
 
+    def uniaxial_stiffness(self, angle: float) -> tuple[float, float]:
+        """Small-strain uniaxial stiffness (N/m) and Poisson ratio for a pull at ``angle`` (rad)
+        from weft, the transverse direction free: the rotated compliance of ``h S``. At 0 and π/2
+        these are ``weft_stretch_n_per_m``, ``poisson_weft`` and the warp ones."""
+        c, s = math.cos(angle), math.sin(angle)
+        compliance = np.linalg.inv(self.thickness * self.S)
+        load = np.array([c * c, s * s, c * s])
+        across = np.array([s * s, c * c, -c * s])
+        along = float(load @ compliance @ load)
+        return 1.0 / along, -float(across @ compliance @ load) / along
+
     def uniaxial_tension(self, axis: int, stretch: float) -> tuple[np.ndarray, float]:
         """Uniaxial tension along weft (``axis`` 0) or warp (1) with the other direction free:
         ``(I (2, 2), W)``. The free Green strain minimises W, ``E_other = −(s01/s_other) E`` with

@@ -11,8 +11,8 @@ level over :data:`RAMP_SECONDS`, then held until every vertex and the clamp move
 about 1 %, so the strain is measured, not commanded) and the width at mid-length read. Per strip: force per unit width (N/m) and compression ratio (width at
 mid-length over the initial width) against engineering strain.
 
-The small-strain uniaxial law of the shell (``weft_stretch_n_per_m`` and its rotated form, design
-notes §3) is reported beside the first level: clamped ends hold the strip's width, so a strip
+The small-strain uniaxial law of the shell (``ShellMaterial.uniaxial_stiffness``: ``weft_stretch_n_per_m``
+and its rotated form, design notes §3) is reported beside the first level: clamped ends hold the strip's width, so a strip
 whose Poisson ratio is large reads stiffer than the uniaxial law; a material with zero Poisson
 ratio reads the law itself (tested).
 
@@ -75,17 +75,6 @@ class StripResult:
     compression_ratio: np.ndarray
     settled: np.ndarray  # bool: came to rest within MAX_HOLD_SECONDS
     wall_seconds: float
-
-
-def uniaxial_law(material: SceneMaterial, angle: float) -> tuple[float, float]:
-    """Small-strain uniaxial stiffness (N/m) and Poisson ratio of the shell for a pull at
-    ``angle`` from weft: the rotated compliance of ``h S``."""
-    c, s = math.cos(angle), math.sin(angle)
-    compliance = np.linalg.inv(material.shell.thickness * material.shell.S)
-    load = np.array([c * c, s * s, c * s])
-    across = np.array([s * s, c * c, -c * s])
-    along = float(load @ compliance @ load)
-    return 1.0 / along, -float(across @ compliance @ load) / along
 
 
 def pull_strip(material: SceneMaterial, strip: str, direction: str, *, quick: bool = False,
@@ -168,7 +157,7 @@ def run_stretch(material: SceneMaterial | str | Path, *, quick: bool = False, re
                                       on_level=callback))
     summary = {"strips": {}}
     for result in results:
-        stiffness, poisson = uniaxial_law(material, result.angle_rad)
+        stiffness, poisson = material.shell.uniaxial_stiffness(result.angle_rad)
         first = result.strain[0]
         summary["strips"][result.name] = {
             "length_m": result.length_m,
