@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rerun as rr
+import trimesh
 
 import yarnfit
 from fabric_shell import FABRIC
@@ -64,6 +65,9 @@ def test_drape_settles_and_records(scene, tmp_path):
     paths = entity_paths(path)
     assert {f"/{scene}/cloth", f"/{scene}/bodies/obstacle", f"/{scene}/plots/kinetic_energy",
             f"/{scene}/plots/lowest_point", f"/{scene}/summary"} <= paths
+    final = trimesh.load(summary["final_mesh"], process=False)
+    assert final.vertices.shape == (13 * 13, 3) and final.vertices[:, 2].min() == pytest.approx(
+        summary["lowest_point_m"], abs=1e-6)
     if scene == "sphere":
         assert summary["fold_count"] >= 2
     else:
@@ -96,6 +100,7 @@ def test_cli_validate_writes_recordings_and_a_summary(tmp_path):
     for scene in summary["scenes"]:
         assert (folder / f"{scene}.rrd").is_file()
         assert summary["wall_seconds"][scene] > 0
+    assert summary["bias_softness"]["8x5"]["bias_softer"]  # the paper's check (a) on the test woven
     assert "stretch: done" in done.stderr  # progress
 
 

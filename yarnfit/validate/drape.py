@@ -24,6 +24,8 @@ Recording (``logs/<material>/<scene>.rrd``): timeline ``sim_time`` (s); entity p
 - ``<scene>/plots/kinetic_energy``: ``Scalars``, kinetic energy per unit mass (J/kg);
 - ``<scene>/plots/lowest_point``: ``Scalars``, lowest vertex height (m);
 - ``<scene>/summary``: ``TextDocument`` (markdown).
+
+The final mesh is also written as ``<scene>_final.ply`` beside the recording.
 """
 
 from __future__ import annotations
@@ -97,7 +99,24 @@ def fold_count(positions: np.ndarray, boundary: np.ndarray, size: float) -> int:
 
 def run_drape(material: SceneMaterial | str | Path, scene: str, *, quick: bool = False, recording_path=None,
               progress: Callable[[str], None] | None = None) -> dict:
-    """Drop (``sphere``) or hang (``wall``) the swatch until at rest; the summary figures."""
+    """Drop (``sphere``) or hang (``wall``) the swatch until at rest; the summary figures. With a
+    ``recording_path``, the final mesh is also written beside it as ``<scene>_final.ply`` (m;
+    ``final_mesh`` in the summary)."""
+    summary, positions, triangles = drape(material, scene, quick=quick, recording_path=recording_path,
+                                          progress=progress)
+    if recording_path:
+        import trimesh
+
+        final = Path(recording_path).with_name(f"{scene}_final.ply")
+        trimesh.Trimesh(positions, triangles, process=False).export(final)
+        summary["final_mesh"] = str(final)
+    return summary
+
+
+def drape(material: SceneMaterial | str | Path, scene: str, *, quick: bool = False, recording_path=None,
+          progress: Callable[[str], None] | None = None) -> tuple[dict, np.ndarray, np.ndarray]:
+    """:func:`run_drape`'s simulation: the summary, the final vertex positions ``(n, 3)`` (m) and
+    the triangles ``(m, 3)``."""
     import mujoco
 
     if scene not in ("sphere", "wall"):
@@ -161,7 +180,7 @@ def run_drape(material: SceneMaterial | str | Path, scene: str, *, quick: bool =
         summary["max_distance_from_wall_m"] = float((x[:, 0] - wall_face).max())
     if recording:
         recording.finish(summary)
-    return summary
+    return summary, x, triangles
 
 
 def _kinetic(model, data) -> float:

@@ -3,7 +3,8 @@
 
 ``summary.json``: ``yarnfit_version``, ``material`` (file, name), ``quick``, ``scenes`` (scene →
 its runner's summary, keys carrying their units), ``wall_seconds`` (scene → s) and, when both
-``stretch`` and ``yarn`` ran, ``shell_vs_yarn`` (:func:`compare_shell_yarn`).
+``stretch`` and ``yarn`` ran, ``shell_vs_yarn`` (:func:`compare_shell_yarn`); with ``stretch``,
+``bias_softness`` (the paper's check (a), :func:`yarnfit.validate.paper.bias_softness`).
 """
 
 from __future__ import annotations
@@ -86,6 +87,10 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
         summary["wall_seconds"][scene] = time.perf_counter() - start
         if progress:
             progress(f"{scene}: done in {summary['wall_seconds'][scene]:.1f} s")
+    if "stretch" in summary["scenes"]:
+        from .paper import bias_softness
+
+        summary["bias_softness"] = bias_softness(summary["scenes"]["stretch"])
     if "stretch" in summary["scenes"] and "yarn" in summary["scenes"]:
         summary["shell_vs_yarn"] = compare_shell_yarn(summary["scenes"]["stretch"], summary["scenes"]["yarn"])
     path = folder / "summary.json"
