@@ -51,9 +51,9 @@ def test_small_strain_force_follows_the_clamped_shell_law(material, direction):
 
 
 def _strip_mesh(length, width, nx, ny):
-    from yarnfit.mujoco.scenes import _grid
+    from yarnfit.mujoco.scenes import grid_mesh
 
-    return _grid(nx, ny, length, width)
+    return grid_mesh(nx, ny, length, width)
 
 
 # Discretisation error of the linear reference on the grids below against the closed forms; the

@@ -15,7 +15,7 @@ import trimesh
 import yarnfit
 from fabric_shell import FABRIC
 from yarnfit.mujoco.scenes import SceneMaterial
-from yarnfit.validate.drape import SIZE, fold_count, projected_area, run_drape
+from yarnfit.validate.drape import RESOLUTION, SIZE, fold_count, projected_area, run_drape
 
 DENSITY = 0.2  # kg/m²
 WOVEN = SceneMaterial("woven", FABRIC, DENSITY)
@@ -66,7 +66,8 @@ def test_drape_settles_and_records(scene, tmp_path):
     assert {f"/{scene}/cloth", f"/{scene}/bodies/obstacle", f"/{scene}/plots/kinetic_energy",
             f"/{scene}/plots/lowest_point", f"/{scene}/summary"} <= paths
     final = trimesh.load(summary["final_mesh"], process=False)
-    assert final.vertices.shape == (13 * 13, 3) and final.vertices[:, 2].min() == pytest.approx(
+    n = RESOLUTION[True]
+    assert final.vertices.shape == (n * n + (n - 1) ** 2, 3) and final.vertices[:, 2].min() == pytest.approx(
         summary["lowest_point_m"], abs=1e-6)
     if scene == "sphere":
         assert summary["fold_count"] >= 2

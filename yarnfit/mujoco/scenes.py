@@ -78,6 +78,7 @@ DROP_GAP = 0.02
 # its target by about 1 % of the extension under load).
 CLAMP_MASS = 0.1
 SERVO_STIFFNESS_RATIO = 100.0
+MESHES = ("grid", "crisscross")
 
 # MuJoCo 4.0.0 warns "flex ... is not rigid and has no equality constraints or passive forces" for a
 # flex whose only elasticity is elastic2d="stretch", although it has passive forces (measured: the
@@ -184,6 +185,7 @@ def build_scene(
     self_collision: bool = False,
     width: float = DEFAULT_STRIP_WIDTH,
     max_strain: float = DEFAULT_MAX_STRAIN,
+    mesh: str = "grid",
 ) -> BuiltScene:
     """Build one of :data:`SCENES` for ``material`` (see the module docstring).
 
@@ -200,13 +202,17 @@ def build_scene(
         self_collision: let the cloth collide with itself (MuJoCo's ``selfcollide="auto"``).
         width: the strip's width (m), stretch only.
         max_strain: upper end of the pull actuator's range as engineering strain, stretch only.
+        mesh: one of :data:`MESHES`: ``grid`` (one diagonal per cell) or ``crisscross`` (both
+            diagonals and a centre vertex; no locking, twice the vertices): :func:`grid_mesh`.
 
     Raises:
-        ValueError: an unknown scene or integrator, a non-positive resolution, size, timestep,
+        ValueError: an unknown scene, integrator or mesh, a non-positive resolution, size, timestep,
             width or max_strain, a negative friction or damping.
     """
     if scene not in SCENES:
         raise ValueError(f"unknown scene {scene!r}; scenes: {', '.join(SCENES)}")
+    if mesh not in MESHES:
+        raise ValueError(f"unknown mesh {mesh!r}; meshes: {', '.join(MESHES)}")
     resolution = DEFAULT_RESOLUTION[scene] if resolution is None else resolution
     size = DEFAULT_SIZE[scene] if size is None else size
     if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) or resolution < 2:
@@ -225,9 +231,9 @@ def build_scene(
     spec.option.integrator = INTEGRATOR_ENUM[key]
     spec.worldbody.add_light(pos=[0, 0, 3 * size + 1], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     if scene == "stretch":
-        layout = _strip(spec, material.shell, resolution, size, width, max_strain)
+        layout = _strip(spec, material.shell, resolution, size, width, max_strain, mesh == "crisscross")
     else:
-        layout = _square(spec, scene, resolution, size, friction)
+        layout = _square(spec, scene, resolution, size, friction, mesh == "crisscross")
 
     if fallback:
         iso = isotropic_fallback(material.shell)
@@ -284,9 +290,10 @@ class _Layout:
     collide: bool
 
 
-def _square(spec: mujoco.MjSpec, scene: str, resolution: int, size: float, friction: float) -> _Layout:
+def _square(spec: mujoco.MjSpec, scene: str, resolution: int, size: float, friction: float,
+            crisscross: bool) -> _Layout:
     """The cloth, sphere and wall scenes: a horizontal square and what it hangs from or falls on."""
-    points, triangles = _grid(resolution, resolution, size, size)
+    points, triangles = grid_mesh(resolution, resolution, size, size, crisscross)
     geom_friction = [friction, 0.005, 0.0001]
     if scene == "cloth":
         points[:, 2] = size + 0.1
@@ -315,28 +322,45 @@ def _square(spec: mujoco.MjSpec, scene: str, resolution: int, size: float, frict
 
 
 def _strip(spec: mujoco.MjSpec, shell: ShellMaterial, resolution: int, length: float, width: float,
-           max_strain: float) -> _Layout:
+           max_strain: float, crisscross: bool) -> _Layout:
     """The stretch scene: a strip from x = 0 to ``length``, its left edge on the world, its right
     edge on the clamp; no gravity."""
     spec.option.gravity = [0.0, 0.0, 0.0]
     ny = max(2, round((resolution - 1) * width / length) + 1)
-    points, triangles = _grid(resolution, ny, length, width)
+    points, triangles = grid_mesh(resolution, ny, length, width, crisscross)
     points[:, 0] += 0.5 * length
     points[:, 2] = 0.1
-    column = np.arange(len(points)) // ny
+    column = np.arange(len(points)) // ny  # grid vertices first; cell centres never on a clamp
     left, right = column == 0, column == resolution - 1
     clamp = _clamp(spec, shell, length, width, max_strain, position=[length, 0.0, 0.1])
     return _Layout(points, triangles, {"world": left, clamp.name: right}, collide=False)
 
 
-def _grid(nx: int, ny: int, lx: float, ly: float) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices ``(nx ny, 3)`` of an ``lx × ly`` grid centred at the origin (vertex ``ix ny + iy``)
-    and its triangles ``(2 (nx−1)(ny−1), 3)``, counter-clockwise seen from +z (flexcomp's order)."""
+def grid_mesh(nx: int, ny: int, lx: float, ly: float, crisscross: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices of an ``lx × ly`` grid centred at the origin (vertex ``ix ny + iy``; ``(nx ny, 3)``)
+    and its triangles, counter-clockwise seen from +z (flexcomp's order).
+
+    ``crisscross=False``: each cell split by one diagonal, ``2 (nx−1)(ny−1)`` triangles.
+    ``crisscross=True``: each cell split by both diagonals around a centre vertex (the centres
+    follow the grid vertices, cell ``(ix, iy)`` at ``nx ny + ix (ny−1) + iy``), ``4 (nx−1)(ny−1)``
+    triangles. Constant-strain triangles with one diagonal lock when the material resists a
+    deformation the mesh cannot follow without stretching stiff directions: a shear-soft woven
+    cut on the bias (its fibres along the diagonals) or a knit whose area is nearly conserved
+    (design notes §7); criss-cross cells have edges along both diagonals and do not.
+    """
     x, y = np.meshgrid(np.linspace(-0.5 * lx, 0.5 * lx, nx), np.linspace(-0.5 * ly, 0.5 * ly, ny), indexing="ij")
     points = np.column_stack([x.ravel(), y.ravel(), np.zeros(nx * ny)])
     a = (np.arange(nx - 1)[:, None] * ny + np.arange(ny - 1)[None, :]).ravel()
-    triangles = np.concatenate([np.stack([a, a + ny, a + ny + 1], 1), np.stack([a, a + ny + 1, a + 1], 1)])
-    return points, triangles
+    if not crisscross:
+        triangles = np.concatenate([np.stack([a, a + ny, a + ny + 1], 1), np.stack([a, a + ny + 1, a + 1], 1)])
+        return points, triangles
+    centres = np.column_stack([0.5 * (x[:-1, :-1] + x[1:, 1:]).ravel(), 0.5 * (y[:-1, :-1] + y[1:, 1:]).ravel(),
+                               np.zeros((nx - 1) * (ny - 1))])
+    m = nx * ny + np.arange((nx - 1) * (ny - 1))
+    b, c, d = a + ny, a + ny + 1, a + 1
+    triangles = np.concatenate([np.stack([a, b, m], 1), np.stack([b, c, m], 1), np.stack([c, d, m], 1),
+                                np.stack([d, a, m], 1)])
+    return np.vstack([points, centres]), triangles
 
 
 def _lumped_mass(points: np.ndarray, triangles: np.ndarray, areal_density: float) -> np.ndarray:

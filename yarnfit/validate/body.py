@@ -10,8 +10,10 @@ panel is its own flat 2D flex with the ``yarnfit.shell`` plugin (built by
 :func:`yarnfit.mujoco.scenes.add_cloth_flex`): its rest shape is the flat pattern, its bending rest
 is flat, so there is no prestress from the construction. Seams are MuJoCo ``connect`` equalities
 between a site on each front seam vertex and the back vertex cut at the same pattern point
-(softened by :data:`SEAM_SOLREF`): in the first :data:`SETTLE_S` seconds, with the body at rest,
-they pull the panels together around the body ("virtual sewing"); the motion starts afterwards.
+(soft at first, :data:`SEAM_SOLREF`, then as stiff as the contacts: :func:`seam_time_constant`): in
+the first :data:`SETTLE_S` seconds, with the body at rest, they pull the panels together around
+the body ("virtual sewing"); the motion starts afterwards. The panels have one diagonal per grid
+cell, so knit garments are somewhat stiffer in plane than their material (design notes §7).
 
 * Shirt: a T-shaped pattern (torso and sleeves), sewn along the sides, under the sleeves and over
   the shoulders and sleeves; open at the hem, the neck and the sleeve ends. Weft horizontal.
@@ -72,9 +74,16 @@ QUICK_SECONDS = 2.0  # s: the quick run stops after the arms come down
 FRAME_S = 1.0 / 30  # s between recorded frames
 PENETRATION_TARGET = 0.01  # m
 DISTANCE_TARGET = 0.15  # m
-# Seams: soft connect equalities, time constant 50 ms, critically damped: the panels meet within
-# a few tenths of a second without a jolt (MuJoCo's default 20 ms closes 0.3 m gaps violently).
+# Seams: connect equalities, critically damped, whose time constant falls geometrically from
+# SEAM_SOLREF[0] to SEAM_TIME_CONSTANT_SEWN over SEAM_TIGHTEN_S. Soft at first (50 ms), so the
+# panels meet without a jolt (MuJoCo's default 20 ms closes 0.3 m gaps violently); then as stiff
+# as the capsule contacts (MuJoCo's default 20 ms): at 50 ms a constraint on a vertex of 0.3 g
+# pulls with millinewtons, the cloth's tension holds seams open against the body and the shirt
+# slides off; stiffer than the contacts (2 ms) the seams win and pull seam vertices 2 cm into the
+# shins (measured on the quick panels).
 SEAM_SOLREF = (0.05, 1.0)
+SEAM_TIME_CONSTANT_SEWN = 0.02
+SEAM_TIGHTEN_S = (0.3, 0.8)
 WAIST_PIN_HALF_WIDTH = 0.12  # m
 FRICTION = 0.5
 DAMPING = 1e-3  # s, the export's default
@@ -83,16 +92,18 @@ DAMPING = 1e-3  # s, the export's default
 SHIRT_DEPTH = 0.16
 PANTS_DEPTH = 0.14
 # Patterns as unions of rectangles (y0, y1, z0, z1) in m, in the panel plane (y left, z up).
-SHIRT_PATTERN = ((-0.24, 0.24, 0.96, 1.52), (-0.50, 0.50, 1.33, 1.52))
-SHIRT_NECK_HALF_WIDTH = 0.09
+SHIRT_PATTERN = ((-0.27, 0.27, 0.96, 1.60), (-0.50, 0.50, 1.30, 1.56))
+SHIRT_NECK_HALF_WIDTH = 0.11
 PANTS_PATTERN = ((-0.26, 0.26, 0.14, 1.00),)
-PANTS_CROTCH = 0.80  # below it the legs are apart (a gap of two grid cells at y = 0)
+PANTS_CROTCH = 0.80  # below it the legs are apart (a gap of one grid cell centred on y = 0)
 
 # Scripted motion: keyframes (time s, joint targets rad or m); joints not named are at 0.
 _ARMS_DOWN = {"l_shoulder": -math.radians(60), "r_shoulder": -math.radians(60),
               "l_elbow": math.radians(30), "r_elbow": math.radians(30)}
-_SQUAT = {"root_z": -0.2, "l_hip": -math.radians(60), "r_hip": -math.radians(60), "l_knee": math.radians(90),
-          "r_knee": math.radians(90)}
+# A half squat: at 90° knees the thigh and shin capsules overlap behind the knee and pinch the
+# pants' cloth inside them (a real leg squeezes it out; capsules cannot).
+_SQUAT = {"root_z": -0.12, "l_hip": -math.radians(45), "r_hip": -math.radians(45), "l_knee": math.radians(70),
+          "r_knee": math.radians(70)}
 MOTION = ((0.0, {}), (1.0, {}), (2.0, _ARMS_DOWN),
           (3.0, {"l_shoulder": math.radians(40), "r_shoulder": math.radians(40)}), (3.5, {}),
           (4.5, {"abdomen": math.radians(30)}), (5.5, {"abdomen": -math.radians(30)}), (6.0, {}),
@@ -108,6 +119,13 @@ def motion_targets(t: float) -> dict[str, float]:
     return dict(MOTION[-1][1])
 
 
+def seam_time_constant(t: float) -> float:
+    """The seams' solref time constant (s) at time ``t`` (s): see :data:`SEAM_TIGHTEN_S`."""
+    start, end = SEAM_TIGHTEN_S
+    s = min(max((t - start) / (end - start), 0.0), 1.0)
+    return SEAM_SOLREF[0] * (SEAM_TIME_CONSTANT_SEWN / SEAM_SOLREF[0]) ** s
+
+
 def garment_panel(kind: str, spacing: float) -> tuple[trimesh.Trimesh, np.ndarray]:
     """A garment's pattern in its plane: a ``trimesh.Trimesh`` with vertices ``(0, y, z)`` (m) on
     a regular grid of ``spacing`` (cells kept whose centre lies inside the pattern, grid lines at
@@ -116,16 +134,20 @@ def garment_panel(kind: str, spacing: float) -> tuple[trimesh.Trimesh, np.ndarra
     rects = SHIRT_PATTERN if kind == "shirt" else PANTS_PATTERN
     y0, y1 = min(r[0] for r in rects), max(r[1] for r in rects)
     z0, z1 = min(r[2] for r in rects), max(r[3] for r in rects)
-    iy = np.arange(math.floor(y0 / spacing), math.ceil(y1 / spacing) + 1)
+    # The pants' grid is offset by half a cell so that one column of cells is centred on y = 0:
+    # removing it below the crotch parts the legs with inseams at |y| = spacing / 2, inside the gap
+    # between the thighs.
+    offset = 0.5 * spacing if kind == "pants" else 0.0
+    iy = np.arange(math.floor((y0 - offset) / spacing), math.ceil((y1 - offset) / spacing) + 1)
     iz = np.arange(math.floor(z0 / spacing), math.ceil(z1 / spacing) + 1)
     ny, nz = len(iy), len(iz)
-    y, z = np.meshgrid(iy * spacing, iz * spacing, indexing="ij")
+    y, z = np.meshgrid(iy * spacing + offset, iz * spacing, indexing="ij")
     cy, cz = 0.5 * (y[:-1, :-1] + y[1:, 1:]), 0.5 * (z[:-1, :-1] + z[1:, 1:])
     inside = np.zeros(cy.shape, bool)
     for a, b, c, d in rects:
         inside |= (cy > a) & (cy < b) & (cz > c) & (cz < d)
     if kind == "pants":
-        inside &= ~((np.abs(cy) < spacing) & (cz < PANTS_CROTCH))
+        inside &= ~((np.abs(cy) < 0.5 * spacing) & (cz < PANTS_CROTCH))
     i, j = np.nonzero(inside)
     v00 = i * nz + j
     faces = np.concatenate([np.stack([v00, v00 + nz, v00 + nz + 1], 1), np.stack([v00, v00 + nz + 1, v00 + 1], 1)])
@@ -225,6 +247,7 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
     model = compile_quietly(spec)
     data = mujoco.MjData(model)
     actuators = {model.actuator(i).name: i for i in range(model.nu)}
+    seams = np.array([i for i in range(model.neq) if "_seam_" in model.equality(i).name])
     geoms = np.array([g for g in range(model.ngeom) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE])
     geom_names = [model.geom(g).name for g in geoms]
     vert = {kind: np.concatenate([np.arange(model.flex_vertadr[_flex_id(model, f)],
@@ -265,6 +288,7 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
             break
         if progress and step % 1000 == 0:
             progress(f"body: {t:.1f}/{seconds:.1f} s simulated")
+        model.eq_solref[seams, 0] = seam_time_constant(t)
         for joint, value in motion_targets(t + model.opt.timestep).items():
             data.ctrl[actuators[joint]] = value
         start = time.perf_counter()
