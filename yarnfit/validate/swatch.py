@@ -85,6 +85,8 @@ STRAINS = (0.02, 0.05, 0.10)
 # 40 s. A strip of FAB's 8 × 5 cm would be 100 times that many nodes. Quick is for CI.
 FULL_SIZE = {"gauge": 4.0, "width": 3.0, "clamp": 0.5}
 QUICK_SIZE = {"gauge": 2.0, "width": 1.5, "clamp": 0.5}
+# Quick strips larger than this many nodes are shrunk to it (CI's time budget).
+QUICK_MAX_NODES = 600
 # Pieces shorter than this fraction of the repeat's smaller side are dropped (clipped fragments).
 MIN_PIECE_FRACTION = 0.5
 # A node within this fraction of an edge length outside the jaw line still counts as clamped
@@ -384,6 +386,12 @@ def stretch_repeat(model: RodModel, position: np.ndarray, material: RodMaterial,
     try:
         for direction in directions:
             swatch = cut_swatch(model, position, material, direction=direction, **dims)
+            if quick and swatch.model.n_nodes > QUICK_MAX_NODES:
+                # A dense weave's quick strip of QUICK_SIZE repeats is thousands of nodes (a satin's
+                # 2900, 45 s per strain): shrink gauge and width to the node budget, same shape.
+                shrink = math.sqrt(QUICK_MAX_NODES / swatch.model.n_nodes)
+                swatch = cut_swatch(model, position, material, direction=direction, gauge=dims["gauge"] * shrink,
+                                    width=dims["width"] * shrink, clamp=dims["clamp"])
             if progress is not None:
                 progress(f"{direction}: {swatch.model.n_nodes} nodes in {swatch.model.n_rods} pieces, "
                          f"{1e3 * swatch.gauge:.3g} × {1e3 * swatch.width:.3g} mm between the jaws")
