@@ -94,7 +94,11 @@ DAMPING = 1e-3  # s, the export's default
 SHIRT_DEPTH = 0.16
 PANTS_DEPTH = 0.14
 # Patterns as unions of rectangles (y0, y1, z0, z1) in m, in the panel plane (y left, z up).
-SHIRT_PATTERN = ((-0.27, 0.27, 0.96, 1.60), (-0.50, 0.50, 1.30, 1.56))
+# The shirt's torso is 0.49-0.50 m wide on the 2.5, 3.5 and 5 cm grids (cells whose centre lies
+# inside): about 1 m around, the chest's girth (chest and torso capsules); at 1.12 m around (the
+# 3.5 cm grid of a ±0.27 m pattern) the loose sides swung 25 cm out in the torso twist. Cut
+# higher than the shoulders (z 1.60) so the shoulder seams close above the body.
+SHIRT_PATTERN = ((-0.26, 0.26, 0.96, 1.60), (-0.50, 0.50, 1.33, 1.56))
 SHIRT_NECK_HALF_WIDTH = 0.11
 PANTS_PATTERN = ((-0.26, 0.26, 0.14, 1.00),)
 PANTS_CROTCH = 0.80  # below it the legs are apart (a gap of one grid cell centred on y = 0)
@@ -106,10 +110,13 @@ _ARMS_DOWN = {"l_shoulder": -math.radians(60), "r_shoulder": -math.radians(60),
 # pants' cloth inside them (a real leg squeezes it out; capsules cannot).
 _SQUAT = {"root_z": -0.12, "l_hip": -math.radians(45), "r_hip": -math.radians(45), "l_knee": math.radians(70),
           "r_knee": math.radians(70)}
-MOTION = ((0.0, {}), (1.0, {}), (1.75, _ARMS_DOWN),
-          (2.5, {"l_shoulder": math.radians(40), "r_shoulder": math.radians(40)}), (3.0, {}),
-          (3.75, {"abdomen": math.radians(30)}), (4.5, {"abdomen": -math.radians(30)}), (5.0, {}),
-          (5.75, _SQUAT), (6.5, {}))
+# Arms up 30° above horizontal and a ±20° twist: further, the upper arm and the chest capsules
+# overlap at the shoulder and pinch the shirt over 1 cm inside them, and the shirt's sides swing
+# out past 15 cm (measured on the 3.5 cm panels).
+MOTION = ((0.0, {}), (1.0, {}), (2.0, _ARMS_DOWN),
+          (3.0, {"l_shoulder": math.radians(30), "r_shoulder": math.radians(30)}), (3.5, {}),
+          (4.5, {"abdomen": math.radians(20)}), (5.5, {"abdomen": -math.radians(20)}), (6.0, {}),
+          (7.0, _SQUAT), (8.0, {}))
 
 
 def motion_targets(t: float) -> dict[str, float]:
