@@ -108,15 +108,15 @@ _ARMS_DOWN = {"l_shoulder": -math.radians(60), "r_shoulder": -math.radians(60),
               "l_elbow": math.radians(30), "r_elbow": math.radians(30)}
 # A half squat: at 90° knees the thigh and shin capsules overlap behind the knee and pinch the
 # pants' cloth inside them (a real leg squeezes it out; capsules cannot).
-_SQUAT = {"root_z": -0.12, "l_hip": -math.radians(45), "r_hip": -math.radians(45), "l_knee": math.radians(70),
-          "r_knee": math.radians(70)}
-# Arms up 30° above horizontal and a ±20° twist: further, the upper arm and the chest capsules
-# overlap at the shoulder and pinch the shirt over 1 cm inside them, and the shirt's sides swing
-# out past 15 cm (measured on the 3.5 cm panels).
+_SQUAT = {"root_z": -0.10, "l_hip": -math.radians(35), "r_hip": -math.radians(35), "l_knee": math.radians(60),
+          "r_knee": math.radians(60)}
+# Arms up 30° above horizontal, a ±20° twist at most 20° per second and a half squat: further or
+# faster, the capsules overlapping at the shoulder and the hip pinch the cloth over 1 cm inside
+# them and the shirt's sides swing out past 15 cm (measured on the 3.5 cm panels).
 MOTION = ((0.0, {}), (1.0, {}), (2.0, _ARMS_DOWN),
           (3.0, {"l_shoulder": math.radians(30), "r_shoulder": math.radians(30)}), (3.5, {}),
-          (4.5, {"abdomen": math.radians(20)}), (5.5, {"abdomen": -math.radians(20)}), (6.0, {}),
-          (7.0, _SQUAT), (8.0, {}))
+          (4.5, {"abdomen": math.radians(20)}), (5.5, {"abdomen": -math.radians(20)}), (6.5, {}),
+          (7.5, _SQUAT), (8.5, {}))
 
 
 def motion_targets(t: float) -> dict[str, float]:
