@@ -78,11 +78,11 @@ PENETRATION_TARGET = 0.01  # m
 DISTANCE_TARGET = 0.15  # m
 # Seams: connect equalities, critically damped, whose time constant falls geometrically from
 # SEAM_SOLREF[0] to SEAM_TIME_CONSTANT_SEWN over SEAM_TIGHTEN_S. Soft at first (50 ms), so the
-# panels meet without a jolt (MuJoCo's default 20 ms closes 0.3 m gaps violently); then as stiff
-# as the capsule contacts (MuJoCo's default 20 ms): at 50 ms a constraint on a vertex of 0.3 g
-# pulls with millinewtons, the cloth's tension holds seams open against the body and the shirt
-# slides off; stiffer than the contacts (2 ms) the seams win and pull seam vertices 2 cm into the
-# shins (measured on the quick panels).
+# panels meet without a jolt (MuJoCo's default 20 ms closes 0.3 m gaps violently); then 20 ms,
+# softer than the capsule contacts (5 ms, mjcf/humanoid.xml): at 50 ms a constraint on a vertex of
+# 0.3 g pulls with millinewtons, the cloth's tension holds seams open against the body and the
+# shirt slides off; stiffer than the contacts (2 ms against 20 ms) the seams won and pulled seam
+# vertices 2 cm into the shins (measured on the quick panels).
 SEAM_SOLREF = (0.05, 1.0)
 SEAM_TIME_CONSTANT_SEWN = 0.02
 SEAM_TIGHTEN_S = (0.3, 0.8)
