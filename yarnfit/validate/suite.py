@@ -27,8 +27,9 @@ class IncompatibleMaterial(ValueError):
 
 REQUIRED_KEYS = ("yarnfit_version", "inputs", "shell", "engineering")
 # How far past the shell's last measured strain a yarn point may lie and still be compared
-# (relative): the servo leaves the measured strain ~1 % below the nominal level.
-SHELL_RANGE_SLACK = 0.02
+# (relative): the servo leaves the measured strain below the nominal level, ~1 % for wovens, up to
+# 5 % for the clamped strips of knits (a jersey's bias strip stops at 9.52 % of 10 %).
+SHELL_RANGE_SLACK = 0.06
 # The shell strips compared with the yarn swatch: 8 cm long (the FAB length), the swatch's
 # proportions; vertices along them (criss-cross cells as in the FAB strips: full within 1 % of the
 # mesh-converged clamped law for the presets, quick within 6 %) and of the fine criss-cross grid
