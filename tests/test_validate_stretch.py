@@ -8,7 +8,7 @@ import pytest
 import rerun as rr
 
 from fabric_shell import FABRIC
-from yarnfit.mujoco.scenes import SceneMaterial
+from yarnfit.mujoco.scenes import SceneMaterial, grid_mesh
 from yarnfit.shell import ShellMaterial
 from yarnfit.validate.reference import read_reference
 from yarnfit.validate.stretch import DIRECTIONS, pull_strip, run_stretch
@@ -50,12 +50,6 @@ def test_small_strain_force_follows_the_clamped_shell_law(material, direction):
     assert result.strain[0] == pytest.approx(0.002, rel=SERVO_LAG_RTOL)
 
 
-def _strip_mesh(length, width, nx, ny):
-    from yarnfit.mujoco.scenes import grid_mesh
-
-    return grid_mesh(nx, ny, length, width)
-
-
 # Discretisation error of the linear reference on the grids below against the closed forms; the
 # long strip's end zones (a width long, where the clamps hold the contraction) add ~ν² W/L.
 CLOSED_FORM_RTOL = 0.02
@@ -65,7 +59,7 @@ CLOSED_FORM_RTOL = 0.02
 def test_clamped_strip_law_without_poisson_is_the_uniaxial_law(angle):
     from yarnfit.validate.stretch import clamped_strip_stiffness
 
-    points, triangles = _strip_mesh(0.08, 0.05, 9, 6)
+    points, triangles = grid_mesh(9, 6, 0.08, 0.05)
     shell = NO_POISSON.shell
     if angle not in (0.0, math.pi / 2):
         # Rotated axes couple shear into the pull: only the isotropic no-Poisson law stays uniaxial.
@@ -81,8 +75,8 @@ def test_clamped_strip_law_between_uniaxial_and_plane_strain():
     c = E / (1 - nu**2)
     shell = ShellMaterial(thickness=H, s00=c, s01=nu * c, s11=c, s22=0.5 * (1 - nu) * c, b00=1.0, b01=0.0,
                           b11=1.0, b22=0.5)
-    long = clamped_strip_stiffness(shell, *_strip_mesh(1.0, 0.02, 201, 5), 0.0)
-    short = clamped_strip_stiffness(shell, *_strip_mesh(0.005, 0.5, 5, 401), 0.0)
+    long = clamped_strip_stiffness(shell, *grid_mesh(201, 5, 1.0, 0.02), 0.0)
+    short = clamped_strip_stiffness(shell, *grid_mesh(5, 401, 0.005, 0.5), 0.0)
     assert long == pytest.approx(E * H, rel=CLOSED_FORM_RTOL) and long > E * H
     assert short == pytest.approx(E * H / (1 - nu**2), rel=CLOSED_FORM_RTOL) and short < E * H / (1 - nu**2)
 
@@ -166,7 +160,6 @@ SHEAR_SOFT = ShellMaterial(thickness=H, s00=4.0e8, s01=5.0e7, s11=6.0e8, s22=2.0
 
 
 def test_crisscross_cells_do_not_lock_on_the_bias():
-    from yarnfit.mujoco.scenes import grid_mesh
     from yarnfit.validate.stretch import clamped_strip_stiffness
 
     bias = math.pi / 4
@@ -181,8 +174,6 @@ def test_crisscross_cells_do_not_lock_on_the_bias():
 
 
 def test_crisscross_mesh_counts_and_orientation():
-    from yarnfit.mujoco.scenes import grid_mesh
-
     points, triangles = grid_mesh(4, 3, 0.3, 0.2, crisscross=True)
     assert points.shape == (4 * 3 + 3 * 2, 3) and triangles.shape == (4 * 3 * 2, 3)
     e1, e2 = points[triangles[:, 1]] - points[triangles[:, 0]], points[triangles[:, 2]] - points[triangles[:, 0]]

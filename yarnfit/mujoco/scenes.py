@@ -326,7 +326,7 @@ def _strip(spec: mujoco.MjSpec, shell: ShellMaterial, resolution: int, length: f
     """The stretch scene: a strip from x = 0 to ``length``, its left edge on the world, its right
     edge on the clamp; no gravity."""
     spec.option.gravity = [0.0, 0.0, 0.0]
-    ny = max(2, round((resolution - 1) * width / length) + 1)
+    ny = strip_columns(resolution, length, width)
     points, triangles = grid_mesh(resolution, ny, length, width, crisscross)
     points[:, 0] += 0.5 * length
     points[:, 2] = 0.1
@@ -334,6 +334,12 @@ def _strip(spec: mujoco.MjSpec, shell: ShellMaterial, resolution: int, length: f
     left, right = column == 0, column == resolution - 1
     clamp = _clamp(spec, shell, length, width, max_strain, position=[length, 0.0, 0.1])
     return _Layout(points, triangles, {"world": left, clamp.name: right}, collide=False)
+
+
+def strip_columns(resolution: int, length: float, width: float) -> int:
+    """Vertices across a strip with ``resolution`` vertices along its ``length``: the same spacing
+    across its ``width`` (m), at least 2."""
+    return max(2, round((resolution - 1) * width / length) + 1)
 
 
 def grid_mesh(nx: int, ny: int, lx: float, ly: float, crisscross: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -91,6 +91,27 @@ class StripResult:
     wall_seconds: float
     clamped_law_n_per_m: float  # clamped_strip_stiffness on the scene's own mesh
 
+    def summary(self, shell) -> dict:
+        """The strip's figures for ``summary.json`` (JSON values, keys carrying units), beside the
+        small-strain uniaxial and clamped laws of ``shell`` at its first level."""
+        stiffness, poisson = shell.uniaxial_stiffness(self.angle_rad)
+        small_strain = float(self.force_per_width_n_per_m[0] / self.strain[0])
+        return {
+            "length_m": self.length_m,
+            "width_m": self.width_m,
+            "angle_rad": self.angle_rad,
+            "strain": self.strain.tolist(),
+            "force_per_width_n_per_m": self.force_per_width_n_per_m.tolist(),
+            "compression_ratio": self.compression_ratio.tolist(),
+            "settled": self.settled.tolist(),
+            "uniaxial_law_n_per_m": stiffness,
+            "uniaxial_law_poisson": poisson,
+            "small_strain_stiffness_over_law": small_strain / stiffness,
+            "clamped_law_n_per_m": self.clamped_law_n_per_m,
+            "small_strain_stiffness_over_clamped_law": small_strain / self.clamped_law_n_per_m,
+            "wall_seconds": self.wall_seconds,
+        }
+
 
 def pull_strip(material: SceneMaterial, strip: str, direction: str, *, quick: bool = False,
                max_strain: float = STRAIN_LEVELS[-1], on_level: Callable | None = None,
@@ -255,26 +276,7 @@ def run_stretch(material: SceneMaterial | str | Path, *, quick: bool = False, re
             callback = recording.level_logger(name) if recording else None
             results.append(pull_strip(material, strip, direction, quick=quick, max_strain=max_strain,
                                       on_level=callback))
-    summary = {"strips": {}}
-    for result in results:
-        stiffness, poisson = material.shell.uniaxial_stiffness(result.angle_rad)
-        first = result.strain[0]
-        summary["strips"][result.name] = {
-            "length_m": result.length_m,
-            "width_m": result.width_m,
-            "angle_rad": result.angle_rad,
-            "strain": result.strain.tolist(),
-            "force_per_width_n_per_m": result.force_per_width_n_per_m.tolist(),
-            "compression_ratio": result.compression_ratio.tolist(),
-            "settled": result.settled.tolist(),
-            "uniaxial_law_n_per_m": stiffness,
-            "uniaxial_law_poisson": poisson,
-            "small_strain_stiffness_over_law": float(result.force_per_width_n_per_m[0] / first / stiffness),
-            "clamped_law_n_per_m": result.clamped_law_n_per_m,
-            "small_strain_stiffness_over_clamped_law": float(
-                result.force_per_width_n_per_m[0] / first / result.clamped_law_n_per_m),
-            "wall_seconds": result.wall_seconds,
-        }
+    summary = {"strips": {result.name: result.summary(material.shell) for result in results}}
     if reference is not None:
         from .reference import compare
 

@@ -124,7 +124,7 @@ def shell_strips_like_swatch(material, yarn: dict, *, quick: bool = False) -> di
     proportions. Each strip carries ``fine_mesh_law_n_per_m``, the clamped law on a fine
     criss-cross grid (:data:`FINE_MESH_RESOLUTION` vertices along), and ``mesh_stiffening``, the
     scene mesh's clamped law over it (design notes §7: meshes with one diagonal per cell lock)."""
-    from ..mujoco.scenes import grid_mesh
+    from ..mujoco.scenes import grid_mesh, strip_columns
     from .stretch import DIRECTIONS, clamped_strip_stiffness, pull_strip
 
     out = {"strips": {}}
@@ -133,16 +133,12 @@ def shell_strips_like_swatch(material, yarn: dict, *, quick: bool = False) -> di
         width = length * curve["width_m"] / curve["gauge_m"]
         result = pull_strip(material, "swatch", direction, quick=quick, max_strain=max(curve["strain"]),
                             dimensions=(length, width), resolution=LIKE_SWATCH_RESOLUTION[quick])
-        ny = round((FINE_MESH_RESOLUTION - 1) * width / length) + 1
-        fine = clamped_strip_stiffness(material.shell, *grid_mesh(FINE_MESH_RESOLUTION, ny, length, width,
-                                                                  crisscross=True), DIRECTIONS[direction])
-        out["strips"][f"swatch_{direction}"] = {
-            "length_m": length, "width_m": width, "resolution": LIKE_SWATCH_RESOLUTION[quick],
-            "strain": result.strain.tolist(), "force_per_width_n_per_m": result.force_per_width_n_per_m.tolist(),
-            "compression_ratio": result.compression_ratio.tolist(), "settled": result.settled.tolist(),
-            "clamped_law_n_per_m": result.clamped_law_n_per_m, "fine_mesh_law_n_per_m": fine,
-            "mesh_stiffening": result.clamped_law_n_per_m / fine, "wall_seconds": result.wall_seconds,
-        }
+        fine_mesh = grid_mesh(FINE_MESH_RESOLUTION, strip_columns(FINE_MESH_RESOLUTION, length, width), length,
+                              width, crisscross=True)
+        fine = clamped_strip_stiffness(material.shell, *fine_mesh, DIRECTIONS[direction])
+        out["strips"][result.name] = {**result.summary(material.shell), "resolution": LIKE_SWATCH_RESOLUTION[quick],
+                                      "fine_mesh_law_n_per_m": fine,
+                                      "mesh_stiffening": result.clamped_law_n_per_m / fine}
     return out
 
 
