@@ -17,6 +17,7 @@ from yarnfit.fabric import (
 )
 from yarnfit.materials import get_fiber
 from yarnfit.patterns import read_pyp
+from yarnfit.yarn import SPINNING_DEFAULTS, YarnConstruction
 
 HYLC = Path(__file__).parent / "data" / "hylc"
 # The radius is a fixed point of the formula over the geometry, iterated to 1e-6 relative.
@@ -31,9 +32,11 @@ def test_the_papers_five_fabrics_are_presets():
 def test_preset_radius_solves_the_papers_formula(name):
     fabric = Fabric.preset(name)
     pattern = fabric.pattern()
-    # r = sqrt(ρ_fabric p_x p_y / (ρ_yarn L0 π)), L0 the yarn length of the generated repeat.
+    # r = sqrt(ρ_fabric p_x p_y / (ρ_yarn L0 π)), L0 the yarn length of the generated repeat and
+    # ρ_yarn = φ ρ_fibre the density of the yarn (fibres packed at φ).
     px, py = pattern.repeat_size
-    expected = math.sqrt(fabric.areal_density * px * py / (fabric.fiber.density_kg_m3 * pattern.yarn_length() * math.pi))
+    yarn_density = fabric.yarn.packing_fraction_for(fabric.fiber) * fabric.fiber.density_kg_m3
+    expected = math.sqrt(fabric.areal_density * px * py / (yarn_density * pattern.yarn_length() * math.pi))
     assert pattern.radius == pytest.approx(expected, rel=RADIUS_RTOL)
     assert 10e-6 < pattern.radius < 500e-6  # a real yarn: tens to hundreds of micrometres
 
@@ -90,6 +93,14 @@ def test_a_pyp_file_without_label_numbers_is_used_as_written():
     assert fabric.shrink == 1.0
 
 
+@pytest.mark.parametrize("model", ["solid", "fibre-assembly"])
+def test_the_yarn_density_is_the_packed_fibres(model):
+    # The solid rod is a cylinder of fibre (φ = 1); a fibre assembly packs φ < 1 of fibre.
+    fabric = Fabric.preset("cotton-twill", yarn=YarnConstruction(model=model))
+    phi = 1.0 if model == "solid" else SPINNING_DEFAULTS["ring-spun"].packing_fraction
+    assert fabric.yarn_density == phi * fabric.fiber.density_kg_m3
+
+
 def test_a_pyp_file_with_an_areal_density_is_resized_and_shrunk():
     fabric = Fabric(name="t", fiber=get_fiber("polyester"), pattern_file=str(HYLC / "stockinette.pyp"),
                     areal_density=0.15, counts=(1800.0, 1300.0))
@@ -98,7 +109,8 @@ def test_a_pyp_file_with_an_areal_density_is_resized_and_shrunk():
     # Two courses and two wales per repeat in that file.
     np.testing.assert_allclose(pattern.repeat_size, [2 / 1300.0, 2 / 1800.0])
     px, py = pattern.repeat_size
-    expected = math.sqrt(0.15 * px * py / (fabric.fiber.density_kg_m3 * pattern.yarn_length() * math.pi))
+    yarn_density = fabric.yarn.packing_fraction_for(fabric.fiber) * fabric.fiber.density_kg_m3
+    expected = math.sqrt(0.15 * px * py / (yarn_density * pattern.yarn_length() * math.pi))
     assert pattern.radius == pytest.approx(expected, rel=RADIUS_RTOL)
 
 

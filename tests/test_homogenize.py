@@ -36,6 +36,7 @@ from yarnfit.materials import FiberMaterial, get_fiber
 from yarnfit.patterns import YarnPattern
 from yarnfit.relax import relax_pattern
 from yarnfit.shell import ShellMaterial
+from yarnfit.yarn import YarnConstruction
 
 # Second differences of the map at step 1e-5 m: truncation ~κ³ h² ~ 1e-6 relative at κ = 300/m.
 FORM_RTOL = 1e-5
@@ -220,24 +221,29 @@ def test_parallel_and_serial_solves_agree():
 # -- end to end ------------------------------------------------------------------------------------
 
 
-def test_straight_parallel_yarns_give_the_closed_form_stiffness():
+@pytest.mark.parametrize("model", ["solid", "fibre-assembly"])
+def test_straight_parallel_yarns_give_the_closed_form_stiffness(model):
     # One straight weft yarn per repeat, spacing d = 3r (not touching, no empty band wider than a
     # diameter), of a linear fibre; breaking strain 2 % keeps the stretch samples where Green and
-    # engineering strain agree to 1 %.
+    # engineering strain agree to 1 %. Closed forms in the yarn's rigidities: stretch EA/d,
+    # bending EI/d (solid rod: E π r²/d and E π r⁴/(4d)).
     r, d, E = 1e-4, 3e-4, 2e9
     fiber = FiberMaterial(name="linear", density_kg_m3=1000.0, young_min_pa=E, young_max_pa=E, breaking_strain=0.02,
-                          poisson=0.3, friction=0.2)
+                          poisson=0.3, friction=0.2, fineness_dtex=2.0, flexural_rigidity_nm2_per_tex2=0.5e-9,
+                          torsional_rigidity_nm2_per_tex2=0.2e-9)
     x = np.linspace(0.0, 2e-3, 16, endpoint=False)
     points = np.column_stack([x, np.full_like(x, 0.5 * d), np.zeros_like(x)])
     pattern = YarnPattern.from_yarns("parallel", "woven", (2e-3, d), r, [(points, (1, 0))])
-    relaxed = relax_pattern(pattern, fiber, shrink=1.0)
+    relaxed = relax_pattern(pattern, fiber, shrink=1.0, yarn=YarnConstruction(model=model))
     assert relaxed.valid
     results = solve_samples(relaxed, sample_design(default_ranges(relaxed), 2), workers=1)
     assert all(s.converged for s in results)
     # The paper's model: with no warp bending stiffness at all, b01 is not identifiable.
     material = fit_shell(fit_samples(results), shell_thickness(relaxed), model="paper").material
     eng = material.engineering()
-    stretch, bending = E * math.pi * r**2 / d, E * math.pi * r**4 / (4 * d)
+    stretch, bending = relaxed.yarn.tensile_rigidity_n / d, relaxed.yarn.bending_rigidity_nm2 / d
+    if model == "solid":
+        assert (stretch, bending) == (E * math.pi * r**2 / d, E * math.pi * r**4 / (4 * d))
     assert eng["weft_stretch_n_per_m"] == pytest.approx(stretch, rel=ANALYTIC_RTOL)
     assert eng["bending_weft_nm"] == pytest.approx(bending, rel=ANALYTIC_RTOL)
     assert eng["warp_stretch_n_per_m"] <= DECOUPLED_RATIO * stretch

@@ -15,7 +15,9 @@ import pytest
 from yarnfit.fabric import Fabric, named_patterns
 from yarnfit.materials import FiberMaterial, get_fiber
 from yarnfit.patterns import DRAFTS
-from yarnfit.relax import OVERLAP_TOLERANCE, relax, relax_pattern, relaxed_energy, rod_material
+from yarnfit.engine import RodMaterial
+from yarnfit.relax import OVERLAP_TOLERANCE, relax, relax_pattern, relaxed_energy
+from yarnfit.yarn import Yarn, YarnConstruction
 
 HYLC = Path(__file__).parent / "data" / "hylc"
 # The acceptance bound on overlaps after relaxation: 1 % of the diameter. (The solver's own
@@ -75,7 +77,9 @@ def test_the_relaxed_repeat_carries_the_labels_areal_density(preset):
     assert result.converged
     length = relaxed_centreline_length(result).sum()
     px, py = result.repeat_size
-    mass_per_area = fabric.fiber.density_kg_m3 * np.pi * result.radius**2 * length / (px * py)
+    # Fibre mass per yarn length ρ φ π r² (the yarn packs its fibres at φ).
+    phi = result.yarn.packing_fraction
+    mass_per_area = fabric.fiber.density_kg_m3 * phi * np.pi * result.radius**2 * length / (px * py)
     assert mass_per_area == pytest.approx(fabric.areal_density, rel=AREAL_DENSITY_RTOL)
 
 
@@ -126,19 +130,20 @@ def test_relaxing_a_relaxed_repeat_changes_nothing(structure):
     assert abs(relaxed_energy(first).total) <= RERELAX_ENERGY_RTOL * abs(first.energy.total)
 
 
-def test_rod_material_follows_the_papers_yarn_model():
+def test_the_solid_yarn_is_the_papers_rod():
+    # The paper's yarn: a solid cylinder of E_min, ν, ρ whose modulus grows as E_min + k ε and
+    # reaches E_max at the breaking strain, in tension and compression alike.
     fiber = get_fiber("wool")
-    material = rod_material(fiber)
-    assert material.young_modulus == fiber.young_min_pa
-    assert material.density == fiber.density_kg_m3
-    assert material.poisson_ratio == fiber.poisson
-    # E(ε) = E_min + k ε reaches E_max at the breaking strain.
+    relaxed = relax(Fabric.preset("wool-jersey", yarn=YarnConstruction(model="solid")))
     slope = (fiber.young_max_pa - fiber.young_min_pa) / fiber.breaking_strain
-    assert material.hardening_tension == pytest.approx(slope)
-    assert material.hardening_compression == pytest.approx(slope)
+    paper = RodMaterial(young_modulus=fiber.young_min_pa, poisson_ratio=fiber.poisson, density=fiber.density_kg_m3,
+                        hardening_tension=slope, hardening_compression=slope).section(relaxed.radius)
+    assert relaxed.yarn.section() == paper
+    np.testing.assert_array_equal(relaxed.model.joint_stiffness[:, 0], paper.bending_rigidity[0])
+    np.testing.assert_array_equal(relaxed.model.edge_stretch_stiffness, paper.tensile_rigidity)
     linear = FiberMaterial(name="linear", density_kg_m3=1000.0, young_min_pa=2e9, young_max_pa=2e9,
                            breaking_strain=0.2, poisson=0.3, friction=0.2)
-    assert rod_material(linear).hardening_tension == 0.0
+    assert Yarn.build(linear, YarnConstruction(model="solid"), 90e-6).section().hardening_tension == 0.0
 
 
 def test_progress_reports_positions_in_yarn_order():

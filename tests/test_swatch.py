@@ -103,11 +103,11 @@ def test_small_weave_balances_with_contacts():
     # balance, contacts included) and it does not widen.
     from yarnfit.fabric import Fabric
     from yarnfit.materials import get_fiber
-    from yarnfit.relax import relax, rod_material
+    from yarnfit.relax import relax
 
     fabric = Fabric(name="plain", fiber=get_fiber("cotton"), structure="plain", areal_density=0.2)
     relaxed = relax(fabric)
-    out = stretch_repeat(relaxed.model, relaxed.state.node_position, rod_material(fabric.fiber), name="plain",
+    out = stretch_repeat(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), name="plain",
                          directions=("weft",), strains=(0.02,), size={"gauge": 1.5, "width": 1.0, "clamp": 0.5})
     point = out["directions"]["weft"]["points"][1]
     assert point["converged"]

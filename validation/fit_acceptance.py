@@ -24,6 +24,7 @@ from yarnfit.material import fit_fabric, fit_samples, shell_thickness
 from yarnfit.materials import FiberMaterial, get_fiber
 from yarnfit.patterns import YarnPattern
 from yarnfit.relax import relax_pattern
+from yarnfit.yarn import YarnConstruction
 
 
 def analytic() -> None:
@@ -33,7 +34,7 @@ def analytic() -> None:
     nodes = np.linspace(0.0, 2e-3, 16, endpoint=False)
     yarn = np.column_stack([nodes, np.full_like(nodes, 0.5 * spacing), np.zeros_like(nodes)])
     repeat = YarnPattern.from_yarns("straight", "woven", (2e-3, spacing), radius, [(yarn, (1, 0))])
-    relaxed = relax_pattern(repeat, linear, shrink=1.0)
+    relaxed = relax_pattern(repeat, linear, shrink=1.0, yarn=YarnConstruction(model="solid"))
     results = solve_samples(relaxed, sample_design(default_ranges(relaxed), 2))
     for model in ("paper", "full"):
         fit = fit_shell(fit_samples(results), shell_thickness(relaxed), model=model)

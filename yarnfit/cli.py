@@ -14,6 +14,8 @@ import time
 from pathlib import Path
 
 from . import __version__
+from .materials import SPINNING_SYSTEMS
+from .yarn import YARN_MODELS
 
 EXIT_FAILED = 1
 EXIT_USAGE = 2
@@ -158,12 +160,26 @@ def add_fabric_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fiber", help="fibre name (see `yarnfit materials`)")
     parser.add_argument("--fiber-file", metavar="FIBER.json",
                         help="a fibre of your own as JSON (keys: name, density_kg_m3, young_min_pa, young_max_pa, "
-                             "breaking_strain, poisson, friction)")
+                             "breaking_strain, poisson, friction; for the fibre-assembly yarn also fineness_dtex "
+                             "or diameter_m, flexural_rigidity_nm2_per_tex2, torsional_rigidity_nm2_per_tex2)")
     parser.add_argument("--pattern", help="named weave or knit (see `yarnfit patterns`)")
     parser.add_argument("--pattern-file", metavar="FILE.pyp", help="a periodic yarn pattern in the .pyp format")
     parser.add_argument("--gsm", type=float, metavar="G", help="areal density in g/m²")
     parser.add_argument("--counts", metavar="AxB",
                         help="per cm: ends x picks for wovens, courses x wales for knits (e.g. 30x25)")
+    parser.add_argument("--yarn-model", choices=YARN_MODELS, default=None,
+                        help="fibre-assembly (default: a bundle of sliding fibres, bending and twisting near the sum "
+                             "of the fibres') or solid (the paper's solid rod of fibre material)")
+    parser.add_argument("--yarn-spinning", choices=SPINNING_SYSTEMS, default=None,
+                        help="how the yarn is spun (default: the fibre's usual system, see `yarnfit materials`)")
+    parser.add_argument("--yarn-packing", type=float, metavar="PHI",
+                        help="packing fraction of fibres in the yarn, in (0, 1] (default: the spinning system's)")
+    parser.add_argument("--yarn-twist-deg", type=float, metavar="DEG",
+                        help="surface twist angle of the yarn in degrees, in [0, 45) (default: the spinning system's)")
+    parser.add_argument("--yarn", metavar="YARN.json", dest="yarn_file",
+                        help="the yarn's construction as JSON (keys: model, spinning, packing_fraction, "
+                             "twist_angle_deg, and measured tensile_rigidity_n, bending_rigidity_nm2, "
+                             "torsional_rigidity_nm2 of a single yarn, SI units)")
 
 
 def fabric_from_arguments(args: argparse.Namespace):
@@ -175,10 +191,11 @@ def fabric_from_arguments(args: argparse.Namespace):
     counts = parse_counts(args.counts) if args.counts is not None else None
     if args.gsm is not None and not (math.isfinite(args.gsm) and args.gsm > 0):
         raise UsageError(f"--gsm must be a positive areal density in g/m², got {args.gsm:g}")
+    yarn = yarn_from_arguments(args)
     if args.preset is not None:
         if any(v is not None for v in (args.fiber, args.fiber_file, args.pattern, args.pattern_file, args.gsm, args.counts)):
             raise UsageError("a preset fixes the fabric: give either a preset or --fiber/--pattern/--gsm/--counts")
-        fabric = Fabric.preset(args.preset)
+        fabric = Fabric.preset(args.preset, yarn=yarn)
         return fabric if args.name is None else _renamed(fabric, args.name)
     if (args.fiber is None) == (args.fiber_file is None):
         raise UsageError("give a preset, or exactly one of --fiber and --fiber-file")
@@ -195,7 +212,27 @@ def fabric_from_arguments(args: argparse.Namespace):
         areal_density=None if args.gsm is None else args.gsm * 1e-3,
         counts=counts,
         pattern_file=args.pattern_file,
+        yarn=yarn,
     )
+
+
+def yarn_from_arguments(args: argparse.Namespace):
+    """The :class:`~yarnfit.yarn.YarnConstruction` of ``--yarn FILE`` or the ``--yarn-*`` options
+    (UsageError if both are given)."""
+    from .yarn import YarnConstruction, load_yarn_file
+
+    options = {"model": args.yarn_model, "spinning": args.yarn_spinning, "packing_fraction": args.yarn_packing,
+               "twist_angle_deg": args.yarn_twist_deg}
+    given = {key: value for key, value in options.items() if value is not None}
+    if args.yarn_file is not None:
+        if given:
+            raise UsageError("give the yarn either as --yarn FILE or with --yarn-model/--yarn-spinning/--yarn-packing/"
+                             "--yarn-twist-deg, not both")
+        return load_yarn_file(args.yarn_file)
+    try:
+        return YarnConstruction(**given)
+    except ValueError as exc:
+        raise UsageError(f"yarn: {exc}") from None
 
 
 def parse_counts(text: str) -> tuple[float, float]:
@@ -347,6 +384,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
         sampling_started[0] = time.perf_counter()
         line.message(f"relaxed in {relaxed.seconds:.1f} s (radius {relaxed.radius * 1e6:.2f} µm); solving samples",
                      force=True)
+        for text in relaxed.yarn.describe():
+            line.message(text, force=True)
 
     def progress(done, total, result):
         now = time.perf_counter()
@@ -435,6 +474,7 @@ def fit_summary(fitted, output, recording_path) -> str:
         f"{fabric.name}: {fabric.fiber.name}, {relaxed.pattern.family} "
         f"{fabric.structure or Path(str(fabric.pattern_file)).name}, {label}; {fit.model} model, "
         f"{_plural(used, 'sample')} fitted" + (f", {excluded} excluded (did not converge)" if excluded else ""),
+        *(f"  {text}" for text in relaxed.yarn.describe()),
         f"  {'weft stretch':<16}{eng['weft_stretch_n_per_m']:12.5g} N/m",
         f"  {'warp stretch':<16}{eng['warp_stretch_n_per_m']:12.5g} N/m",
         f"  {'poisson weft':<16}{eng['poisson_weft']:12.4g}",
@@ -465,6 +505,7 @@ def relax_summary(result, fabric, recording_path, output) -> str:
         f"{result.model.n_nodes} nodes",
         f"  repeat            {px * 1e3:.4g} mm × {py * 1e3:.4g} mm",
         f"  yarn radius       {result.radius * 1e6:.4g} µm",
+        *(f"  {text}" for text in result.yarn.describe()),
         f"  yarn per area     {result.yarn_length_per_area:.5g} m/m²",
         f"  areal density     {result.areal_density * 1e3:.4g} g/m²",
         f"  residual          force {result.residual.force:.2e}, torque {result.residual.torque:.2e}, "

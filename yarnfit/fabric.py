@@ -7,7 +7,8 @@ with the yarn radius of the paper's formula (§4.1)::
     r = sqrt(ρ_fabric p_x p_y / (ρ_yarn L0 π))
 
 ``ρ_fabric`` the areal density (kg/m²), ``p_x p_y`` the repeat, ``L0`` the yarn length in it and
-``ρ_yarn`` the fibre density (solid yarn: the radius is that of the fibre mass). The generated
+``ρ_yarn = φ ρ_fibre`` the yarn's density (:meth:`yarnfit.yarn.YarnConstruction.yarn_density`: φ the
+packing fraction, 1 for the paper's solid yarn, whose radius is that of the fibre mass). The generated
 geometry depends on r (crimp and loop depth scale with it), so r is the fixed point of that
 formula over the geometry; relaxation (:mod:`yarnfit.relax`) repeats the fixed point on the relaxed
 length, so the relaxed repeat carries the stated areal density.
@@ -27,6 +28,7 @@ import numpy as np
 
 from .materials import FiberMaterial, get_fiber
 from .patterns import DRAFTS, STITCHES, PatternError, YarnPattern, knit, read_pyp, weave
+from .yarn import Yarn, YarnConstruction
 
 # Shrink factors of the relaxation (paper §4.5): rest lengths are shortened so that the yarns pull
 # into contact while the repeat keeps its size.
@@ -103,6 +105,8 @@ class Fabric:
         counts: per metre, ``(ends, picks)`` or ``(courses, wales)``; ``None`` for the structure's
             typical counts (or, for a ``.pyp`` file, its own repeat size).
         pattern_file: a ``.pyp`` file instead of a named structure.
+        yarn: how the yarn is made and which yarn model to use (default: the fibre-assembly
+            model with the fibre's usual spinning system).
     """
 
     name: str
@@ -111,8 +115,11 @@ class Fabric:
     areal_density: float | None = None
     counts: tuple[float, float] | None = None
     pattern_file: str | None = None
+    yarn: YarnConstruction = YarnConstruction()
 
     def __post_init__(self) -> None:
+        if not isinstance(self.yarn, YarnConstruction):
+            raise ValueError(f"yarn must be a YarnConstruction, got {type(self.yarn).__name__}")
         if (self.structure is None) == (self.pattern_file is None):
             raise ValueError("give either a named pattern or a pattern file, not both or neither")
         if self.structure is not None and self.structure not in named_patterns():
@@ -128,14 +135,24 @@ class Fabric:
                 raise ValueError(f"counts must be two positive numbers, got {self.counts!r}")
 
     @classmethod
-    def preset(cls, name: str) -> "Fabric":
-        """One of :data:`PRESETS`."""
+    def preset(cls, name: str, yarn: YarnConstruction | None = None) -> "Fabric":
+        """One of :data:`PRESETS`, its yarn made as ``yarn`` (default: the fibre's usual yarn)."""
         key = name.strip().lower()
         if key not in PRESETS:
             raise ValueError(f"unknown preset {name!r}; presets: {', '.join(PRESETS)}")
         p = PRESETS[key]
         return cls(name=key, fiber=get_fiber(p.fiber), structure=p.pattern, areal_density=p.gsm * 1e-3,
-                   counts=(p.counts_per_cm[0] * 100.0, p.counts_per_cm[1] * 100.0))
+                   counts=(p.counts_per_cm[0] * 100.0, p.counts_per_cm[1] * 100.0),
+                   yarn=yarn or YarnConstruction())
+
+    @property
+    def yarn_density(self) -> float:
+        """Mass per yarn volume (kg/m³), ``φ ρ_fibre``: sizes the yarn radius."""
+        return self.yarn.yarn_density(self.fiber)
+
+    def yarn_at(self, radius: float) -> Yarn:
+        """The :class:`~yarnfit.yarn.Yarn` of this fabric at contact radius ``radius`` (m)."""
+        return Yarn.build(self.fiber, self.yarn, radius)
 
     @cached_property
     def file_pattern(self) -> YarnPattern | None:
@@ -177,13 +194,13 @@ class Fabric:
             if self.areal_density is None:
                 break
             length = length_override if length_override is not None else pattern.yarn_length()
-            new = radius_from_areal_density(self.areal_density, self.fiber.density_kg_m3, pattern.repeat_size, length)
+            new = radius_from_areal_density(self.areal_density, self.yarn_density, pattern.repeat_size, length)
             if abs(new / radius - 1.0) < RADIUS_TOLERANCE:
                 radius = new
                 pattern = self._build(radius)
                 break
             radius = new
-        check_packing(pattern, self.areal_density, self.fiber.density_kg_m3, self.counts_per_m(pattern))
+        check_packing(pattern, self.areal_density, self.yarn_density, self.counts_per_m(pattern))
         return pattern
 
     # -- internals ----------------------------------------------------------------------------
@@ -224,7 +241,8 @@ class Fabric:
 
 
 def radius_from_areal_density(areal_density: float, yarn_density: float, repeat_size, yarn_length: float) -> float:
-    """``r = sqrt(ρ_fabric p_x p_y / (ρ_yarn L0 π))`` (m), paper §4.1."""
+    """``r = sqrt(ρ_fabric p_x p_y / (ρ_yarn L0 π))`` (m), paper §4.1, ``ρ_yarn`` the yarn's
+    density (kg/m³: φ ρ_fibre)."""
     return math.sqrt(areal_density * repeat_size[0] * repeat_size[1] / (yarn_density * yarn_length * math.pi))
 
 
@@ -252,8 +270,8 @@ def check_packing(pattern: YarnPattern, areal_density: float | None, yarn_densit
 
     Two touching layers of parallel cylinders hold at most ``π r`` of yarn volume per area (a
     jammed plain weave); and in a woven, neighbouring parallel yarns are 1/count apart, which must
-    leave room for a diameter. Real yarns flatten and are porous, but the radius here is that of
-    the solid fibre mass, so neither bound can be exceeded by a real fabric.
+    leave room for a diameter. ``yarn_density`` is the yarn's (φ ρ_fibre), so ``r`` is the yarn's
+    own radius; real yarns also flatten where they are pressed, which round yarns cannot.
     """
     r = pattern.radius
     if areal_density is not None:

@@ -7,13 +7,20 @@ file, JSON in SI units with stable keys:
 
 - ``yarnfit_version``;
 - ``inputs``: ``fabric`` (name), ``fiber`` (name, density_kg_m3, young_min_pa, young_max_pa,
-  breaking_strain, poisson, friction, source), ``pattern`` (named structure or file), ``family``,
+  breaking_strain, poisson, friction, source, and where known fineness_dtex,
+  flexural_rigidity_nm2_per_tex2, torsional_rigidity_nm2_per_tex2, spinning), ``yarn`` (the
+  construction as given: model, spinning, packing_fraction, twist_angle_deg and measured
+  rigidities, null for defaults), ``pattern`` (named structure or file), ``family``,
   ``counts_per_m`` (``[ends, picks]`` or ``[courses, wales]``, null for a file used as written),
   ``areal_density_kg_m2`` (null likewise);
-- ``yarn``: derived yarn parameters — ``radius_m``, ``young_modulus_pa`` (E_min),
-  ``hardening_pa``, ``poisson``, ``density_kg_m3``, ``friction``, ``shrink``, ``repeat_size_m``,
-  ``yarn_length_per_area_m_per_m2``, ``areal_density_kg_m2`` (of the relaxed repeat) and the
-  relaxation's ``converged``, ``iterations``, ``residual`` and ``worst_overlap``;
+- ``yarn``: the yarn (:meth:`yarnfit.yarn.Yarn.to_dict`: ``model``, ``spinning``,
+  ``linear_density_tex``, ``fibres_per_section``, ``packing_fraction``, ``twist_angle_deg``,
+  ``radius_m``, ``tensile_rigidity_n``, ``hardening_n``, ``shear_rigidity_n``,
+  ``bending_rigidity_nm2``, ``torsional_rigidity_nm2``, ``bending_vs_solid``, ``limits``), the
+  fibre's ``young_modulus_pa`` (E_min), ``hardening_pa``, ``poisson``, ``density_kg_m3``,
+  ``friction``, and ``shrink``, ``repeat_size_m``, ``yarn_length_per_area_m_per_m2``,
+  ``areal_density_kg_m2`` (of the relaxed repeat) and the relaxation's ``converged``,
+  ``iterations``, ``residual`` and ``worst_overlap``;
 - ``shell``: ``thickness_m``, ``membrane_pa`` {s00, s01, s11, s22}, ``bending_pa`` {b00, b01,
   b11, b22} (:meth:`yarnfit.shell.ShellMaterial.from_json` reads it back);
 - ``engineering``: the constants of ``docs/design.md`` §3 (``weft_stretch_n_per_m``, …);
@@ -42,8 +49,12 @@ from . import __version__
 from .fabric import Fabric
 from .fit import COUPLING_LIMIT, Sample, ShellFit, fit_shell
 from .homogenize import SampleRanges, SampleResult, default_ranges, levels_for, sample_design, solve_samples
-from .relax import RelaxedRepeat, relax, rod_material
+from .relax import RelaxedRepeat, relax
 from .shell import ShellMaterial
+
+# The fibre's optional fibre-assembly data, written into the file's inputs where known.
+FIBER_ASSEMBLY_FIELDS = ("fineness_dtex", "flexural_rigidity_nm2_per_tex2", "torsional_rigidity_nm2_per_tex2",
+                         "spinning")
 
 # Two magnitudes per family and sign of deformation, uniaxial tension at the smaller (28 in all):
 # enough to see curvature of the response, few enough that a preset fits in about a minute on two
@@ -89,7 +100,6 @@ class FabricFit:
     def to_dict(self) -> dict:
         """The material file as a JSON-serialisable dict (see the module docstring)."""
         fabric, relaxed, fiber = self.fabric, self.relaxed, self.fabric.fiber
-        yarn = rod_material(fiber)
         residual = relaxed.residual
         return {
             "yarnfit_version": __version__,
@@ -104,18 +114,20 @@ class FabricFit:
                     "poisson": fiber.poisson,
                     "friction": fiber.friction,
                     "source": fiber.source,
+                    **{key: getattr(fiber, key) for key in FIBER_ASSEMBLY_FIELDS if getattr(fiber, key) is not None},
                 },
+                "yarn": fabric.yarn.to_dict(),
                 "pattern": fabric.structure if fabric.structure is not None else str(fabric.pattern_file),
                 "family": relaxed.pattern.family,
                 "counts_per_m": None if fabric.uses_file_as_is else list(_counts(fabric, relaxed)),
                 "areal_density_kg_m2": fabric.areal_density,
             },
             "yarn": {
-                "radius_m": relaxed.radius,
-                "young_modulus_pa": yarn.young_modulus,
-                "hardening_pa": yarn.hardening_tension,
-                "poisson": yarn.poisson_ratio,
-                "density_kg_m3": yarn.density,
+                **relaxed.yarn.to_dict(),
+                "young_modulus_pa": fiber.young_min_pa,
+                "hardening_pa": fiber.hardening_pa,
+                "poisson": fiber.poisson,
+                "density_kg_m3": fiber.density_kg_m3,
                 "friction": fiber.friction,
                 "shrink": relaxed.shrink,
                 "repeat_size_m": [float(v) for v in relaxed.repeat_size],

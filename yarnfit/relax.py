@@ -10,8 +10,9 @@ size. The relaxed configuration then becomes the rest state: rest lengths and cu
 relaxed yarns (frames turned onto their edges, removing the tiny equilibrium shear).
 
 For a fabric given by areal density, the yarn radius is the fixed point of
-``r = sqrt(ρ_fabric p_x p_y / (ρ_yarn L π))`` with ``L`` the *relaxed* yarn length, so the relaxed
-repeat carries the stated g/m² (a relaxation or two more than the first).
+``r = sqrt(ρ_fabric p_x p_y / (ρ_yarn L π))`` with ``L`` the *relaxed* yarn length and
+``ρ_yarn = φ ρ_fibre``, so the relaxed repeat carries the stated g/m² (a relaxation or two more
+than the first). The rods' rigidities are the :class:`~yarnfit.yarn.Yarn`'s at that radius.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ from .engine import (
     QuasiStaticSolver,
     Residual,
     Rod,
-    RodMaterial,
     RodModel,
+    RodSection,
     RodState,
     aligned_frames,
     energy,
@@ -41,6 +42,7 @@ from .engine.model import quaternion_d1
 from .fabric import SHRINK, Fabric, radius_from_areal_density
 from .materials import FiberMaterial
 from .patterns import YarnPattern
+from .yarn import Yarn, YarnConstruction
 
 # The radius fixed point stops when r changes by less than this; the areal density then matches
 # to about twice as much (it goes as r²), well inside the 0.5 % the relaxed repeat is checked to.
@@ -57,20 +59,11 @@ MAX_ITERATIONS = 1000
 OVERLAP_TOLERANCE = 0.01
 
 
-def rod_material(fiber: FiberMaterial) -> RodMaterial:
-    """Engine material of a yarn of ``fiber``: ``E_min``, ν, ρ and the stretch hardening
-    ``k = (E_max − E_min) / ε_max`` in tension and compression (the paper derives its slopes from
-    tensile tests only, so compression uses the tension slope)."""
-    k = fiber.hardening_pa
-    return RodMaterial(young_modulus=fiber.young_min_pa, poisson_ratio=fiber.poisson, density=fiber.density_kg_m3,
-                       hardening_tension=k, hardening_compression=k)
-
-
-def pattern_rods(pattern: YarnPattern, material: RodMaterial, shrink: float) -> list[Rod]:
+def pattern_rods(pattern: YarnPattern, section: RodSection, shrink: float) -> list[Rod]:
     """One closed periodic rod per yarn, in the order of ``pattern.yarns()``: straight rest shape,
     rest lengths ``shrink`` × the edge lengths, nothing pinned (see :func:`free_motion_constraints`)."""
     return [
-        Rod(points=pattern.node_position[yarn.nodes], radius=pattern.radius, material=material, closed=True,
+        Rod(points=pattern.node_position[yarn.nodes], radius=pattern.radius, material=section, closed=True,
             tile_offsets=yarn.tiles, rest_lengths=rest, straight=True, name=f"yarn {k}")
         for k, (yarn, rest) in enumerate(zip(pattern.yarns(), _rest_lengths(pattern, shrink)))
     ]
@@ -136,6 +129,7 @@ class RelaxedRepeat:
     Attributes:
         name: label.
         fiber: the fibre.
+        yarn: the yarn at the relaxation's radius (its rigidities are the rods').
         pattern: the unrelaxed input pattern (at the relaxation's radius and repeat size).
         model: the rod model whose rest state is the relaxed configuration (rest lengths and
             curvatures of the relaxed yarns; nothing pinned, see :func:`free_motion_constraints`).
@@ -154,6 +148,7 @@ class RelaxedRepeat:
 
     name: str
     fiber: FiberMaterial
+    yarn: Yarn
     pattern: YarnPattern
     model: RodModel
     relaxation_model: RodModel
@@ -192,8 +187,8 @@ class RelaxedRepeat:
 
     @property
     def areal_density(self) -> float:
-        """Areal density of the relaxed repeat, ``ρ_yarn π r² L / (p_x p_y)`` (kg/m²)."""
-        return self.fiber.density_kg_m3 * np.pi * self.radius**2 * self.yarn_length_per_area
+        """Areal density of the relaxed repeat, ``φ ρ_fibre π r² L / (p_x p_y)`` (kg/m²)."""
+        return self.yarn.mass_per_length * self.yarn_length_per_area
 
     def relaxed_pattern(self) -> YarnPattern:
         """The relaxed repeat as a :class:`YarnPattern`, e.g. to write a ``.pyp`` file: relaxed
@@ -220,15 +215,18 @@ def relax_pattern(
     options: QuasiStaticOptions | None = None,
     progress: Callable[[Progress], None] | None = None,
     name: str | None = None,
+    yarn: YarnConstruction | None = None,
 ) -> RelaxedRepeat:
-    """Relax ``pattern`` made of ``fiber`` yarns (phase 1). ``shrink`` defaults to the pattern
-    family's (0.8 knits, 0.9 wovens); ``progress`` receives the solver's :class:`Progress` after
-    every iteration (node positions in the order of ``pattern.yarns()``)."""
+    """Relax ``pattern`` made of ``fiber`` yarns (phase 1), the yarns made as ``yarn`` (default:
+    the fibre-assembly model) with the pattern's radius as contact radius. ``shrink`` defaults to
+    the pattern family's (0.8 knits, 0.9 wovens); ``progress`` receives the solver's
+    :class:`Progress` after every iteration (node positions in the order of ``pattern.yarns()``)."""
     shrink = SHRINK[pattern.family] if shrink is None else float(shrink)
     if not 0.0 < shrink <= 1.0:
         raise ValueError(f"shrink factor must lie in (0, 1], got {shrink!r}")
     start = time.perf_counter()
-    rods = pattern_rods(pattern, rod_material(fiber), shrink)
+    built_yarn = Yarn.build(fiber, yarn or YarnConstruction(), pattern.radius)
+    rods = pattern_rods(pattern, built_yarn.section(), shrink)
     phase1 = RodModel.from_rods(rods, lattice=pattern.lattice)
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
     result = QuasiStaticSolver(phase1, options).solve(RodState.from_model(phase1), callback=progress,
@@ -243,6 +241,7 @@ def relax_pattern(
     return RelaxedRepeat(
         name=name or pattern.name,
         fiber=fiber,
+        yarn=built_yarn,
         pattern=pattern,
         model=model,
         relaxation_model=phase1,
@@ -272,11 +271,12 @@ def relax(
         pattern = fabric.pattern(length_override=length)
         if on_start is not None:
             on_start(pattern)
-        result = relax_pattern(pattern, fabric.fiber, fabric.shrink, options, progress, name=fabric.name)
+        result = relax_pattern(pattern, fabric.fiber, fabric.shrink, options, progress, name=fabric.name,
+                               yarn=fabric.yarn)
         # An unconverged length says nothing about the radius: stop, and report the relaxation.
         if fabric.areal_density is None or not result.converged:
             break
-        radius = radius_from_areal_density(fabric.areal_density, fabric.fiber.density_kg_m3, pattern.repeat_size,
+        radius = radius_from_areal_density(fabric.areal_density, fabric.yarn_density, pattern.repeat_size,
                                            result.yarn_length)
         if abs(radius / pattern.radius - 1.0) < RADIUS_TOLERANCE:
             break

@@ -12,7 +12,7 @@ Typical use::
 """
 
 from .energy import EnergyTerms, energy, energy_gradient
-from .model import Rod, RodMaterial, RodModel, aligned_frames, parallel_transport_frames, straight_points
+from .model import Rod, RodMaterial, RodModel, RodSection, aligned_frames, parallel_transport_frames, straight_points
 from .quasistatic import (
     ConvergenceWarning,
     LinearConstraints,
@@ -37,6 +37,7 @@ __all__ = [
     "Residual",
     "Rod",
     "RodMaterial",
+    "RodSection",
     "RodModel",
     "RodState",
     "XPBDOptions",

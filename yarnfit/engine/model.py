@@ -43,6 +43,8 @@ CONTACT_EXCLUSION_FACTOR = 0.5 * math.pi
 
 
 def _positive_finite(value: float, what: str) -> float:
+    if isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{what} must be a positive finite number, got {value!r}")
     try:
         value = float(value)
     except (TypeError, ValueError):
@@ -53,8 +55,61 @@ def _positive_finite(value: float, what: str) -> float:
 
 
 @dataclass(frozen=True)
+class RodSection:
+    """Rigidities of a rod's cross-section (SI units), each independent of the others.
+
+    A yarn is a bundle of fibres that slide on each other, so its bending and twisting rigidities
+    are not those of a solid cylinder of its tensile rigidity (``docs/design.md`` §4,
+    :mod:`yarnfit.yarn`). The engine therefore takes the five rigidities directly.
+
+    Attributes:
+        tensile_rigidity: EA (N), the axial force per unit strain at zero strain.
+        shear_rigidity: GA (N), the transverse shear force per unit shear strain.
+        bending_rigidity: (EI1, EI2) (N·m²) about the first and second directors.
+        torsional_rigidity: GJ (N·m²).
+        mass_per_length: kg/m.
+        hardening_tension: H2 (N): the axial force is ``EA ε + ½ H2 ε²`` in tension, i.e. the
+            tangent rigidity grows as ``EA + H2 ε`` (the paper's strain hardening, §4.1).
+        hardening_compression: H1 (N), the same in compression (``EA + H1 |ε|``).
+    """
+
+    tensile_rigidity: float
+    shear_rigidity: float
+    bending_rigidity: tuple[float, float]
+    torsional_rigidity: float
+    mass_per_length: float
+    hardening_tension: float = 0.0
+    hardening_compression: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("tensile_rigidity", "shear_rigidity", "torsional_rigidity", "mass_per_length"):
+            object.__setattr__(self, name, _positive_finite(getattr(self, name), name))
+        pair = self.bending_rigidity
+        # An ordered pair only: a string or a set would unpack silently into the wrong numbers.
+        if isinstance(pair, np.ndarray):
+            pair = pair.tolist()
+        if not isinstance(pair, (tuple, list)) or len(pair) != 2:
+            raise ValueError(f"bending_rigidity must be a pair (EI1, EI2), got {self.bending_rigidity!r}")
+        ei1, ei2 = pair
+        object.__setattr__(self, "bending_rigidity", (_positive_finite(ei1, "bending_rigidity[0]"),
+                                                      _positive_finite(ei2, "bending_rigidity[1]")))
+        for name in ("hardening_tension", "hardening_compression"):
+            try:
+                h = float(getattr(self, name))
+            except (TypeError, ValueError):
+                h = math.nan
+            if not math.isfinite(h) or h < 0.0:
+                raise ValueError(f"{name} must be a finite number >= 0, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, h)
+
+
+@dataclass(frozen=True)
 class RodMaterial:
-    """Elastic and inertial properties of a rod's material (SI units).
+    """An isotropic material, for rods that are solid circular cylinders of it (SI units).
+
+    :meth:`section` gives the :class:`RodSection` of a solid cylinder of radius r:
+    ``EA = E π r²``, ``GA = G π r²``, ``EI1 = EI2 = E π r⁴/4``, ``GJ = G π r⁴/2``, mass ``ρ π r²``
+    per length, hardening ``k π r²``. It is the paper's yarn (§3.2) exactly.
 
     Attributes:
         young_modulus: E (Pa); for a nonlinear yarn, the modulus at zero strain (E_min).
@@ -86,6 +141,21 @@ class RodMaterial:
         """G = E / (2 (1 + ν)) (Pa)."""
         return self.young_modulus / (2.0 * (1.0 + self.poisson_ratio))
 
+    def section(self, radius: float) -> RodSection:
+        """The :class:`RodSection` of a solid circular cylinder of this material, radius ``radius`` (m)."""
+        r = _positive_finite(radius, "radius")
+        area = math.pi * r**2
+        inertia = 0.25 * math.pi * r**4
+        return RodSection(
+            tensile_rigidity=self.young_modulus * area,
+            shear_rigidity=self.shear_modulus * area,
+            bending_rigidity=(self.young_modulus * inertia, self.young_modulus * inertia),
+            torsional_rigidity=self.shear_modulus * 2.0 * inertia,
+            mass_per_length=self.density * area,
+            hardening_tension=self.hardening_tension * area,
+            hardening_compression=self.hardening_compression * area,
+        )
+
 
 @dataclass
 class Rod:
@@ -93,8 +163,10 @@ class Rod:
 
     Attributes:
         points: node positions ``(n, 3)`` (m); the initial configuration.
-        radius: cross-section radius r (m), circular section.
-        material: :class:`RodMaterial`.
+        radius: contact radius r (m): two rods touch when their centrelines are ``ra + rb``
+            apart. With ``material``, also the radius of the solid section.
+        material: a :class:`RodSection` (the rigidities, independent of ``radius``), or a
+            :class:`RodMaterial` (a solid circular cylinder of ``radius``, :meth:`RodMaterial.section`).
         closed: a closed loop (an extra edge joins the last node to the first).
         frames: edge frames ``(E, 4)`` as unit quaternions (w, x, y, z) with ``d3`` along the edge;
             default: parallel transport along the polyline.
@@ -110,7 +182,7 @@ class Rod:
 
     points: np.ndarray
     radius: float
-    material: RodMaterial
+    material: RodSection | RodMaterial
     closed: bool = False
     frames: np.ndarray | None = None
     rest_lengths: np.ndarray | None = None
@@ -442,8 +514,8 @@ def _check_lattice(lattice) -> np.ndarray:
 
 def _build_rod(index: int, rod: Rod, lattice: np.ndarray) -> dict:
     label = f"rod {index}" + (f" ({rod.name!r})" if rod.name else "")
-    if not isinstance(rod.material, RodMaterial):
-        raise ValueError(f"{label}: material must be a RodMaterial, got {type(rod.material).__name__}")
+    if not isinstance(rod.material, (RodSection, RodMaterial)):
+        raise ValueError(f"{label}: material must be a RodSection or a RodMaterial, got {type(rod.material).__name__}")
     pts = np.asarray(rod.points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"{label}: points must have shape (n, 3), got {pts.shape}")
@@ -502,12 +574,9 @@ def _build_rod(index: int, rod: Rod, lattice: np.ndarray) -> dict:
     else:
         rest_darboux = quaternion_conj_mul(frames[joint_edges[:, 0]], frames[joint_edges[:, 1]])
 
-    mat = rod.material
-    area = math.pi * radius**2
-    inertia = 0.25 * math.pi * radius**4
-    polar = 0.5 * math.pi * radius**4
+    section = rod.material.section(radius) if isinstance(rod.material, RodMaterial) else rod.material
     node_mass = np.zeros(n_nodes)
-    edge_mass = mat.density * area * rest
+    edge_mass = section.mass_per_length * rest
     np.add.at(node_mass, edge_nodes[:, 0], 0.5 * edge_mass)
     np.add.at(node_mass, edge_nodes[:, 1], 0.5 * edge_mass)
     node_pinned = np.zeros(n_nodes, dtype=bool)
@@ -531,17 +600,19 @@ def _build_rod(index: int, rod: Rod, lattice: np.ndarray) -> dict:
         "edge_radius": radius * ones_e,
         "arc_start": arc,
         "frames": frames,
-        "shear_stiffness": mat.shear_modulus * area * ones_e,
-        "stretch_stiffness": mat.young_modulus * area * ones_e,
-        "hardening": np.stack([mat.hardening_compression * area * ones_e, mat.hardening_tension * area * ones_e], axis=1),
-        # A thin cylinder about a transverse axis through its centre: m (l²/12 + r²/4).
+        "shear_stiffness": section.shear_rigidity * ones_e,
+        "stretch_stiffness": section.tensile_rigidity * ones_e,
+        "hardening": np.stack([section.hardening_compression * ones_e, section.hardening_tension * ones_e], axis=1),
+        # A thin cylinder about a transverse axis through its centre, m (l²/12 + r²/4), r the
+        # contact radius (XPBD's rotational inertia only; quasi-static solves do not use it).
         "edge_inertia": edge_mass * (rest**2 / 12.0 + radius**2 / 4.0),
         "edge_pinned": edge_pinned,
         "joint_edges": joint_edges.astype(np.int64),
         "rest_darboux": rest_darboux,
         "joint_rest_length": 0.5 * (rest[joint_edges[:, 0]] + rest[joint_edges[:, 1]]),
         "joint_stiffness": np.stack(
-            [mat.young_modulus * inertia * ones_j, mat.young_modulus * inertia * ones_j, mat.shear_modulus * polar * ones_j],
+            [section.bending_rigidity[0] * ones_j, section.bending_rigidity[1] * ones_j,
+             section.torsional_rigidity * ones_j],
             axis=1,
         ),
     }

@@ -70,6 +70,7 @@ from ..engine import (
     QuasiStaticSolver,
     Rod,
     RodMaterial,
+    RodSection,
     RodModel,
     RodState,
     energy_gradient,
@@ -171,7 +172,7 @@ def _unrolled_yarns(model: RodModel, position: np.ndarray, half_extent: np.ndarr
                 yield points, rest, frames, float(model.edge_radius[edges[0]]), n
 
 
-def cut_swatch(model: RodModel, position: np.ndarray, material: RodMaterial, *, direction: str = "weft",
+def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | RodMaterial, *, direction: str = "weft",
                gauge: float, width: float, clamp: float) -> Swatch:
     """Cut a strip from the flat periodic ``model`` at ``position`` (its relaxed rest state, frames
     its rest frames): ``gauge`` × ``width`` between the jaws plus a ``clamp`` band at each end (m),
@@ -366,7 +367,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     }
 
 
-def stretch_repeat(model: RodModel, position: np.ndarray, material: RodMaterial, *, name: str = "swatch",
+def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection | RodMaterial, *, name: str = "swatch",
                    directions: Sequence[str] = ("weft", "warp"), strains: Sequence[float] = STRAINS,
                    size: dict | None = None, quick: bool = False, recording_path=None,
                    progress: Callable[[str], None] | None = None, options: QuasiStaticOptions | None = None) -> dict:
@@ -423,7 +424,7 @@ def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Ca
     ``logs/<material>/yarn.rrd`` (``False``: no recording). Returns a JSON-able dict with the
     curves per direction (see :func:`stretch_swatch`) and the relaxation. ``size`` overrides the
     strip size (see :func:`stretch_repeat`)."""
-    from ..relax import relax, rod_material
+    from ..relax import relax
 
     data, where = _material_data(material)
     fabric = fabric_from_inputs(data.get("inputs"), where)
@@ -437,7 +438,7 @@ def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Ca
     elif recording_path is False:
         recording_path = None
     directions = directions or (("weft", "warp") if quick else ("weft", "warp", "bias"))
-    out = stretch_repeat(relaxed.model, relaxed.state.node_position, rod_material(fabric.fiber), name=fabric.name,
+    out = stretch_repeat(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), name=fabric.name,
                          directions=directions, size=size, quick=quick, recording_path=recording_path,
                          progress=progress)
     out["material"] = fabric.name
@@ -463,22 +464,29 @@ def _material_data(material) -> tuple[dict, str]:
 def fabric_from_inputs(inputs, where: str = "material"):
     """The :class:`yarnfit.fabric.Fabric` a material file's ``inputs`` block describes."""
     from ..fabric import Fabric, named_patterns
+    from ..material import FIBER_ASSEMBLY_FIELDS
     from ..materials import FiberMaterial
+    from ..yarn import YarnConstruction
 
     if not isinstance(inputs, dict):
         raise ValueError(f"{where}: missing 'inputs' (the fabric the material was fitted for)")
     try:
         fiber = inputs["fiber"]
+        optional = ("source",) + FIBER_ASSEMBLY_FIELDS
         fiber = FiberMaterial(**{k: fiber[k] for k in ("name", "density_kg_m3", "young_min_pa", "young_max_pa",
                                                         "breaking_strain", "poisson", "friction")},
-                              **({"source": fiber["source"]} if "source" in fiber else {}))
+                              **{k: fiber[k] for k in optional if k in fiber})
+        # Files written before the fibre-assembly yarn (no inputs.yarn) were fitted with the paper's
+        # solid rod: rebuild them with it.
+        yarn = (YarnConstruction.from_dict(inputs["yarn"], f"{where}: inputs.yarn") if "yarn" in inputs
+                else YarnConstruction(model="solid"))
         pattern = inputs["pattern"]
         counts = inputs.get("counts_per_m")
         structure = pattern if pattern in named_patterns() else None
         return Fabric(name=str(inputs.get("fabric") or "fabric"), fiber=fiber, structure=structure,
                       areal_density=inputs.get("areal_density_kg_m2"),
                       counts=None if counts is None else (float(counts[0]), float(counts[1])),
-                      pattern_file=None if structure is not None else pattern)
+                      pattern_file=None if structure is not None else pattern, yarn=yarn)
     except (KeyError, TypeError) as exc:
         raise ValueError(f"{where}: inputs: cannot rebuild the fabric ({exc!r})") from None
 
