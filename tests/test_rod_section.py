@@ -127,14 +127,14 @@ def test_material_section_is_the_solid_cylinder():
                            hardening_compression=k1)
     section = material.section(r)
     g = e / (2.0 * (1.0 + nu))
-    assert section.tensile_rigidity == pytest.approx(e * math.pi * r**2, rel=ROUNDOFF_RTOL)
-    assert section.shear_rigidity == pytest.approx(g * math.pi * r**2, rel=ROUNDOFF_RTOL)
-    assert section.bending_rigidity[0] == pytest.approx(e * math.pi * r**4 / 4.0, rel=ROUNDOFF_RTOL)
-    assert section.bending_rigidity[1] == pytest.approx(e * math.pi * r**4 / 4.0, rel=ROUNDOFF_RTOL)
-    assert section.torsional_rigidity == pytest.approx(g * math.pi * r**4 / 2.0, rel=ROUNDOFF_RTOL)
-    assert section.mass_per_length == pytest.approx(rho * math.pi * r**2, rel=ROUNDOFF_RTOL)
-    assert section.hardening_tension == pytest.approx(k2 * math.pi * r**2, rel=ROUNDOFF_RTOL)
-    assert section.hardening_compression == pytest.approx(k1 * math.pi * r**2, rel=ROUNDOFF_RTOL)
+    assert section.tensile_rigidity == pytest.approx(e * math.pi * r**2, rel=ROUNDOFF_RTOL, abs=0.0)
+    assert section.shear_rigidity == pytest.approx(g * math.pi * r**2, rel=ROUNDOFF_RTOL, abs=0.0)
+    assert section.bending_rigidity[0] == pytest.approx(e * math.pi * r**4 / 4.0, rel=ROUNDOFF_RTOL, abs=0.0)
+    assert section.bending_rigidity[1] == pytest.approx(e * math.pi * r**4 / 4.0, rel=ROUNDOFF_RTOL, abs=0.0)
+    assert section.torsional_rigidity == pytest.approx(g * math.pi * r**4 / 2.0, rel=ROUNDOFF_RTOL, abs=0.0)
+    assert section.mass_per_length == pytest.approx(rho * math.pi * r**2, rel=ROUNDOFF_RTOL, abs=0.0)
+    assert section.hardening_tension == pytest.approx(k2 * math.pi * r**2, rel=ROUNDOFF_RTOL, abs=0.0)
+    assert section.hardening_compression == pytest.approx(k1 * math.pi * r**2, rel=ROUNDOFF_RTOL, abs=0.0)
 
 
 def test_material_and_its_section_build_identical_models():
@@ -230,10 +230,10 @@ def test_small_deflection_cantilever_uses_the_sections_bending_rigidity():
         model = cantilever(yarn_section(), n)
         x = solve(model, tip_load(model, (0.0, 0.0, -force))).node_position
         deflection[n] = -x[-1, 2]
-        assert deflection[n] == pytest.approx(discrete_linear_tip_deflection(force, BENDING, n), rel=LINEAR_THEORY_RTOL)
+        assert deflection[n] == pytest.approx(discrete_linear_tip_deflection(force, BENDING, n), rel=LINEAR_THEORY_RTOL, abs=0.0)
         assert np.abs(x[:, 1]).max() <= OFF_PLANE_ATOL
     extrapolated = 2.0 * deflection[2 * N_EDGES] - deflection[N_EDGES]
-    assert extrapolated == pytest.approx(force * LENGTH**3 / (3.0 * BENDING), rel=RICHARDSON_RTOL)
+    assert extrapolated == pytest.approx(force * LENGTH**3 / (3.0 * BENDING), rel=RICHARDSON_RTOL, abs=0.0)
 
 
 @pytest.mark.parametrize("spin", [0.0, 0.4])
@@ -262,9 +262,9 @@ def test_anisotropic_section_bends_about_the_material_directors(spin):
         other = d2 if name == "d1" else d1
         deflection[name] = float(tip @ direction)
         assert deflection[name] == pytest.approx(discrete_linear_tip_deflection(force, rigidity, N_EDGES),
-                                                 rel=LINEAR_THEORY_RTOL)
+                                                 rel=LINEAR_THEORY_RTOL, abs=0.0)
         assert abs(tip @ other) <= OFF_PLANE_ATOL
-    assert deflection["d2"] / deflection["d1"] == pytest.approx(ei2 / ei1, rel=ANISOTROPY_RTOL)
+    assert deflection["d2"] / deflection["d1"] == pytest.approx(ei2 / ei1, rel=ANISOTROPY_RTOL, abs=0.0)
 
 
 def test_pure_twist_by_end_moment():
@@ -284,11 +284,11 @@ def test_pure_twist_by_end_moment():
     relative = quaternion_conj_mul(state.edge_quaternion[:1], state.edge_quaternion[-1:])[0]
     phi = 2.0 * math.atan2(relative[3], relative[0])  # rotation about d3 of the clamped frame
     psi = math.asin(moment * l0 / TORSION)
-    assert phi == pytest.approx((N_EDGES - 1) * psi, rel=DISCRETE_RTOL)
-    assert phi == pytest.approx(moment * twisted_length / TORSION, rel=TWIST_SMALL_ANGLE_RTOL)
+    assert phi == pytest.approx((N_EDGES - 1) * psi, rel=DISCRETE_RTOL, abs=0.0)
+    assert phi == pytest.approx(moment * twisted_length / TORSION, rel=TWIST_SMALL_ANGLE_RTOL, abs=0.0)
     terms = energy(model, state)
-    assert terms.twist == pytest.approx((N_EDGES - 1) * (2.0 / l0) * TORSION * math.sin(psi / 2) ** 2, rel=DISCRETE_RTOL)
-    assert terms.twist == pytest.approx(TORSION * phi**2 / (2.0 * twisted_length), rel=TWIST_SMALL_ANGLE_RTOL)
+    assert terms.twist == pytest.approx((N_EDGES - 1) * (2.0 / l0) * TORSION * math.sin(psi / 2) ** 2, rel=DISCRETE_RTOL, abs=0.0)
+    assert terms.twist == pytest.approx(TORSION * phi**2 / (2.0 * twisted_length), rel=TWIST_SMALL_ANGLE_RTOL, abs=0.0)
     assert terms.bend <= DISCRETE_RTOL * terms.twist
     assert np.abs(state.node_position[:, 1:]).max() <= OFF_PLANE_ATOL  # stays straight
 
@@ -315,11 +315,11 @@ def test_axial_stretch_with_hardening(sign):
     else:
         hardening = HARDENING_COMPRESSION
         expected = (TENSILE - math.sqrt(TENSILE**2 - 2 * hardening * force)) / hardening
-    assert strain == pytest.approx(expected, rel=DISCRETE_RTOL)
+    assert strain == pytest.approx(expected, rel=DISCRETE_RTOL, abs=0.0)
     assert abs(expected) < 0.95 * abs(force) / TENSILE  # hardening engaged: ≥ 5 % below linear
     terms = energy(model, state)
     stored = LENGTH * (0.5 * TENSILE * expected**2 + hardening * abs(expected) ** 3 / 6.0)
-    assert terms.stretch == pytest.approx(stored, rel=DISCRETE_RTOL)
+    assert terms.stretch == pytest.approx(stored, rel=DISCRETE_RTOL, abs=0.0)
     assert np.abs(state.node_position[:, 1:]).max() <= OFF_PLANE_ATOL
 
 

@@ -120,6 +120,8 @@ class Fabric:
     def __post_init__(self) -> None:
         if not isinstance(self.yarn, YarnConstruction):
             raise ValueError(f"yarn must be a YarnConstruction, got {type(self.yarn).__name__}")
+        # Before any relaxation starts: a fibre without the data its yarn model needs is bad input.
+        self.yarn.check_fiber(self.fiber)
         if (self.structure is None) == (self.pattern_file is None):
             raise ValueError("give either a named pattern or a pattern file, not both or neither")
         if self.structure is not None and self.structure not in named_patterns():

@@ -167,6 +167,23 @@ class YarnConstruction:
                 raise ValueError(f"the solid yarn model takes no construction or measured rigidities "
                                  f"(given: {', '.join(given)}); use the fibre-assembly model")
 
+    def check_fiber(self, fiber: FiberMaterial) -> None:
+        """Raise ``ValueError`` (one line, naming the keys) if the fibre lacks data this model needs:
+        the fibre-assembly model needs the fineness, and the specific flexural and torsional
+        rigidities unless EI and GJ were measured."""
+        if self.model == "solid":
+            return
+        missing = [key for key, needed, value in (
+            ("fineness_dtex", True, fiber.fineness_dtex),
+            ("flexural_rigidity_nm2_per_tex2", self.bending_rigidity_nm2 is None, fiber.flexural_rigidity_nm2_per_tex2),
+            ("torsional_rigidity_nm2_per_tex2", self.torsional_rigidity_nm2 is None,
+             fiber.torsional_rigidity_nm2_per_tex2),
+        ) if needed and value is None]
+        if missing:
+            raise ValueError(f"fibre {fiber.name!r} has no {', '.join(missing)}: the fibre-assembly yarn model needs "
+                             f"{'it' if len(missing) == 1 else 'them'} (add {'it' if len(missing) == 1 else 'them'} "
+                             f"to the fibre file, or use the solid yarn model)")
+
     def spinning_for(self, fiber: FiberMaterial) -> str | None:
         """The spinning system: as given, else the fibre's, else ring-spun (``None`` for solid)."""
         if self.model == "solid":
@@ -304,19 +321,10 @@ class Yarn:
                 free_bending = fibres * fiber.flexural_rigidity_nm2_per_tex2 * fiber.fineness_tex**2
             if fiber.torsional_rigidity_nm2_per_tex2 is not None:
                 free_torsion = fibres * fiber.torsional_rigidity_nm2_per_tex2 * fiber.fineness_tex**2
+        construction.check_fiber(fiber)
         if construction.model == "solid":
             bending, torsion = no_slip_bending, no_slip_torsion
         else:
-            missing = [key for key, needed, value in (
-                ("fineness_dtex", True, fiber.fineness_dtex),
-                ("flexural_rigidity_nm2_per_tex2", construction.bending_rigidity_nm2 is None,
-                 fiber.flexural_rigidity_nm2_per_tex2),
-                ("torsional_rigidity_nm2_per_tex2", construction.torsional_rigidity_nm2 is None,
-                 fiber.torsional_rigidity_nm2_per_tex2),
-            ) if needed and value is None]
-            if missing:
-                raise ValueError(f"fibre {fiber.name!r} has no {', '.join(missing)}: the fibre-assembly yarn model "
-                                 f"needs it (add it to the fibre file, or use the solid yarn model)")
             bending = construction.bending_rigidity_nm2 or free_bending
             torsion = construction.torsional_rigidity_nm2 or free_torsion
         tensile = e_f * fibre_area * tensile_helix_factor(t2)
