@@ -3,8 +3,8 @@ relaxations, iterations, final residuals and the worst overlap of two yarns.
 
     python validation/relax_patterns.py [FILE.pyp ...]
 
-Named structures are relaxed as cotton at their typical counts, knits at 150 g/m² and wovens at
-200 g/m²; ``.pyp`` files as polyester, used as written (their own radius, repeat and rest
+Named structures are relaxed as cotton at their typical counts, knits and the 8-harness satin at
+150 g/m², the other wovens at 200 g/m²; ``.pyp`` files as polyester, used as written (their own radius, repeat and rest
 lengths). Exit status 1 if any relaxation did not converge or overlaps by 1 % of the diameter.
 """
 
@@ -26,8 +26,9 @@ MAX_OVERLAP = 0.01
 def cases(files: list[str]) -> list[Fabric]:
     out = []
     for name, family in named_patterns().items():
-        out.append(Fabric(name=name, fiber=get_fiber("cotton"), structure=name,
-                          areal_density=0.15 if family == "knit" else 0.2))
+        # The 8-harness satin's 70 ends/cm leave no room for 200 g/m² of round fibre-assembly yarns.
+        areal_density = 0.15 if family == "knit" or name == "satin-8" else 0.2
+        out.append(Fabric(name=name, fiber=get_fiber("cotton"), structure=name, areal_density=areal_density))
     for path in files:
         out.append(Fabric(name=Path(path).stem, fiber=get_fiber("polyester"), pattern_file=path))
     return out
