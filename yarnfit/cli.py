@@ -259,10 +259,14 @@ def _renamed(fabric, name: str):
 def cmd_materials(args: argparse.Namespace) -> int:
     from .fabric import PRESETS
     from .materials import FIBERS
+    from .yarn import SPINNING_DEFAULTS
 
     print("fibres:")
     for fiber in FIBERS.values():
         print("  " + fiber.describe())
+    print("yarn construction defaults (--yarn-spinning, --yarn-packing, --yarn-twist-deg):")
+    for name, spinning in SPINNING_DEFAULTS.items():
+        print(f"  {name:<10} φ {spinning.packing_fraction:.2f}  twist {spinning.twist_angle_deg:4.1f}°  ({spinning.source})")
     print("presets (yarnfit relax <preset>):")
     for name, p in PRESETS.items():
         print(f"  {name:<17} {p.fiber:<9} {p.pattern:<9} {p.gsm:5.0f} g/m²  {p.counts_per_cm[0]:g}x{p.counts_per_cm[1]:g}/cm  ({p.note})")

@@ -159,7 +159,7 @@ class FiberMaterial:
                          f"{(self.torsional_rigidity_nm2_per_tex2 or math.nan) * 1e9:.3g} mN·mm²/tex²")
         return (
             f"{self.name:<10} {self.density_kg_m3:5.0f} kg/m³  E {modulus:<13} ε_max {self.breaking_strain:.2f}  "
-            f"ν {self.poisson:.2f}  μ {self.friction:.2f}  {fineness}  {rigidity}  ({short_source})"
+            f"ν {self.poisson:.2f}  μ {self.friction:.2f}  {fineness} {self.spinning or '':<9}  {rigidity}  ({short_source})"
         )
 
 

@@ -466,6 +466,7 @@ def summary(result) -> str:
     rows = [
         ("repeat size", f"{px:.4g} × {py:.4g} mm"),
         ("yarn radius", f"{1e6 * result.radius:.4g} µm"),
+        *yarn_rows(result.yarn),
         ("yarn length per area", f"{result.yarn_length_per_area:.5g} m/m²"),
         ("areal density", f"{1e3 * result.areal_density:.4g} g/m²"),
         ("residual force / torque", f"{r.force:.3g} / {r.torque:.3g}"),
@@ -477,6 +478,21 @@ def summary(result) -> str:
         ("wall time", f"{result.seconds:.3g} s"),
     ]
     return f"## Relaxed repeat\n\n{_markdown_table(rows)}"
+
+
+def yarn_rows(yarn) -> list[tuple[str, str]]:
+    """Rows of a :class:`yarnfit.yarn.Yarn` in textile units beside SI."""
+    fibres = "–" if yarn.fibres_per_section is None else f"{yarn.fibres_per_section:.0f}"
+    return [
+        ("yarn model", yarn.model + ("" if yarn.spinning is None else f", {yarn.spinning}")),
+        ("linear density / fibres per section", f"{yarn.linear_density_tex:.4g} tex / {fibres}"),
+        ("packing fraction / surface twist", f"{yarn.packing_fraction:.3g} / {yarn.twist_angle_deg:.3g}°"),
+        ("tensile rigidity EA", f"{yarn.tensile_rigidity_n:.4g} N"),
+        ("bending rigidity EI", f"{yarn.bending_rigidity_nm2:.4g} N·m² ({1e9 * yarn.bending_rigidity_nm2:.4g} mN·mm²)"),
+        ("torsional rigidity GJ", f"{yarn.torsional_rigidity_nm2:.4g} N·m² "
+                                  f"({1e9 * yarn.torsional_rigidity_nm2:.4g} mN·mm²)"),
+        ("EI / solid rod of the same mass", f"{yarn.bending_vs_solid:.3g}"),
+    ]
 
 
 def _matrix(m) -> str:
@@ -543,6 +559,7 @@ def fit_summary(fabric_fit) -> str:
     seconds = fabric_fit.seconds
     run = [
         ("fabric", fabric_fit.fabric.name),
+        *yarn_rows(fabric_fit.relaxed.yarn),
         ("model", fit.model),
         ("thickness", f"{1e3 * material.thickness:.4g} mm"),
         ("samples", f"{len(samples)} ({converged} converged, {len(fit.used)} fitted, {len(fit.excluded)} excluded)"),
