@@ -28,13 +28,15 @@ from yarnfit.homogenize import (
     levels_for,
     sample_design,
     solve_sample,
+    _solve_with_continuation,
     solve_samples,
     tile_repeat,
+    transfer_fluctuation,
 )
 from yarnfit.material import DEFAULT_SAMPLES, FabricFit, fit_fabric, fit_samples, shell_thickness
 from yarnfit.materials import FiberMaterial, get_fiber
 from yarnfit.patterns import YarnPattern
-from yarnfit.relax import relax_pattern
+from yarnfit.relax import relax, relax_pattern
 from yarnfit.shell import ShellMaterial
 from yarnfit.yarn import YarnConstruction
 
@@ -289,3 +291,36 @@ def test_the_material_file_reads_back(tmp_path):
                                         "bending_bias_nm"}
     assert ShellMaterial.from_json(path) == result.material
     assert len(data["samples"]) == len(result.samples)
+
+
+# -- continuation ----------------------------------------------------------------------------------
+
+# Two converged solves of the same sample (force residual ≤ 1e-8 of the force scale) agree on Ū to
+# about the residual times the stretch (energy error is second order in the position error; the
+# contact smoothing adds δ² / k, 1e-5 of the 1 % stretch, see IDENTITY_RTOL).
+SAME_EQUILIBRIUM_RTOL = 1e-5
+# Positions of ~1e-3 m through two surface frames: a few ulps.
+TRANSFER_ATOL = 1e-15
+
+
+def test_transfer_keeps_the_corotated_fluctuation():
+    # ũ = 0 on one surface maps to ũ = 0 on another: the affine start of the second sample exactly.
+    relaxed = relax(plain())
+    source = tile_repeat(relaxed, np.eye(2), np.zeros((2, 2)))
+    target = tile_repeat(relaxed, [[1.05, 0.02], [0.02, 0.98]], [[30.0, 5.0], [5.0, -20.0]])
+    start = target.state.node_position.copy()
+    transfer_fluctuation(source, source.state, target)
+    np.testing.assert_allclose(target.state.node_position, start, rtol=0.0, atol=TRANSFER_ATOL)
+
+
+def test_continuation_lands_on_the_direct_equilibrium():
+    # A plain weave's stretch has one equilibrium: reached in one solve, or through the continuation
+    # (forced here by allowing the direct solve a single iteration), Ū must agree.
+    relaxed = relax(plain())
+    I = np.diag([1.0 + 2 * 0.02, 1.0])
+    II = np.zeros((2, 2))
+    _, direct, _ = _solve_with_continuation(relaxed, I, II, QuasiStaticOptions(max_iterations=600))
+    tiled, continued, iterations = _solve_with_continuation(relaxed, I, II, QuasiStaticOptions(max_iterations=1))
+    assert direct.converged and continued.converged
+    assert iterations > continued.iterations  # the direct attempt and every step are counted
+    assert continued.energy.internal == pytest.approx(direct.energy.internal, rel=SAME_EQUILIBRIUM_RTOL, abs=0.0)
