@@ -280,6 +280,11 @@ def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticO
     if spec.family in UNIAXIAL_FAMILIES:
         return _solve_uniaxial(relaxed, spec, options, start)
     tiled, result, iterations = _solve_with_continuation(relaxed, spec.I, spec.II, options)
+    if result is None:
+        # No solve of this deformation stayed within the mapped tiles: nothing to report but that.
+        return SampleResult(spec=spec, energy_density=math.nan, converged=False,
+                            residual=Residual(math.nan, math.nan, math.nan, math.nan), iterations=iterations,
+                            seconds=time.perf_counter() - start, position=tiled.state.node_position)
     return SampleResult(
         spec=spec,
         energy_density=result.energy.internal / tiled.area,
@@ -308,15 +313,22 @@ def _solve_with_continuation(relaxed: RelaxedRepeat, I, II, options: QuasiStatic
     """``(tiled, result, iterations)`` of the sample ``(I, II)``: one solve from the affine start
     and, if it does not converge, a continuation over :data:`CONTINUATION_FRACTIONS` of the
     deformation (``I = 1 + s (I − 1)``, ``II = s II``), each step allowed
-    :data:`CONTINUATION_MAX_ITERATIONS`. ``iterations`` counts every solve's."""
+    :data:`CONTINUATION_MAX_ITERATIONS`. ``iterations`` counts every solve's. ``result`` is the
+    full deformation's (converged or, if nothing converged, the closer to balance of the direct
+    solve and the last step), or ``None`` when every solve of the full deformation stepped beyond
+    the tiles mapped (:class:`TilingReachError`)."""
     tiled = tile_repeat(relaxed, I, II)
-    with warnings.catch_warnings():
-        # Not converging here is not the sample's verdict: the continuation below gives that.
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        result = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
-    iterations = result.iterations
-    if result.converged:
-        return tiled, result, iterations
+    result, iterations = None, 0
+    try:
+        with warnings.catch_warnings():
+            # Not converging here is not the sample's verdict: the continuation below gives that.
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            result = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
+        iterations = result.iterations
+        if result.converged:
+            return tiled, result, iterations
+    except TilingReachError:
+        pass  # a Newton step swept beyond the mapped tiles: smaller steps of deformation may not
     I, II = np.asarray(I, dtype=np.float64), np.asarray(II, dtype=np.float64)
     step_options = replace(options, max_iterations=max(options.max_iterations, CONTINUATION_MAX_ITERATIONS))
     previous = None
@@ -324,15 +336,20 @@ def _solve_with_continuation(relaxed: RelaxedRepeat, I, II, options: QuasiStatic
         step = tile_repeat(relaxed, np.eye(2) + fraction * (I - np.eye(2)), fraction * II)
         if previous is not None:
             transfer_fluctuation(previous[0], previous[1].state, step)
-        solved = QuasiStaticSolver(step.model, step_options).solve(step.state, constraints=step.constraints)
+        try:
+            solved = QuasiStaticSolver(step.model, step_options).solve(step.state, constraints=step.constraints)
+        except TilingReachError:
+            break
         iterations += solved.iterations
         if not solved.converged:
-            # The continuation failed too: report whichever of the two ended closer to balance.
-            if solved.residual.force < result.residual.force and fraction == 1.0:
+            # The continuation failed too: report whichever full-deformation solve ended closer to balance.
+            if fraction == 1.0 and (result is None or solved.residual.force < result.residual.force):
                 tiled, result = step, solved
-            return tiled, result, iterations
+            break
         previous = (step, solved)
-    return previous[0], previous[1], iterations
+    else:
+        return previous[0], previous[1], iterations
+    return tiled, result, iterations
 
 
 def transfer_fluctuation(source: TiledRepeat, state: RodState, target: TiledRepeat) -> None:
