@@ -7,6 +7,8 @@ and the summary's units and R².
 
 import dataclasses
 import functools
+import json
+import math
 import re
 
 import numpy as np
@@ -14,10 +16,11 @@ import pytest
 import rerun as rr
 
 import yarnfit.record
+from yarnfit.engine import Residual
 from yarnfit.engine.tiling import yarn_strips
 from yarnfit.fabric import Fabric
-from yarnfit.homogenize import UNIAXIAL_FAMILIES, family_deformation, tile_repeat
-from yarnfit.material import fit_fabric
+from yarnfit.homogenize import UNIAXIAL_FAMILIES, SampleResult, family_deformation, identity_sample, tile_repeat
+from yarnfit.material import _sample_dict, fit_fabric
 from yarnfit.materials import get_fiber
 from yarnfit.record import EXCLUDED_COLOR, SAMPLE_TIMELINE, FitRecording
 from yarnfit.shell import GF_CM2_PER_CM
@@ -226,3 +229,15 @@ def test_samples_that_did_not_converge_are_drawn_red_apart_from_the_fit(tmp_path
     np.testing.assert_allclose(rows[f"fit/curves/{family}/yarn"]["Points2D:positions"][None],
                                [[r.spec.parameter, r.energy_density] for r in kept], rtol=CURVE_RTOL)
     assert f"{len(samples)} ({len(samples) - 1} converged" in rows["fit/summary"]["TextDocument:text"][None][0]
+
+
+def test_a_sample_without_a_state_is_written_as_nulls():
+    # Every solve of the sample stepped beyond the mapped tiles: energy and residuals are NaN, and the
+    # material file (strict JSON) says null.
+    nan = math.nan
+    result = SampleResult(spec=identity_sample(), energy_density=nan, converged=False,
+                          residual=Residual(nan, nan, nan, nan), iterations=12, seconds=0.5,
+                          position=np.zeros((1, 3)))
+    written = json.loads(json.dumps(_sample_dict(result), allow_nan=False))
+    assert written["energy_density_j_m2"] is None and not written["converged"]
+    assert set(written["residual"].values()) == {None}

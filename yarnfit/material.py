@@ -172,8 +172,10 @@ def _sample_dict(result: SampleResult) -> dict:
         "II": result.spec.II.tolist(),
         "energy_density_j_m2": result.energy_density if np.isfinite(result.energy_density) else None,
         "converged": result.converged,
-        "residual": {"force": r.force, "torque": r.torque, "energy_change": r.energy_change,
-                     "penetration": r.penetration},
+        # A sample with no state to measure (every solve left the mapped tiles) has NaN residuals.
+        "residual": {key: value if np.isfinite(value) else None for key, value in (
+            ("force", r.force), ("torque", r.torque), ("energy_change", r.energy_change),
+            ("penetration", r.penetration))},
         "iterations": result.iterations,
         "seconds": result.seconds,
     }
