@@ -28,7 +28,7 @@ import numpy as np
 
 from .materials import FiberMaterial, get_fiber
 from .patterns import DRAFTS, STITCHES, PatternError, YarnPattern, knit, read_pyp, weave
-from .yarn import Yarn, YarnConstruction
+from .yarn import YarnConstruction
 
 # Shrink factors of the relaxation (paper §4.5): rest lengths are shortened so that the yarns pull
 # into contact while the repeat keeps its size.
@@ -151,10 +151,6 @@ class Fabric:
     def yarn_density(self) -> float:
         """Mass per yarn volume (kg/m³), ``φ ρ_fibre``: sizes the yarn radius."""
         return self.yarn.yarn_density(self.fiber)
-
-    def yarn_at(self, radius: float) -> Yarn:
-        """The :class:`~yarnfit.yarn.Yarn` of this fabric at contact radius ``radius`` (m)."""
-        return Yarn.build(self.fiber, self.yarn, radius)
 
     @cached_property
     def file_pattern(self) -> YarnPattern | None:
