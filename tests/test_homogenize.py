@@ -319,8 +319,10 @@ def test_continuation_lands_on_the_direct_equilibrium():
     relaxed = relax(plain())
     I = np.diag([1.0 + 2 * 0.02, 1.0])
     II = np.zeros((2, 2))
-    _, direct, _ = _solve_with_continuation(relaxed, I, II, QuasiStaticOptions(max_iterations=600))
-    tiled, continued, iterations = _solve_with_continuation(relaxed, I, II, QuasiStaticOptions(max_iterations=1))
+    enough = QuasiStaticOptions(max_iterations=600)
+    _, direct, _ = _solve_with_continuation(relaxed, I, II, enough)
+    tiled, continued, iterations = _solve_with_continuation(relaxed, I, II, QuasiStaticOptions(max_iterations=1),
+                                                            step_options=enough)
     assert direct.converged and continued.converged
     assert iterations > continued.iterations  # the direct attempt and every step are counted
     assert continued.energy.internal == pytest.approx(direct.energy.internal, rel=SAME_EQUILIBRIUM_RTOL, abs=0.0)

@@ -302,18 +302,21 @@ def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticO
 # −0.4: force residual 1e-2 after 4000 iterations). The deformation is then applied in these
 # fractions, each solve warm-started from the last one's equilibrium.
 CONTINUATION_FRACTIONS = (0.25, 0.5, 0.75, 1.0)
-# Newton iterations per continuation step. Its steps converge, but slowly where the yarn is very
-# slender in bending: a HYLC basket as written (r = 1 mm) in 1.7 dtex polyester is a 2600-tex
-# yarn of 15,000 filaments whose EI is 3e-4 of the solid rod's, and its weft stretch at 20 % took
-# 2205 iterations to a force residual of 1e-12 (the first 600 ended at 3e-5).
-CONTINUATION_MAX_ITERATIONS = 5000
+# Newton iterations per continuation step, as a multiple of the sample's limit (600 → 5400). Its
+# steps converge, but slowly where the yarn is very slender in bending: a HYLC basket as written
+# (r = 1 mm) in 1.7 dtex polyester is a 2600-tex yarn of 15,000 filaments whose EI is 3e-4 of the
+# solid rod's, and its weft stretch at 20 % took 2205 iterations to a force residual of 1e-12 (the
+# first 600 ended at 3e-5).
+CONTINUATION_ITERATION_FACTOR = 9
 
 
-def _solve_with_continuation(relaxed: RelaxedRepeat, I, II, options: QuasiStaticOptions):
+def _solve_with_continuation(relaxed: RelaxedRepeat, I, II, options: QuasiStaticOptions,
+                             step_options: QuasiStaticOptions | None = None):
     """``(tiled, result, iterations)`` of the sample ``(I, II)``: one solve from the affine start
     and, if it does not converge, a continuation over :data:`CONTINUATION_FRACTIONS` of the
-    deformation (``I = 1 + s (I − 1)``, ``II = s II``), each step allowed
-    :data:`CONTINUATION_MAX_ITERATIONS`. ``iterations`` counts every solve's. ``result`` is the
+    deformation (``I = 1 + s (I − 1)``, ``II = s II``), each step solved with ``step_options``
+    (default: ``options`` with :data:`CONTINUATION_ITERATION_FACTOR` times its iterations).
+    ``iterations`` counts every solve's. ``result`` is the
     full deformation's (converged or, if nothing converged, the closer to balance of the direct
     solve and the last step), or ``None`` when every solve of the full deformation stepped beyond
     the tiles mapped (:class:`TilingReachError`)."""
@@ -330,7 +333,8 @@ def _solve_with_continuation(relaxed: RelaxedRepeat, I, II, options: QuasiStatic
     except TilingReachError:
         pass  # a Newton step swept beyond the mapped tiles: smaller steps of deformation may not
     I, II = np.asarray(I, dtype=np.float64), np.asarray(II, dtype=np.float64)
-    step_options = replace(options, max_iterations=max(options.max_iterations, CONTINUATION_MAX_ITERATIONS))
+    if step_options is None:
+        step_options = replace(options, max_iterations=CONTINUATION_ITERATION_FACTOR * options.max_iterations)
     previous = None
     for fraction in CONTINUATION_FRACTIONS:
         step = tile_repeat(relaxed, np.eye(2) + fraction * (I - np.eye(2)), fraction * II)
