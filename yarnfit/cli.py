@@ -388,8 +388,6 @@ def cmd_fit(args: argparse.Namespace) -> int:
         sampling_started[0] = time.perf_counter()
         line.message(f"relaxed in {relaxed.seconds:.1f} s (radius {relaxed.radius * 1e6:.2f} µm); solving samples",
                      force=True)
-        for text in relaxed.yarn.describe():
-            line.message(text, force=True)
 
     def progress(done, total, result):
         now = time.perf_counter()

@@ -49,12 +49,9 @@ from . import __version__
 from .fabric import Fabric
 from .fit import COUPLING_LIMIT, Sample, ShellFit, fit_shell
 from .homogenize import SampleRanges, SampleResult, default_ranges, levels_for, sample_design, solve_samples
+from .materials import OPTIONAL_FIBER_FIELDS
 from .relax import RelaxedRepeat, relax
 from .shell import ShellMaterial
-
-# The fibre's optional fibre-assembly data, written into the file's inputs where known.
-FIBER_ASSEMBLY_FIELDS = ("fineness_dtex", "flexural_rigidity_nm2_per_tex2", "torsional_rigidity_nm2_per_tex2",
-                         "spinning")
 
 # Two magnitudes per family and sign of deformation, uniaxial tension at the smaller (28 in all):
 # enough to see curvature of the response, few enough that a preset fits in about a minute on two
@@ -114,7 +111,7 @@ class FabricFit:
                     "poisson": fiber.poisson,
                     "friction": fiber.friction,
                     "source": fiber.source,
-                    **{key: getattr(fiber, key) for key in FIBER_ASSEMBLY_FIELDS if getattr(fiber, key) is not None},
+                    **{key: getattr(fiber, key) for key in OPTIONAL_FIBER_FIELDS if getattr(fiber, key) is not None},
                 },
                 "yarn": fabric.yarn.to_dict(),
                 "pattern": fabric.structure if fabric.structure is not None else str(fabric.pattern_file),

@@ -52,7 +52,8 @@ from dataclasses import dataclass
 
 from .jsonfile import read_json
 
-__all__ = ["FIBERS", "FiberMaterial", "UnknownFiberError", "get_fiber", "load_fiber_file"]
+__all__ = ["FIBERS", "FiberMaterial", "UnknownFiberError", "finite_number", "get_fiber", "load_fiber_file",
+           "positive_or_none"]
 
 # Largest accepted breaking strain: textile fibres break below ~0.7 (wool, nylon 6 staple); 1.5
 # leaves room for textured or partly elastomeric user fibres but rejects percentages typed as
@@ -66,6 +67,8 @@ MAX_FRICTION = 2.0
 SPINNING_SYSTEMS = ("ring-spun", "filament")
 # The optional fibre data of the fibre-assembly yarn, numeric.
 ASSEMBLY_KEYS = ("fineness_dtex", "flexural_rigidity_nm2_per_tex2", "torsional_rigidity_nm2_per_tex2")
+# Every optional field of a fibre (written into material files where known).
+OPTIONAL_FIBER_FIELDS = ASSEMBLY_KEYS + ("spinning",)
 # The handbook's unit of specific rigidity, mN·mm²/tex², in N·m²/tex².
 MN_MM2_PER_TEX2 = 1e-9
 
@@ -109,7 +112,7 @@ class FiberMaterial:
             raise ValueError(f"name must be a non-empty string, got {self.name!r}")
         # Store plain floats so that ints from JSON or literals compare and print like floats.
         for field_name in ("density_kg_m3", "young_min_pa", "young_max_pa", "breaking_strain", "poisson", "friction"):
-            object.__setattr__(self, field_name, _finite_number(getattr(self, field_name), field_name))
+            object.__setattr__(self, field_name, finite_number(getattr(self, field_name), field_name))
 
         if self.density_kg_m3 <= 0.0:
             raise ValueError(f"density_kg_m3 must be > 0, got {self.density_kg_m3!r}")
@@ -129,12 +132,7 @@ class FiberMaterial:
         if not 0.0 <= self.friction <= MAX_FRICTION:
             raise ValueError(f"friction must lie in [0, {MAX_FRICTION}], got {self.friction!r}")
         for field_name in ASSEMBLY_KEYS:
-            value = getattr(self, field_name)
-            if value is not None:
-                value = _finite_number(value, field_name)
-                if value <= 0.0:
-                    raise ValueError(f"{field_name} must be > 0, got {value!r}")
-                object.__setattr__(self, field_name, value)
+            object.__setattr__(self, field_name, positive_or_none(getattr(self, field_name), field_name))
         if self.spinning is not None and self.spinning not in SPINNING_SYSTEMS:
             raise ValueError(f"spinning must be one of {', '.join(SPINNING_SYSTEMS)}, got {self.spinning!r}")
 
@@ -163,7 +161,7 @@ class FiberMaterial:
         )
 
 
-def _finite_number(value: object, field_name: str) -> float:
+def finite_number(value: object, field_name: str) -> float:
     """``value`` as a float, or ValueError naming the field if it is not a finite real number."""
     # bool is an int subclass: `true` in a JSON file must not read as 1.
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -171,6 +169,16 @@ def _finite_number(value: object, field_name: str) -> float:
     value = float(value)
     if not math.isfinite(value):
         raise ValueError(f"{field_name} must be finite, got {value!r}")
+    return value
+
+
+def positive_or_none(value: object, field_name: str) -> float | None:
+    """``None`` as is, else ``value`` as a positive finite float (ValueError naming the field)."""
+    if value is None:
+        return None
+    value = finite_number(value, field_name)
+    if value <= 0.0:
+        raise ValueError(f"{field_name} must be > 0, got {value!r}")
     return value
 
 

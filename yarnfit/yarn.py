@@ -68,7 +68,7 @@ import os
 from dataclasses import dataclass, fields
 
 from .jsonfile import read_json
-from .materials import SPINNING_SYSTEMS, FiberMaterial
+from .materials import SPINNING_SYSTEMS, FiberMaterial, finite_number, positive_or_none
 
 __all__ = ["SPINNING_DEFAULTS", "YARN_MODELS", "Yarn", "YarnConstruction", "load_yarn_file"]
 
@@ -145,22 +145,17 @@ class YarnConstruction:
         if self.spinning is not None and self.spinning not in SPINNING_SYSTEMS:
             raise ValueError(f"spinning must be one of {', '.join(SPINNING_SYSTEMS)}, got {self.spinning!r}")
         if self.packing_fraction is not None:
-            phi = _number(self.packing_fraction, "packing fraction")
+            phi = finite_number(self.packing_fraction, "packing fraction")
             if not 0.0 < phi <= 1.0:
                 raise ValueError(f"packing fraction must lie in (0, 1], got {phi!r}")
             object.__setattr__(self, "packing_fraction", phi)
         if self.twist_angle_deg is not None:
-            alpha = _number(self.twist_angle_deg, "twist angle")
+            alpha = finite_number(self.twist_angle_deg, "twist angle")
             if not 0.0 <= alpha < MAX_TWIST_DEG:
                 raise ValueError(f"twist angle must lie in [0°, {MAX_TWIST_DEG:g}°), got {alpha!r}°")
             object.__setattr__(self, "twist_angle_deg", alpha)
         for key in _RIGIDITY_KEYS:
-            value = getattr(self, key)
-            if value is not None:
-                value = _number(value, key)
-                if value <= 0.0:
-                    raise ValueError(f"{key} must be > 0, got {value!r}")
-                object.__setattr__(self, key, value)
+            object.__setattr__(self, key, positive_or_none(getattr(self, key), key))
         if self.model == "solid":
             given = [key for key in _CONSTRUCTION_KEYS + _RIGIDITY_KEYS if getattr(self, key) is not None]
             if given:
@@ -298,7 +293,7 @@ class Yarn:
         Raises ``ValueError`` (one line, naming the missing keys) when the fibre-assembly model
         needs fibre data the fibre does not have.
         """
-        radius = _number(radius, "yarn radius")
+        radius = finite_number(radius, "yarn radius")
         if radius <= 0.0:
             raise ValueError(f"yarn radius must be positive, got {radius!r} m")
         phi = construction.packing_fraction_for(fiber)
@@ -433,12 +428,3 @@ def no_slip_bending_factor(t2: float) -> float:
     if t2 < _SERIES_T2:
         return 1.0 - 4.0 * t2 / 3.0 + 1.5 * t2 * t2
     return 2.0 / t2**2 * (math.log1p(t2) - t2 / (1.0 + t2))
-
-
-def _number(value: object, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{what} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{what} must be finite, got {value!r}")
-    return value

@@ -464,15 +464,14 @@ def _material_data(material) -> tuple[dict, str]:
 def fabric_from_inputs(inputs, where: str = "material"):
     """The :class:`yarnfit.fabric.Fabric` a material file's ``inputs`` block describes."""
     from ..fabric import Fabric, named_patterns
-    from ..material import FIBER_ASSEMBLY_FIELDS
-    from ..materials import FiberMaterial
+    from ..materials import OPTIONAL_FIBER_FIELDS, FiberMaterial
     from ..yarn import YarnConstruction
 
     if not isinstance(inputs, dict):
         raise ValueError(f"{where}: missing 'inputs' (the fabric the material was fitted for)")
     try:
         fiber = inputs["fiber"]
-        optional = ("source",) + FIBER_ASSEMBLY_FIELDS
+        optional = ("source",) + OPTIONAL_FIBER_FIELDS
         fiber = FiberMaterial(**{k: fiber[k] for k in ("name", "density_kg_m3", "young_min_pa", "young_max_pa",
                                                         "breaking_strain", "poisson", "friction")},
                               **{k: fiber[k] for k in optional if k in fiber})
