@@ -6,6 +6,7 @@ undeformed sample's zero energy, the symmetry of a square plain weave, the paper
 experiment, and serial against parallel solves.
 """
 
+import dataclasses
 import functools
 import json
 import math
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 
 from yarnfit.engine import ConvergenceWarning, QuasiStaticOptions
+from yarnfit import homogenize as homogenize_module
 from yarnfit.engine.tiling import yarn_strips
 from yarnfit.fabric import Fabric
 from yarnfit.fit import FAMILIES, fit_shell
@@ -28,6 +30,7 @@ from yarnfit.homogenize import (
     levels_for,
     sample_design,
     solve_sample,
+    CONTINUATION_HALVINGS,
     _solve_with_continuation,
     solve_samples,
     tile_repeat,
@@ -326,3 +329,66 @@ def test_continuation_lands_on_the_direct_equilibrium():
     assert direct.converged and continued.converged
     assert iterations > continued.iterations  # the direct attempt and every step are counted
     assert continued.energy.internal == pytest.approx(direct.energy.internal, rel=SAME_EQUILIBRIUM_RTOL, abs=0.0)
+
+
+class _FailingSolves:
+    """Stands in for the solver in :mod:`yarnfit.homogenize`: solves as the real one, but reports
+    the calls numbered in ``fail`` as not converged (``None``: every call); records each call's
+    Green strain E₀₁ (the shear applied) in ``shears``."""
+
+    def __init__(self, solver_type, fail=None):
+        self.solver_type, self.fail, self.shears = solver_type, fail, []
+
+    def __call__(self, model, options):
+        spy = self
+        solver = self.solver_type(model, options)
+
+        class Solver:
+            def solve(self, state, **kw):
+                call = len(spy.shears)
+                lattice = model.lattice[:, :2]
+                spy.shears.append(float(lattice[0] @ lattice[1]))
+                result = solver.solve(state, **kw)
+                if spy.fail is None or call in spy.fail:
+                    return dataclasses.replace(result, converged=False)
+                return result
+
+        return Solver()
+
+
+@pytest.fixture
+def failing_solves(monkeypatch):
+    def install(fail=None):
+        spy = _FailingSolves(homogenize_module.QuasiStaticSolver, fail)
+        monkeypatch.setattr(homogenize_module, "QuasiStaticSolver", spy)
+        return spy
+    return install
+
+
+SHEAR_SAMPLE = (np.array([[1.0, 0.1], [0.1, 1.0]]), np.zeros((2, 2)))
+
+
+def test_a_continuation_step_that_fails_is_halved(failing_solves):
+    # Calls: direct, 0.25, 0.5, 0.75, 1 (made to fail), 0.875, 1: the halved step lands on the
+    # equilibrium the direct solve finds.
+    relaxed = relax(plain())
+    options = QuasiStaticOptions(max_iterations=600)
+    _, direct, _ = _solve_with_continuation(relaxed, *SHEAR_SAMPLE, options)
+    spy = failing_solves(fail={0, 4})
+    _, continued, _ = _solve_with_continuation(relaxed, *SHEAR_SAMPLE, options, step_options=options)
+    unit = spy.shears[0]  # the full shear's lattice product, a fraction s of it is s * unit
+    assert np.allclose(np.array(spy.shears) / unit, [1.0, 0.25, 0.5, 0.75, 1.0, 0.875, 1.0], rtol=0.0, atol=1e-12)
+    assert continued.converged
+    assert continued.energy.internal == pytest.approx(direct.energy.internal, rel=SAME_EQUILIBRIUM_RTOL, abs=0.0)
+
+
+def test_a_continuation_that_keeps_failing_stops_and_warns(failing_solves):
+    relaxed = relax(plain())
+    spy = failing_solves()
+    with pytest.warns(ConvergenceWarning, match="continuation to 0 of the deformation"):
+        _, result, _ = _solve_with_continuation(relaxed, *SHEAR_SAMPLE, QuasiStaticOptions(max_iterations=600))
+    assert not result.converged
+    # The direct solve, the first step, then CONTINUATION_HALVINGS halvings of it.
+    fractions = np.array(spy.shears) / spy.shears[0]
+    expected = [1.0] + [0.25 / 2**k for k in range(CONTINUATION_HALVINGS + 1)]
+    assert np.allclose(fractions, expected, rtol=0.0, atol=1e-12)
