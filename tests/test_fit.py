@@ -9,21 +9,18 @@ import numpy as np
 import pytest
 import scipy.optimize
 
+from yarnfit.engine import Residual
 from yarnfit.fit import (
-    BENDING_FAMILIES,
     COUPLING_LIMIT,
     DIAGONAL_FLOOR_REL,
-    FAMILIES,
-    MEMBRANE_FAMILIES,
-    OPTIONAL_FAMILIES,
     IndefiniteFitError,
-    Sample,
     design_matrix,
     fit_residual_jacobian,
     fit_shell,
     sample_weights,
     weighted_residuals,
 )
+from yarnfit.samples import BENDING_FAMILIES, FAMILIES, MEMBRANE_FAMILIES, OPTIONAL_FAMILIES, SampleResult, SampleSpec
 from yarnfit.shell import PARAMETER_NAMES, ShellMaterial
 
 from fabric_shell import FABRIC as TRUE, H  # a realistic woven
@@ -108,7 +105,13 @@ def forms(family: str, x: float) -> tuple[np.ndarray, np.ndarray]:
     return I, II
 
 
-def make_samples(material: ShellMaterial, families=FAMILIES, energy=None) -> list[Sample]:
+def sample(family, I, II, energy_density, residual, converged, parameter) -> SampleResult:
+    """A fit input as the homogenization returns it, ``residual`` its force imbalance."""
+    return SampleResult(SampleSpec(family, I, II, parameter), energy_density, converged,
+                        Residual(force=residual, torque=0.0, energy_change=0.0, penetration=0.0))
+
+
+def make_samples(material: ShellMaterial, families=FAMILIES, energy=None) -> list[SampleResult]:
     """PER_FAMILY samples per family with the material's exact energies (or ``energy(family, W)``)."""
     samples = []
     for family in families:
@@ -117,17 +120,17 @@ def make_samples(material: ShellMaterial, families=FAMILIES, energy=None) -> lis
             W = material.energy_density(I, II)
             if energy is not None:
                 W = energy(family, W)
-            samples.append(Sample(family, I, II, W, residual=1e-9, converged=True, parameter=x))
+            samples.append(sample(family, I, II, W, residual=1e-9, converged=True, parameter=x))
     return samples
 
 
-def with_energies(samples: list[Sample], energies) -> list[Sample]:
+def with_energies(samples: list[SampleResult], energies) -> list[SampleResult]:
     return [
-        Sample(s.family, s.I, s.II, float(u), s.residual, s.converged, s.parameter) for s, u in zip(samples, energies)
+        sample(s.family, s.I, s.II, float(u), s.residual.force, s.converged, s.parameter) for s, u in zip(samples, energies)
     ]
 
 
-def hand_weights(samples: list[Sample], thickness: float) -> np.ndarray:
+def hand_weights(samples: list[SampleResult], thickness: float) -> np.ndarray:
     """w = exp(−½(s/σ)²), s = ‖½(I − Id)‖_F or ‖II‖_F h/2, σ = a quarter of the group's largest s."""
     s = np.array(
         [
@@ -141,7 +144,7 @@ def hand_weights(samples: list[Sample], thickness: float) -> np.ndarray:
     return np.exp(-0.5 * (s / sigma) ** 2)
 
 
-def noisy_energies(samples: list[Sample], weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def noisy_energies(samples: list[SampleResult], weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Exact energies plus Gaussian noise of variance ∝ 1/w (the model the covariance formula assumes)."""
     exact = np.array([s.energy_density for s in samples])
     membrane = np.array([s.family in MEMBRANE_FAMILIES for s in samples])
@@ -444,8 +447,8 @@ def test_a_stiffness_the_data_put_at_zero_is_reported_at_its_floor():
 def test_non_converged_samples_are_excluded_and_listed():
     good = make_samples(TRUE)
     bad = [
-        Sample("saddle_bend", *forms("saddle_bend", 300.0), float("nan"), float("nan"), False, 300.0),
-        Sample("weft_stretch", *forms("weft_stretch", 0.2), 1e9, 0.5, False, 0.2),
+        sample("saddle_bend", *forms("saddle_bend", 300.0), float("nan"), float("nan"), False, 300.0),
+        sample("weft_stretch", *forms("weft_stretch", 0.2), 1e9, 0.5, False, 0.2),
     ]
     fit = fit_shell(good[:5] + bad[:1] + good[5:] + bad[1:], H)
     assert len(fit.excluded) == 2 and fit.excluded[0] is bad[0] and fit.excluded[1] is bad[1]
@@ -469,7 +472,7 @@ def test_missing_families_are_named():
     fit_shell(without_saddle, H, model="paper")
     # A family whose samples all failed counts as missing, and the message says why.
     failed = [
-        Sample(s.family, s.I, s.II, s.energy_density, s.residual, s.family != "weft_bend", s.parameter)
+        sample(s.family, s.I, s.II, s.energy_density, s.residual.force, s.family != "weft_bend", s.parameter)
         for s in make_samples(TRUE)
     ]
     with pytest.raises(ValueError, match=r"weft_bend \(4 excluded as not converged\)"):
@@ -482,14 +485,14 @@ def test_missing_families_are_named():
 def test_undetermined_parameters_are_named():
     # Shear samples at zero strain carry no information about s22.
     samples = [
-        Sample("shear", np.eye(2), np.zeros((2, 2)), 0.0, 0.0, True, 0.0) if s.family == "shear" else s
+        sample("shear", np.eye(2), np.zeros((2, 2)), 0.0, 0.0, True, 0.0) if s.family == "shear" else s
         for s in make_samples(TRUE)
     ]
     with pytest.raises(ValueError, match="s22 undetermined"):
         fit_shell(samples, H)
     # Bias bends alone cannot separate b01 from b22 when saddle samples repeat the weft bend.
     samples = [
-        Sample("saddle_bend", np.eye(2), np.diag([s.parameter, 0.0]), 0.0, 0.0, True, s.parameter)
+        sample("saddle_bend", np.eye(2), np.diag([s.parameter, 0.0]), 0.0, 0.0, True, s.parameter)
         if s.family == "saddle_bend" else s
         for s in make_samples(TRUE)
     ]
@@ -523,7 +526,7 @@ def test_bad_fit_arguments():
         fit_shell(samples, H, weight_width=0.0)
     with pytest.raises(ValueError, match="samples is empty"):
         fit_shell([], H)
-    with pytest.raises(ValueError, match=r"samples\[1\] must be a Sample"):
+    with pytest.raises(ValueError, match=r"samples\[1\] must be a SampleResult"):
         fit_shell([samples[0], {"family": "shear"}], H)
     with pytest.raises(ValueError, match="weights must be"):
         weighted_residuals(np.ones(8), samples, H, np.ones(3))
@@ -534,17 +537,17 @@ def test_bad_fit_arguments():
 @pytest.mark.parametrize(
     "changes, message",
     [
-        ({"family": "twist"}, "Sample.family must be one of weft_stretch, .*, got 'twist'"),
-        ({"I": np.diag([1.0, -1.0])}, "Sample.I: first fundamental form must be symmetric positive definite"),
+        ({"family": "twist"}, "SampleSpec.family must be one of weft_stretch, .*, got 'twist'"),
+        ({"I": np.diag([1.0, -1.0])}, "SampleSpec.I: first fundamental form must be symmetric positive definite"),
         ({"I": np.eye(3)}, r"must have shape \(2, 2\) or \(n, 2, 2\)"),
-        ({"I": np.stack([np.eye(2)] * 2)}, r"Sample.I must have shape \(2, 2\)"),
-        ({"II": np.array([[1.0, 2.0], [0.0, 1.0]])}, "Sample.II: second fundamental form must be finite and symmetric"),
-        ({"II": np.diag([1.0, 0.0])}, "Sample.II must be zero for membrane family weft_stretch"),
+        ({"I": np.stack([np.eye(2)] * 2)}, r"SampleSpec.I must have shape \(2, 2\)"),
+        ({"II": np.array([[1.0, 2.0], [0.0, 1.0]])}, "SampleSpec.II: second fundamental form must be finite and symmetric"),
+        ({"II": np.diag([1.0, 0.0])}, "SampleSpec.II must be zero for membrane family weft_stretch"),
         ({"energy_density": float("nan")}, "energy_density must be finite for a converged sample"),
-        ({"residual": -1.0}, "Sample.residual must be >= 0"),
-        ({"converged": 1}, "Sample.converged must be a bool, got 1"),
-        ({"parameter": float("inf")}, "Sample.parameter must be finite"),
-        ({"energy_density": "1.0"}, "Sample.energy_density must be a real number"),
+        ({"residual": -1.0}, "SampleResult.residual.force must be >= 0"),
+        ({"converged": 1}, "SampleResult.converged must be a bool, got 1"),
+        ({"parameter": float("inf")}, "SampleSpec.parameter must be finite"),
+        ({"energy_density": "1.0"}, "SampleResult.energy_density must be a real number"),
     ],
 )
 def test_bad_membrane_samples_are_rejected(changes, message):
@@ -558,22 +561,22 @@ def test_bad_membrane_samples_are_rejected(changes, message):
         "parameter": 0.1,
     }
     with pytest.raises(ValueError, match=message):
-        Sample(**{**fields, **changes})
+        sample(**{**fields, **changes})
 
 
 def test_bending_samples_must_not_stretch():
-    with pytest.raises(ValueError, match="Sample.I must be the identity for bending family bias_bend"):
-        Sample("bias_bend", np.diag([1.0 + 1e-6, 1.0]), 50.0 * np.ones((2, 2)), 1.0, 0.0, True, 100.0)
+    with pytest.raises(ValueError, match="SampleSpec.I must be the identity for bending family bias_bend"):
+        sample("bias_bend", np.diag([1.0 + 1e-6, 1.0]), 50.0 * np.ones((2, 2)), 1.0, 0.0, True, 100.0)
     # Round-off in building I = Id is accepted.
-    Sample("bias_bend", np.diag([1.0 + 1e-15, 1.0]), 50.0 * np.ones((2, 2)), 1.0, 0.0, True, 100.0)
+    sample("bias_bend", np.diag([1.0 + 1e-15, 1.0]), 50.0 * np.ones((2, 2)), 1.0, 0.0, True, 100.0)
     assert set(BENDING_FAMILIES) | set(MEMBRANE_FAMILIES) == set(FAMILIES)
     assert not set(BENDING_FAMILIES) & set(MEMBRANE_FAMILIES)
 
 
 def test_sample_arrays_are_read_only_copies():
     I = np.diag([1.21, 1.0])
-    sample = Sample("weft_stretch", I, np.zeros((2, 2)), 1.0, 0.0, True, 0.1)
+    result = sample("weft_stretch", I, np.zeros((2, 2)), 1.0, 0.0, True, 0.1)
     I[0, 0] = 5.0
-    assert sample.I[0, 0] == 1.21
+    assert result.I[0, 0] == 1.21
     with pytest.raises(ValueError):
-        sample.I[0, 0] = 2.0
+        result.I[0, 0] = 2.0

@@ -19,10 +19,11 @@ import yarnfit.record
 from yarnfit.engine import Residual
 from yarnfit.engine.tiling import yarn_strips
 from yarnfit.fabric import Fabric
-from yarnfit.homogenize import UNIAXIAL_FAMILIES, SampleResult, family_deformation, identity_sample, tile_repeat
-from yarnfit.material import _sample_dict, fit_fabric
+from yarnfit.homogenize import tile_repeat
+from yarnfit.material import fit_fabric
 from yarnfit.materials import get_fiber
 from yarnfit.record import EXCLUDED_COLOR, SAMPLE_TIMELINE, FitRecording
+from yarnfit.samples import Family, SampleResult, family_deformation, identity_sample
 from yarnfit.shell import GF_CM2_PER_CM
 
 # Strips are stored as float32; positions are ~1e-3 m, so float32 round-off is ~1e-10 m.
@@ -168,8 +169,8 @@ def test_the_shell_curves_pass_through_the_fitted_energy_and_the_samples_are_plo
         assert p[0] <= min(0.0, want[:, 0].min()) and p[-1] >= max(0.0, want[:, 0].max())
         # At the family's largest sampled deformation, the curve is the fitted shell's energy.
         parameter = max((r.spec.parameter for r in results), key=abs)
-        if family in UNIAXIAL_FAMILIES:  # the shell's own free width
-            expected = material.uniaxial_tension(UNIAXIAL_FAMILIES[family], 1.0 + parameter)[1]
+        if Family(family).uniaxial_axis is not None:  # the shell's own free width
+            expected = material.uniaxial_tension(Family(family).uniaxial_axis, 1.0 + parameter)[1]
         else:
             expected = material.energy_density(*family_deformation(family, parameter))
         assert np.interp(parameter, p, w) == pytest.approx(expected, rel=CURVE_RTOL)
@@ -238,6 +239,6 @@ def test_a_sample_without_a_state_is_written_as_nulls():
     result = SampleResult(spec=identity_sample(), energy_density=nan, converged=False,
                           residual=Residual(nan, nan, nan, nan), iterations=12, seconds=0.5,
                           position=np.zeros((1, 3)))
-    written = json.loads(json.dumps(_sample_dict(result), allow_nan=False))
+    written = json.loads(json.dumps(result.to_dict(), allow_nan=False))
     assert written["energy_density_j_m2"] is None and not written["converged"]
     assert set(written["residual"].values()) == {None}

@@ -18,28 +18,31 @@ from yarnfit.engine import ConvergenceWarning, QuasiStaticOptions
 from yarnfit import homogenize as homogenize_module
 from yarnfit.engine.tiling import yarn_strips
 from yarnfit.fabric import Fabric
-from yarnfit.fit import FAMILIES, fit_shell
+from yarnfit.fit import fit_shell
 from yarnfit.homogenize import (
-    SampleRanges,
-    SampleSpec,
-    SurfaceMap,
-    default_ranges,
-    family_deformation,
-    design_size,
-    identity_sample,
-    levels_for,
-    sample_design,
-    solve_sample,
     CONTINUATION_HALVINGS,
+    SurfaceMap,
     _solve_with_continuation,
+    default_ranges,
+    solve_sample,
     solve_samples,
     tile_repeat,
     transfer_fluctuation,
 )
-from yarnfit.material import DEFAULT_SAMPLES, FabricFit, fit_fabric, fit_samples, shell_thickness
+from yarnfit.material import DEFAULT_SAMPLES, FabricFit, fit_fabric, shell_thickness
 from yarnfit.materials import FiberMaterial, get_fiber
 from yarnfit.patterns import YarnPattern
 from yarnfit.relax import relax, relax_pattern
+from yarnfit.samples import (
+    FAMILIES,
+    SampleRanges,
+    SampleSpec,
+    design_size,
+    family_deformation,
+    identity_sample,
+    levels_for,
+    sample_design,
+)
 from yarnfit.shell import ShellMaterial
 from yarnfit.yarn import YarnConstruction
 
@@ -244,7 +247,7 @@ def test_straight_parallel_yarns_give_the_closed_form_stiffness(model):
     results = solve_samples(relaxed, sample_design(default_ranges(relaxed), 2), workers=1)
     assert all(s.converged for s in results)
     # The paper's model: with no warp bending stiffness at all, b01 is not identifiable.
-    material = fit_shell(fit_samples(results), shell_thickness(relaxed), model="paper").material
+    material = fit_shell(results, shell_thickness(relaxed), model="paper").material
     eng = material.engineering()
     stretch, bending = relaxed.yarn.tensile_rigidity_n / d, relaxed.yarn.bending_rigidity_nm2 / d
     if model == "solid":
@@ -276,7 +279,7 @@ def test_samples_that_do_not_converge_are_listed_and_excluded(tmp_path):
         stuck = solve_sample(relaxed, base.samples[2].spec, QuasiStaticOptions(max_iterations=1))
     assert not stuck.converged
     samples = list(base.samples) + [stuck]
-    fit = fit_shell(fit_samples(samples), shell_thickness(relaxed))
+    fit = fit_shell(samples, shell_thickness(relaxed))
     assert len(fit.excluded) == 1 and len(fit.used) == len(base.samples)
     result = FabricFit(base.fabric, relaxed, base.ranges, samples, fit, dict(base.seconds))
     data = json.loads(result.write(tmp_path / "m.json").read_text())

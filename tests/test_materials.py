@@ -122,8 +122,8 @@ def test_describe_is_one_line_with_units():
         ("friction", -0.1, "friction"),
         ("friction", 2.5, "friction"),
         ("friction", float("nan"), "friction must be finite"),
-        ("density_kg_m3", "1480", "density_kg_m3 must be a number"),
-        ("poisson", True, "poisson must be a number"),
+        ("density_kg_m3", "1480", "density_kg_m3 must be a real number"),
+        ("poisson", True, "poisson must be a real number"),
     ],
 )
 def test_invalid_fields_are_rejected_with_name_and_value(field, value, phrase):

@@ -448,7 +448,7 @@ def test_edges_of_the_accepted_ranges_are_accepted():
 
 @pytest.mark.parametrize("value", ["0.5", True, [0.5]], ids=repr)
 def test_non_numbers_are_refused(value):
-    one_line_error(lambda: YarnConstruction(packing_fraction=value), r"^packing fraction must be a number")
+    one_line_error(lambda: YarnConstruction(packing_fraction=value), r"^packing fraction must be a real number")
 
 
 @pytest.mark.parametrize("key", sorted(MEASURED))

@@ -18,12 +18,12 @@ import numpy as np
 
 from yarnfit.fabric import Fabric
 from yarnfit.fit import fit_shell
-from yarnfit.homogenize import SampleSpec, default_ranges, family_deformation, identity_sample, sample_design
-from yarnfit.homogenize import solve_sample, solve_samples
-from yarnfit.material import fit_fabric, fit_samples, shell_thickness
+from yarnfit.homogenize import default_ranges, solve_sample, solve_samples
+from yarnfit.material import fit_fabric, shell_thickness
 from yarnfit.materials import FiberMaterial, get_fiber
 from yarnfit.patterns import YarnPattern
 from yarnfit.relax import relax_pattern
+from yarnfit.samples import Family, SampleSpec, identity_sample, sample_design
 from yarnfit.yarn import YarnConstruction
 
 
@@ -37,7 +37,7 @@ def analytic() -> None:
     relaxed = relax_pattern(repeat, linear, shrink=1.0, yarn=YarnConstruction(model="solid"))
     results = solve_samples(relaxed, sample_design(default_ranges(relaxed), 2))
     for model in ("paper", "full"):
-        fit = fit_shell(fit_samples(results), shell_thickness(relaxed), model=model)
+        fit = fit_shell(results, shell_thickness(relaxed), model=model)
         eng = fit.material.engineering()
         stretch = young * math.pi * radius**2 / spacing
         bending = young * math.pi * radius**4 / (4 * spacing)
@@ -59,7 +59,7 @@ def invariance() -> None:
     fits = {gsm: fit_fabric(plain(gsm)) for gsm in (150.0, 200.0, 250.0)}
     relaxed = fits[200.0].relaxed
     zero = solve_sample(relaxed, identity_sample())
-    one = solve_sample(relaxed, SampleSpec("weft_stretch", *family_deformation("weft_stretch", 0.01), 0.01))
+    one = solve_sample(relaxed, SampleSpec.at(Family.WEFT_STRETCH, 0.01))
     print(f"undeformed sample: Ū = {zero.energy_density:.3g} J/m² (residual {zero.residual}); 1 % weft stretch "
           f"Ū = {one.energy_density:.4g} J/m²; ratio {zero.energy_density / one.energy_density:.2g}")
     eng = fits[200.0].material.engineering()

@@ -368,7 +368,7 @@ def cmd_relax(args: argparse.Namespace) -> int:
 
 def cmd_fit(args: argparse.Namespace) -> int:
     from .fit import COUPLING_LIMIT
-    from .homogenize import design_size
+    from .samples import design_size
     from .material import DEFAULT_SAMPLES, fit_fabric
     from .record import FitRecording
 

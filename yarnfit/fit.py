@@ -1,6 +1,6 @@
 """Weighted least-squares fit of an orthotropic StVK shell to yarn-level energy densities.
 
-Input: :class:`Sample` s, each a prescribed surface deformation (first and second fundamental forms
+Input: samples (:class:`~yarnfit.samples.SampleResult`), each a prescribed surface deformation (first and second fundamental forms
 ``I``, ``II``) with the homogenized yarn-level energy per reference area ``Ū`` (J/m²). Output: a
 :class:`ShellFit` holding the fitted :class:`~yarnfit.shell.ShellMaterial` and its quality report.
 
@@ -13,15 +13,13 @@ so the fit is linear: ``W(γ; I, II) = D(I, II) γ`` with the design matrix rows
 :func:`design_matrix`) ``h/2 (ε0², 2 ε0 ε1, ε1², ε2²)`` for the membrane and
 ``h³/2 (κ0², 2 κ0 κ1, κ1², κ2²)`` for bending.
 
-Sample families. Every sample belongs to one family and is either a membrane sample (``II = 0``)
-or a bending sample (``I = Id``), never both:
-
-* membrane: ``weft_stretch`` (s00), ``warp_stretch`` (s11), ``biaxial_stretch`` (s01 against the
-  two uniaxial families), ``shear`` (s22), and optionally ``weft_uniaxial``, ``warp_uniaxial``:
-  uniaxial tension with the transverse direction free (``I = diag(λ², μ²)`` with μ where the
-  yarn-level energy is least), which probe the free-width stiffness ``h (s00 − s01²/s11)`` directly
-  (for a knit a small difference of large numbers that the pure families cannot resolve);
-* bending: ``weft_bend`` (b00), ``warp_bend`` (b11), ``bias_bend`` (b22), ``saddle_bend`` (b01).
+Samples. Every sample (:class:`~yarnfit.samples.SampleResult`) belongs to one
+:class:`~yarnfit.samples.Family` and is either a membrane sample (``II = 0``) or a bending sample
+(``I = Id``), never both; each family pins one parameter (``Family.determines``: the pure stretches
+s00 and s11, the biaxial stretch s01 against them, shear s22, the bends b00, b11, b22 and the saddle
+b01). The optional uniaxial families (the transverse direction free, ``I = diag(λ², μ²)`` with μ
+where the yarn-level energy is least) probe the free-width stiffness ``h (s00 − s01²/s11)``
+directly (for a knit a small difference of large numbers that the pure families cannot resolve).
 
 Because no parameter is shared between the membrane and the bending group, the two groups are
 fitted (and their residual variances estimated) separately; their energies differ by orders of
@@ -36,32 +34,26 @@ the small-strain behaviour the StVK model is meant to capture.
 from __future__ import annotations
 
 import math
-import numbers
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
-from yarnfit.shell import (
+from .checks import real_number
+from .samples import BENDING_FAMILIES, FAMILIES, MEMBRANE_FAMILIES, Group, SampleResult
+from .shell import (
     BENDING_PARAMETERS,
     MEMBRANE_PARAMETERS,
     PARAMETER_NAMES,
     ShellMaterial,
-    as_first_fundamental_form,
-    as_second_fundamental_form,
     bending_strain,
     membrane_strain,
 )
 
 __all__ = [
-    "BENDING_FAMILIES",
-    "FAMILIES",
     "IndefiniteFitError",
-    "MEMBRANE_FAMILIES",
     "MODELS",
-    "OPTIONAL_FAMILIES",
-    "Sample",
     "ShellFit",
     "design_matrix",
     "fit_residual_jacobian",
@@ -71,22 +63,9 @@ __all__ = [
     "weighted_residuals",
 ]
 
-MEMBRANE_FAMILIES = ("weft_stretch", "warp_stretch", "biaxial_stretch", "shear", "weft_uniaxial", "warp_uniaxial")
-BENDING_FAMILIES = ("weft_bend", "warp_bend", "bias_bend", "saddle_bend")
-FAMILIES = MEMBRANE_FAMILIES + BENDING_FAMILIES
-# The uniaxial-tension families (the transverse direction free) add what a tensile test measures;
-# they are optional: the pure families alone determine every parameter.
-OPTIONAL_FAMILIES = ("weft_uniaxial", "warp_uniaxial")
 # "full" fits all eight parameters; "paper" fixes b01 = 0 (the paper's model).
 MODELS = ("full", "paper")
 
-# Largest accepted |I − Id| entry of a bending sample (dimensionless strain). The homogenizer
-# prescribes I = Id; 1e-12 admits round-off in building it (~1e-16) and is far below the smallest
-# strain any sample resolves (~1e-4), so the membrane energy it carries (~s·h·1e-24 J/m²) is nil.
-PURE_STRAIN_ATOL = 1e-12
-# Largest accepted |II| entry of a membrane sample (1/m). For any shell thinner than 1 cm its
-# surface strain h|II|/2 stays below 5e-12, the same order as PURE_STRAIN_ATOL.
-PURE_CURVATURE_ATOL = 1e-9
 # Lower bound of a diagonal stiffness (s00, s11, s22, b00, b11, b22) relative to the largest
 # diagonal of its group in the unbounded fit. Positive, so a fitted material stays strictly positive
 # definite; far below any physical anisotropy ratio (< 1e4), so it never binds a real stiffness;
@@ -113,13 +92,11 @@ BOUNDED_SOLVE_TOLERANCE = 1e-15
 BOUNDED_SOLVE_EVALUATIONS = 10000
 
 _DIAGONAL = ("s00", "s11", "s22", "b00", "b11", "b22")
-_GROUPS = (("membrane", MEMBRANE_FAMILIES, MEMBRANE_PARAMETERS), ("bending", BENDING_FAMILIES, BENDING_PARAMETERS))
+_GROUPS = ((Group.MEMBRANE, MEMBRANE_FAMILIES, MEMBRANE_PARAMETERS), (Group.BENDING, BENDING_FAMILIES, BENDING_PARAMETERS))
 # Each group's coupled block: (diagonal, coupling, diagonal).
 _COUPLINGS = {"membrane": ("s00", "s01", "s11"), "bending": ("b00", "b01", "b11")}
 # The sample family that determines each parameter (named in notes and errors).
-_DIAGONAL_FAMILY = {"s00": "weft_stretch", "s11": "warp_stretch", "s22": "shear", "b00": "weft_bend",
-                    "b11": "warp_bend", "b22": "bias_bend"}
-_COUPLING_FAMILY = {"s01": "biaxial_stretch", "b01": "saddle_bend"}
+_FAMILY_OF = {family.determines: family for family in FAMILIES if family.determines is not None}
 
 
 class IndefiniteFitError(ValueError):
@@ -135,77 +112,6 @@ class IndefiniteFitError(ValueError):
         super().__init__(message)
         self.family = family
         self.parameters = parameters
-
-
-@dataclass(frozen=True, eq=False)
-class Sample:
-    """One homogenized deformation sample.
-
-    Attributes:
-        family: one of :data:`FAMILIES`.
-        I: first fundamental form ``(2, 2)``, SPD (dimensionless); the identity for bending families.
-        II: second fundamental form ``(2, 2)`` (1/m), symmetric; zero for membrane families.
-        energy_density: yarn-level energy per reference area ``Ū`` (J/m²); may be NaN only if
-            ``converged`` is False.
-        residual: the quasi-static solver's worst relative residual (dimensionless, ≥ 0); may be
-            NaN only if ``converged`` is False.
-        converged: whether the solve reached its tolerance; non-converged samples are never fitted.
-        parameter: the scalar that varies along the family (stretch, shear or curvature in the
-            family's own units), for plots and reports.
-    """
-
-    family: str
-    I: np.ndarray
-    II: np.ndarray
-    energy_density: float
-    residual: float
-    converged: bool
-    parameter: float
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.family, str) or self.family not in FAMILIES:
-            raise ValueError(f"Sample.family must be one of {', '.join(FAMILIES)}, got {self.family!r}")
-        if not isinstance(self.converged, (bool, np.bool_)):
-            raise ValueError(f"Sample.converged must be a bool, got {self.converged!r}")
-        converged = bool(self.converged)
-        object.__setattr__(self, "converged", converged)
-
-        I = _single_form(as_first_fundamental_form, self.I, "I")
-        II = _single_form(as_second_fundamental_form, self.II, "II")
-        if self.family in MEMBRANE_FAMILIES and np.max(np.abs(II)) > PURE_CURVATURE_ATOL:
-            raise ValueError(
-                f"Sample.II must be zero for membrane family {self.family} (a sample never mixes "
-                f"membrane and bending; tolerance {PURE_CURVATURE_ATOL} 1/m), got {II.tolist()}"
-            )
-        if self.family in BENDING_FAMILIES and np.max(np.abs(I - np.eye(2))) > PURE_STRAIN_ATOL:
-            raise ValueError(
-                f"Sample.I must be the identity for bending family {self.family} (a sample never mixes "
-                f"membrane and bending; tolerance {PURE_STRAIN_ATOL}), got {I.tolist()}"
-            )
-        I.setflags(write=False)
-        II.setflags(write=False)
-        object.__setattr__(self, "I", I)
-        object.__setattr__(self, "II", II)
-
-        energy = _real(self.energy_density, "Sample.energy_density")
-        residual = _real(self.residual, "Sample.residual")
-        if converged and not math.isfinite(energy):
-            raise ValueError(f"Sample.energy_density must be finite for a converged sample, got {energy!r}")
-        if converged and not math.isfinite(residual):
-            raise ValueError(f"Sample.residual must be finite for a converged sample, got {residual!r}")
-        if residual < 0.0:
-            raise ValueError(f"Sample.residual must be >= 0, got {residual!r}")
-        parameter = _real(self.parameter, "Sample.parameter")
-        if not math.isfinite(parameter):
-            raise ValueError(f"Sample.parameter must be finite, got {parameter!r}")
-        object.__setattr__(self, "energy_density", energy)
-        object.__setattr__(self, "residual", residual)
-        object.__setattr__(self, "parameter", parameter)
-
-    @property
-    def is_membrane(self) -> bool:
-        """True for the membrane families, False for the bending families."""
-        return self.family in MEMBRANE_FAMILIES
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,8 +146,8 @@ class ShellFit:
     std_error: dict[str, float]
     families: dict[str, dict]
     active_bounds: list[str]
-    excluded: list[Sample]
-    used: list[Sample]
+    excluded: list[SampleResult]
+    used: list[SampleResult]
     weights: np.ndarray
     weight_widths: dict[str, float]
     fitted_energy: np.ndarray = field(repr=False)
@@ -254,14 +160,14 @@ class ShellFit:
         Non-finite numbers (an r2 of −inf, NaN standard errors) are written as ``None`` so that the
         material file stays strict JSON.
         """
-        def sample_dict(sample: Sample) -> dict:
+        def sample_dict(sample: SampleResult) -> dict:
             return {
                 "family": sample.family,
                 "parameter": sample.parameter,
                 "I": sample.I.tolist(),
                 "II_per_m": sample.II.tolist(),
                 "energy_density_j_per_m2": _json_float(sample.energy_density),
-                "residual": _json_float(sample.residual),
+                "residual": _json_float(sample.worst_residual),
             }
 
         used = []
@@ -291,7 +197,7 @@ class ShellFit:
         }
 
 
-def design_matrix(samples: Sequence[Sample], thickness: float) -> np.ndarray:
+def design_matrix(samples: Sequence[SampleResult], thickness: float) -> np.ndarray:
     """``dW/dγ`` for each sample, ``(n, 8)``, columns in :data:`~yarnfit.shell.PARAMETER_NAMES` order.
 
     Rows: ``h/2 (ε0², 2 ε0 ε1, ε1², ε2²)`` in the membrane columns and
@@ -311,7 +217,7 @@ def design_matrix(samples: Sequence[Sample], thickness: float) -> np.ndarray:
     return D
 
 
-def sample_strain(sample: Sample, thickness: float) -> float:
+def sample_strain(sample: SampleResult, thickness: float) -> float:
     """Strain magnitude used for weighting (dimensionless).
 
     ``‖E‖_F`` with ``E = ½(I − Id)`` for a membrane sample; ``‖II‖_F h/2``, the surface strain of the
@@ -324,7 +230,7 @@ def sample_strain(sample: Sample, thickness: float) -> float:
 
 
 def sample_weights(
-    samples: Sequence[Sample], thickness: float, weight_width: float | None = None
+    samples: Sequence[SampleResult], thickness: float, weight_width: float | None = None
 ) -> tuple[np.ndarray, dict[str, float]]:
     """Least-squares weights ``w = exp(−½ (s/σ)²)`` and the widths σ used.
 
@@ -343,7 +249,7 @@ def sample_weights(
     """
     samples = _sample_list(samples)
     if weight_width is not None:
-        weight_width = _real(weight_width, "weight_width")
+        weight_width = real_number(weight_width, "weight_width")
         if not (math.isfinite(weight_width) and weight_width > 0.0):
             raise ValueError(f"weight_width must be finite and > 0 (dimensionless strain), got {weight_width!r}")
     strain = np.array([sample_strain(s, thickness) for s in samples])
@@ -362,7 +268,7 @@ def sample_weights(
 
 
 def weighted_residuals(
-    params: Sequence[float], samples: Sequence[Sample], thickness: float, weights: np.ndarray
+    params: Sequence[float], samples: Sequence[SampleResult], thickness: float, weights: np.ndarray
 ) -> np.ndarray:
     """``√w (W_shell(γ; I, II) − Ū)`` (J/m², w dimensionless), ``(n,)``.
 
@@ -382,7 +288,7 @@ def weighted_residuals(
 
 
 def fit_residual_jacobian(
-    params: Sequence[float], samples: Sequence[Sample], thickness: float, weights: np.ndarray
+    params: Sequence[float], samples: Sequence[SampleResult], thickness: float, weights: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Weighted residuals ``(n,)`` and their Jacobian ``d r/d γ = √w D`` ``(n, 8)`` at γ = ``params``."""
     r = weighted_residuals(params, samples, thickness, weights)
@@ -391,7 +297,7 @@ def fit_residual_jacobian(
 
 
 def fit_shell(
-    samples: Iterable[Sample],
+    samples: Iterable[SampleResult],
     thickness: float,
     model: str = "full",
     weight_width: float | None = None,
@@ -430,14 +336,15 @@ def fit_shell(
     if model not in MODELS:
         raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
     if coupling_limit is not None:
-        coupling_limit = _real(coupling_limit, "coupling_limit")
+        coupling_limit = real_number(coupling_limit, "coupling_limit")
         if not 0.0 < coupling_limit < 1.0:
             raise ValueError(f"coupling_limit must be in (0, 1) (or None for no bound), got {coupling_limit!r}")
     samples = _sample_list(samples)
     used = [s for s in samples if s.converged]
     excluded = [s for s in samples if not s.converged]
 
-    required = tuple(f for f in FAMILIES if f not in OPTIONAL_FAMILIES and (model == "full" or f != "saddle_bend"))
+    # The paper's model fixes b01 = 0, so it needs no family that determines b01.
+    required = tuple(f for f in FAMILIES if not f.optional and (model == "full" or f.determines != "b01"))
     missing = []
     for family in required:
         if not any(s.family == family for s in used):
@@ -475,19 +382,20 @@ def fit_shell(
                                                      weights[rows], _COUPLINGS[group], None)
             floors = list(at_bound)
             at_bound = floors + [off]
-        notes += [f"{n} at its positive floor: the {_DIAGONAL_FAMILY[n]} energies carry no {n} stiffness"
+        notes += [f"{n} at its positive floor: the {_FAMILY_OF[n]} energies carry no {n} stiffness"
                   for n in floors]
         if off in at_bound and off not in values:
             notes.append(f"{off} held at 0: {' and '.join(n for n in (d0, d1) if n in floors)} at the positive floor")
         elif off in at_bound:
             notes.append(f"{off} at the positive-definite bound |{off}| = {coupling_limit:g} √({d0}·{d1}): the "
-                         f"{_COUPLING_FAMILY[off]} energies ask for {off}/√({d0}·{d1}) = {ratio:.3g}, which no "
+                         f"{_FAMILY_OF[off]} energies ask for {off}/√({d0}·{d1}) = {ratio:.3g}, which no "
                          f"positive-definite shell has (the unbounded fit is indefinite)")
         active += at_bound
         parameters.update(values)
         std_error.update(errors)
 
-    for d0, off, d1, family in (("s00", "s01", "s11", "biaxial_stretch"), ("b00", "b01", "b11", "saddle_bend")):
+    for d0, off, d1 in _COUPLINGS.values():
+        family = _FAMILY_OF[off]
         p0, p01, p1 = parameters[d0], parameters[off], parameters[d1]
         if p01 * p01 >= p0 * p1:
             floors = [n for n in (d0, d1) if n in active]
@@ -662,7 +570,7 @@ def _coupling_bounded_solve(
     return x
 
 
-def _family_statistics(used: list[Sample], fitted: np.ndarray, target: np.ndarray) -> dict[str, dict]:
+def _family_statistics(used: list[SampleResult], fitted: np.ndarray, target: np.ndarray) -> dict[str, dict]:
     stats = {}
     for family in FAMILIES:
         mask = np.array([s.family == family for s in used], dtype=bool)
@@ -679,36 +587,20 @@ def _family_statistics(used: list[Sample], fitted: np.ndarray, target: np.ndarra
     return stats
 
 
-def _single_form(check, value: object, name: str) -> np.ndarray:
-    try:
-        form = check(value)
-    except ValueError as exc:
-        raise ValueError(f"Sample.{name}: {exc}") from None
-    if form.shape != (2, 2):
-        raise ValueError(f"Sample.{name} must have shape (2, 2), got shape {form.shape}")
-    return form.copy()
-
-
-def _real(value: object, name: str) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be a real number, got {value!r}")
-    return float(value)
-
-
 def _thickness(thickness: object) -> float:
-    h = _real(thickness, "thickness")
+    h = real_number(thickness, "thickness")
     if not (math.isfinite(h) and h > 0.0):
         raise ValueError(f"thickness must be finite and > 0 (m), got {h!r}")
     return h
 
 
-def _sample_list(samples: Iterable[Sample]) -> list[Sample]:
+def _sample_list(samples: Iterable[SampleResult]) -> list[SampleResult]:
     samples = list(samples)
     if not samples:
         raise ValueError("samples is empty")
     for k, s in enumerate(samples):
-        if not isinstance(s, Sample):
-            raise ValueError(f"samples[{k}] must be a Sample, got {type(s).__name__}")
+        if not isinstance(s, SampleResult):
+            raise ValueError(f"samples[{k}] must be a SampleResult, got {type(s).__name__}")
     return samples
 
 

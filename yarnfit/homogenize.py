@@ -44,6 +44,7 @@ from .engine.contact import TilingReachError, image_range
 from .engine.model import aligned_frames
 from .engine.tiling import CurvedTiling, retile
 from .relax import RelaxedRepeat
+from .samples import SampleRanges, SampleResult, SampleSpec
 from .shell import as_first_fundamental_form, as_second_fundamental_form
 
 # A bend whose |det II'| is below this fraction of ‖II'‖² is a cylinder (developable); the
@@ -244,32 +245,6 @@ def _rve_constraints(model: RodModel, frame: np.ndarray) -> LinearConstraints:
 # -- one sample -----------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True, eq=False)
-class SampleSpec:
-    """A sampled deformation: ``family`` (see :data:`yarnfit.fit.FAMILIES`), ``I``, ``II`` (1/m)
-    and the scalar ``parameter`` that varies along the family (stretch λ − 1, shear ``I12``, or
-    curvature in 1/m), for plots."""
-
-    family: str
-    I: np.ndarray
-    II: np.ndarray
-    parameter: float
-
-
-@dataclass(frozen=True, eq=False)
-class SampleResult:
-    """A solved sample: ``energy_density`` Ū (J/m²), the solver's ``residual``, ``converged``,
-    ``iterations``, wall ``seconds`` and the final ``position (N, 3)`` (m)."""
-
-    spec: SampleSpec
-    energy_density: float
-    converged: bool
-    residual: Residual
-    iterations: int
-    seconds: float
-    position: np.ndarray
-
-
 def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions | None = None) -> SampleResult:
     """Tile ``relaxed`` on the sample's surface and minimise the yarn energy under ``C_RVE``.
 
@@ -277,7 +252,7 @@ def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticO
     transverse stretch μ (see :func:`_solve_uniaxial`); its result's spec carries the μ found."""
     start = time.perf_counter()
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
-    if spec.family in UNIAXIAL_FAMILIES:
+    if spec.family.uniaxial_axis is not None:
         return _solve_uniaxial(relaxed, spec, options, start)
     tiled, result, iterations = _solve_with_continuation(relaxed, spec.I, spec.II, options)
     if result is None:
@@ -391,8 +366,8 @@ def transfer_fluctuation(source: TiledRepeat, state: RodState, target: TiledRepe
     target.state.edge_quaternion[:] = aligned_frames(target.model, position, quaternion)
 
 
-# Uniaxial tension along weft (axis 0) or warp (axis 1) with the other direction free.
-UNIAXIAL_FAMILIES = {"weft_uniaxial": 0, "warp_uniaxial": 1}
+# -- uniaxial tension (weft or warp, the other direction free) -----------------------------------
+
 # Tolerance on the free Green strain E⊥ = (μ² − 1)/2: Ū is flat at its minimum, so an error δ
 # costs about ½ k δ² with k the pure transverse stiffness (~1e5 J/m² for the presets): 1e-4 leaves
 # ~5e-4 J/m², a few percent of the smallest uniaxial Ū measured (jersey at 1 %: 3e-2 J/m²) and far
@@ -431,7 +406,7 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
     values, which are linear in the positions). Not converged if the solve at the optimum did not
     converge, the search ran out of solves, or E⊥ ends at the interval's lower end (the fabric
     would contract further)."""
-    axis = UNIAXIAL_FAMILIES[spec.family]
+    axis = spec.family.uniaxial_axis
     stretch = math.sqrt(float(spec.I[axis, axis]))
     strain = 0.5 * (stretch**2 - 1.0)
     low = max(0.5 * (SMALLEST_FREE_STRETCH**2 - 1.0), -FREE_STRAIN_RANGE * strain)
@@ -537,44 +512,13 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
     )
 
 
-# -- sample design --------------------------------------------------------------------------------
+# -- sample ranges --------------------------------------------------------------------------------
 
-# Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
-# four bend families of both signs; plus weft and warp uniaxial tension at the lower half of the
-# levels (each costs 5–15 solves; the small strains are what a tensile test's start measures).
-SAMPLES_PER_LEVEL = 13
-UNIAXIAL_PER_LEVEL = 2
 # Largest curvature times repeat size (rad): keeps the saddles' Gauss defect (~κ² p² / 16 of
 # strain at the repeat's corners) small. Measured on cotton twill, a saddle's Ū/κ² grows by 4 %
 # from 0.05 to 0.2 rad per repeat and by 10 % to 0.4 rad; single and dome bends by under 2 %.
 MAX_TURN_PER_REPEAT = 0.25
 
-
-@dataclass(frozen=True)
-class SampleRanges:
-    """Largest sampled deformations: ``stretch`` (λ − 1 along a yarn direction, and ``I12`` for
-    shear), ``curvature`` (1/m) and ``compression``, the in-plane compression sampled along weft and
-    warp as a fraction of ``stretch`` (0, the default: none).
-
-    In-plane compression is off by default because a flat repeat cannot show what a fabric does
-    under it: real cloth buckles out of plane at once, while the flat-constrained repeat either goes
-    slack (single jersey: Ū = 0 to round-off at 2.5 % along the wales) or jams (HYLC stockinette:
-    three times its tensile stiffness at 10 %). Fitted together with tension, a quadratic shell
-    takes the average and the knits' membrane blocks came out indefinite.
-    """
-
-    stretch: float
-    curvature: float
-    compression: float = 0.0
-
-    def __post_init__(self) -> None:
-        for name in ("stretch", "curvature"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"sample range {name} must be positive, got {value!r}")
-        if not (math.isfinite(self.compression) and 0.0 <= self.compression < 1.0):
-            raise ValueError(f"sample range compression must be a fraction of the stretch range in [0, 1), "
-                             f"got {self.compression!r}")
 
 
 def default_ranges(relaxed: RelaxedRepeat) -> SampleRanges:
@@ -584,90 +528,6 @@ def default_ranges(relaxed: RelaxedRepeat) -> SampleRanges:
     strain = relaxed.fiber.breaking_strain
     curvature = min(strain / relaxed.radius, MAX_TURN_PER_REPEAT / float(max(relaxed.repeat_size)))
     return SampleRanges(stretch=strain, curvature=curvature)
-
-
-def family_deformation(family: str, parameter: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(I, II)`` of a sample of ``family`` at ``parameter`` (see :func:`sample_design`)."""
-    e, eye, zero = float(parameter), np.eye(2), np.zeros((2, 2))
-    forms = {
-        "weft_stretch": lambda: (np.diag([(1 + e) ** 2, 1.0]), zero),
-        "warp_stretch": lambda: (np.diag([1.0, (1 + e) ** 2]), zero),
-        "biaxial_stretch": lambda: ((1 + e) ** 2 * eye, zero),
-        "shear": lambda: (np.array([[1.0, e], [e, 1.0]]), zero),
-        # The transverse stretch is found by the solve; this is where its search starts.
-        "weft_uniaxial": lambda: (np.diag([(1 + e) ** 2, 1.0]), zero),
-        "warp_uniaxial": lambda: (np.diag([1.0, (1 + e) ** 2]), zero),
-        "weft_bend": lambda: (eye, np.diag([e, 0.0])),
-        "warp_bend": lambda: (eye, np.diag([0.0, e])),
-        # Cylinder at +45° for positive parameters, at −45° (curvature |e|) for negative ones.
-        "bias_bend": lambda: (eye, 0.5 * abs(e) * np.array([[1.0, np.sign(e)], [np.sign(e), 1.0]])),
-        "saddle_bend": lambda: (eye, np.diag([e, -e])),
-    }
-    if family not in forms:
-        raise ValueError(f"unknown sample family {family!r}; families: {', '.join(forms)}")
-    return forms[family]()
-
-
-def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
-    """The samples (paper §4.6, plus saddles for b01): ``levels`` magnitudes per family and sign
-    (:func:`family_deformation` gives each one's ``I`` and ``II``).
-
-    - weft, warp stretch: ``I = diag(λ², 1)`` / ``diag(1, λ²)``, λ − 1 at ``j/levels`` of the
-      range, and one compression at ``ranges.compression`` of it if that is not 0; biaxial
-      ``I = λ² Id``, all in tension;
-    - shear: ``I = [[1, s], [s, 1]]``, ``s = ±j/levels`` of the stretch range;
-    - weft, warp uniaxial tension: λ as for the pure stretches at the lower half of the levels
-      (:func:`uniaxial_levels`), the other direction free (its stretch μ minimises Ū; the spec
-      holds μ = 1, the result the μ found);
-    - weft, warp bends: ``II = diag(κ, 0)`` / ``diag(0, κ)``, ``κ = ±j/levels`` of the curvature
-      range;
-    - bias bends: cylinders at ±45°, ``II = κ/2 [[1, ±1], [±1, 1]]``;
-    - saddles: ``II = ±κ diag(1, −1)`` (the only samples that separate b01 from b22).
-    """
-    if not (isinstance(levels, int) and levels >= 1):
-        raise ValueError(f"levels must be a positive integer, got {levels!r}")
-    fractions = np.arange(1, levels + 1) / levels
-    both_signs = np.concatenate([-fractions[::-1], fractions])
-    stretch, curvature = ranges.stretch, ranges.curvature
-    uniaxial = np.concatenate([[-ranges.compression] if ranges.compression > 0 else [], fractions])
-    parameters = {
-        "weft_stretch": uniaxial * stretch,
-        "warp_stretch": uniaxial * stretch,
-        "biaxial_stretch": fractions * stretch,
-        "shear": both_signs * stretch,
-        "weft_uniaxial": fractions[:uniaxial_levels(levels)] * stretch,
-        "warp_uniaxial": fractions[:uniaxial_levels(levels)] * stretch,
-        "weft_bend": both_signs * curvature,
-        "warp_bend": both_signs * curvature,
-        "bias_bend": both_signs * curvature,
-        "saddle_bend": both_signs * curvature,
-    }
-    specs = []
-    for family, values in parameters.items():
-        for value in values:
-            I, II = family_deformation(family, value)
-            specs.append(SampleSpec(family, I, II, float(value)))
-    return specs
-
-
-def uniaxial_levels(levels: int) -> int:
-    """Levels at which the uniaxial-tension families are sampled: the lower half, at least one."""
-    return (levels + 1) // 2
-
-
-def design_size(levels: int) -> int:
-    """Samples in a design of ``levels`` magnitudes per family and sign."""
-    return SAMPLES_PER_LEVEL * levels + UNIAXIAL_PER_LEVEL * uniaxial_levels(levels)
-
-
-def levels_for(samples: int) -> int:
-    """Magnitudes per family and sign for about ``samples`` samples in all (at least
-    ``design_size(1)``)."""
-    smallest = design_size(1)
-    if not (isinstance(samples, int) and samples >= smallest):
-        raise ValueError(f"the sample design needs at least {smallest} samples (one per family and sign), "
-                         f"got {samples!r}")
-    return min(range(1, samples // SAMPLES_PER_LEVEL + 2), key=lambda levels: abs(design_size(levels) - samples))
 
 
 # -- many samples in parallel ---------------------------------------------------------------------
@@ -731,9 +591,4 @@ def _expected_cost(spec: SampleSpec) -> tuple:
     """Sort key of a sample's expected solve time (larger first): uniaxial searches, then membrane
     samples by strain, then bends by curvature."""
     strain = float(np.abs(spec.I - np.eye(2)).max())
-    return (spec.family in UNIAXIAL_FAMILIES, float(np.abs(spec.II).max()) == 0.0, strain, float(np.abs(spec.II).max()))
-
-
-def identity_sample() -> SampleSpec:
-    """The undeformed surface (``I = Id``, ``II = 0``): Ū must vanish."""
-    return SampleSpec("weft_stretch", np.eye(2), np.zeros((2, 2)), 0.0)
+    return (spec.family.uniaxial_axis is not None, float(np.abs(spec.II).max()) == 0.0, strain, float(np.abs(spec.II).max()))

@@ -41,16 +41,15 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
-
-import numpy as np
+from typing import Callable
 
 from . import __version__
 from .fabric import Fabric
-from .fit import COUPLING_LIMIT, Sample, ShellFit, fit_shell
-from .homogenize import SampleRanges, SampleResult, default_ranges, levels_for, sample_design, solve_samples
+from .fit import COUPLING_LIMIT, ShellFit, fit_shell
+from .homogenize import default_ranges, solve_samples
 from .materials import OPTIONAL_FIBER_FIELDS
 from .relax import RelaxedRepeat, relax
+from .samples import SampleRanges, SampleResult, levels_for, sample_design
 from .shell import ShellMaterial
 
 # Two magnitudes per family and sign of deformation, uniaxial tension at the smaller (28 in all):
@@ -144,7 +143,7 @@ class FabricFit:
             "engineering": self.material.engineering(),
             "fit": {**self.fit.quality_dict(), "stretch_range": self.ranges.stretch,
                     "curvature_range_per_m": self.ranges.curvature},
-            "samples": [_sample_dict(s) for s in self.samples],
+            "samples": [s.to_dict() for s in self.samples],
             "seconds": dict(self.seconds),
         }
 
@@ -158,32 +157,6 @@ class FabricFit:
 
 def _counts(fabric: Fabric, relaxed: RelaxedRepeat) -> tuple[float, float]:
     return fabric.counts_per_m(relaxed.pattern)
-
-
-def _sample_dict(result: SampleResult) -> dict:
-    r = result.residual
-    return {
-        "family": result.spec.family,
-        "parameter": result.spec.parameter,
-        "I": result.spec.I.tolist(),
-        "II": result.spec.II.tolist(),
-        "energy_density_j_m2": result.energy_density if np.isfinite(result.energy_density) else None,
-        "converged": result.converged,
-        # A sample with no state to measure (every solve left the mapped tiles) has NaN residuals.
-        "residual": {key: value if np.isfinite(value) else None for key, value in (
-            ("force", r.force), ("torque", r.torque), ("energy_change", r.energy_change),
-            ("penetration", r.penetration))},
-        "iterations": result.iterations,
-        "seconds": result.seconds,
-    }
-
-
-def fit_samples(results: Sequence[SampleResult]) -> list[Sample]:
-    """Homogenization results as :class:`yarnfit.fit.Sample` s (residual: the worse of force and
-    torque)."""
-    return [Sample(family=r.spec.family, I=r.spec.I, II=r.spec.II, energy_density=r.energy_density,
-                   residual=max(r.residual.force, r.residual.torque), converged=r.converged,
-                   parameter=r.spec.parameter) for r in results]
 
 
 def fit_fabric(
@@ -230,7 +203,7 @@ def fit_fabric(
     results = solve_samples(relaxed, specs, workers=workers, progress=progress)
     seconds["homogenize"] = time.perf_counter() - start
     start = time.perf_counter()
-    shell = fit_shell(fit_samples(results), shell_thickness(relaxed), model=model,
+    shell = fit_shell(results, shell_thickness(relaxed), model=model,
                       coupling_limit=coupling_limit)
     seconds["fit"] = time.perf_counter() - start
     return FabricFit(fabric, relaxed, ranges, results, shell, seconds)

@@ -50,10 +50,10 @@ import math
 import os
 from dataclasses import dataclass
 
+from .checks import finite_number, positive_or_none
 from .jsonfile import read_json
 
-__all__ = ["FIBERS", "FiberMaterial", "UnknownFiberError", "finite_number", "get_fiber", "load_fiber_file",
-           "positive_or_none"]
+__all__ = ["FIBERS", "FiberMaterial", "UnknownFiberError", "get_fiber", "load_fiber_file"]
 
 # Largest accepted breaking strain: textile fibres break below ~0.7 (wool, nylon 6 staple); 1.5
 # leaves room for textured or partly elastomeric user fibres but rejects percentages typed as
@@ -159,27 +159,6 @@ class FiberMaterial:
             f"{self.name:<10} {self.density_kg_m3:5.0f} kg/m³  E {modulus:<13} ε_max {self.breaking_strain:.2f}  "
             f"ν {self.poisson:.2f}  μ {self.friction:.2f}  {fineness} {self.spinning or '':<9}  {rigidity}  ({short_source})"
         )
-
-
-def finite_number(value: object, field_name: str) -> float:
-    """``value`` as a float, or ValueError naming the field if it is not a finite real number."""
-    # bool is an int subclass: `true` in a JSON file must not read as 1.
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{field_name} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{field_name} must be finite, got {value!r}")
-    return value
-
-
-def positive_or_none(value: object, field_name: str) -> float | None:
-    """``None`` as is, else ``value`` as a positive finite float (ValueError naming the field)."""
-    if value is None:
-        return None
-    value = finite_number(value, field_name)
-    if value <= 0.0:
-        raise ValueError(f"{field_name} must be > 0, got {value!r}")
-    return value
 
 
 def _modulus_from_specific(n_per_tex: float, density_kg_m3: float) -> float:

@@ -51,7 +51,7 @@ A :class:`FitRecording` writes one shell fit run (phases 2 and 3, ``yarnfit.homo
 ``yarnfit.fit``, driven by ``yarnfit.material.fit_fabric``).
 
 Timeline ``sample`` (sequence): sample k (its index in the design order of
-``yarnfit.homogenize.sample_design``, 0-based, as in ``FabricFit.samples``) is logged at step k, in
+``yarnfit.samples.sample_design``, 0-based, as in ``FabricFit.samples``) is logged at step k, in
 whatever order the samples finish. The relaxed repeat, the fit curves and the summary are static.
 
 Entity paths (positions and radii in m, 3D x weft, y warp, z up):
@@ -76,14 +76,14 @@ Entity paths (positions and radii in m, 3D x weft, y warp, z up):
   that did not converge (excluded from the fit) with a finite Ū; only logged if there are any
   (static, by ``finish``).
 - ``fit/curves/<family>/shell``: ``LineStrips2D``, the fitted shell's energy density
-  ``W(family_deformation(family, p))`` (for the uniaxial families ``W`` of
+  ``W(Family.deformation(p))`` (for the uniaxial families ``W`` of
   ``ShellMaterial.uniaxial_tension``, the shell's own free width) over a dense range of p spanning the family's sampled
   parameters and 0, through every sampled parameter (static, by ``finish``).
 - ``fit/summary``: ``TextDocument`` (markdown), the engineering constants in SI and user units (N/m,
   N·m and gf·cm²/cm for bending), R² and relative RMS per family, the bounds the fit reached (if
   any), model, thickness, sample counts and wall time per stage (static, by ``finish``).
 
-``<family>`` is each of ``yarnfit.fit.FAMILIES`` with at least one sample. The curves' x is the
+``<family>`` is each of ``yarnfit.samples.FAMILIES`` with at least one sample. The curves' x is the
 family's parameter (λ − 1 for the stretch families, I12 for shear, curvature in 1/m for the bend
 families) and y is in J/m². Rerun 2D views keep x and y at equal scale with y pointing down, so
 each curve entity also carries a static ``Transform3D`` scaling x by 1 / max |p| and y by
@@ -110,9 +110,9 @@ import rerun.blueprint as rrb
 
 from .engine import Progress
 from .engine.tiling import yarn_strips
-from .fit import BENDING_FAMILIES, FAMILIES
-from .homogenize import UNIAXIAL_FAMILIES, family_deformation, tile_repeat
+from .homogenize import tile_repeat
 from .patterns import YarnPattern
+from .samples import FAMILIES, Family
 from .shell import GF_CM2_PER_CM
 
 APPLICATION_ID = "yarnfit"
@@ -175,7 +175,7 @@ def fit_blueprint() -> rrb.Blueprint:
     the left; the sample energy, the sample's numbers and the summary in the middle; one 2D view
     per sample family with its fit curve on the right; the time panel on the ``sample`` timeline."""
     curves = [rrb.Spatial2DView(origin=f"fit/curves/{family}",
-                                name=f"{family}: Ū (J/m²) over {parameter_label(family)}") for family in FAMILIES]
+                                name=f"{family}: Ū (J/m²) over {family.label}") for family in FAMILIES]
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
@@ -200,13 +200,6 @@ def _folded_panels(timeline: str) -> tuple:
     and selection panels folded away."""
     return (rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
             rrb.TimePanel(state="expanded", timeline=timeline))
-
-
-def parameter_label(family: str) -> str:
-    """What a sample family's parameter measures, with its unit (see ``SampleSpec.parameter``)."""
-    if family == "shear":
-        return "I12"
-    return "curvature (1/m)" if family in BENDING_FAMILIES else "λ − 1"
 
 
 class _Recording:
@@ -401,7 +394,7 @@ class FitRecording(_Recording):
                                                        colors=SHELL_COLOR), display, static=True)
 
 
-def shell_curve(material, family: str, parameters) -> tuple[np.ndarray, np.ndarray]:
+def shell_curve(material, family: Family, parameters) -> tuple[np.ndarray, np.ndarray]:
     """The shell's energy density along ``family``: parameters ``p (n,)`` (the family's unit) on
     a uniform grid of CURVE_POINTS spanning ``parameters`` and 0, plus ``parameters`` themselves
     (so the curve passes exactly through the shell's value at every sample), and ``W(p) (n,)``
@@ -409,11 +402,12 @@ def shell_curve(material, family: str, parameters) -> tuple[np.ndarray, np.ndarr
     parameters = np.asarray(parameters, dtype=np.float64)
     low, high = min(0.0, float(parameters.min())), max(0.0, float(parameters.max()))
     p = np.union1d(np.linspace(low, high, CURVE_POINTS), parameters)
-    if family in UNIAXIAL_FAMILIES:
+    family = Family.named(family)
+    if family.uniaxial_axis is not None:
         # The shell's own free width: the Schur complement, not the yarn-level sample's μ.
-        energy = [material.uniaxial_tension(UNIAXIAL_FAMILIES[family], 1.0 + value)[1] for value in p]
+        energy = [material.uniaxial_tension(family.uniaxial_axis, 1.0 + value)[1] for value in p]
         return p, np.asarray(energy, dtype=np.float64)
-    forms = [family_deformation(family, value) for value in p]
+    forms = [family.deformation(value) for value in p]
     energy = material.energy_density(np.array([I for I, _ in forms]), np.array([II for _, II in forms]))
     return p, np.asarray(energy, dtype=np.float64)
 
@@ -506,7 +500,7 @@ def sample_summary(index: int, result) -> str:
     spec, r = result.spec, result.residual
     rows = [
         ("family", spec.family),
-        (f"parameter ({parameter_label(spec.family)})", f"{spec.parameter:.6g}"),
+        (f"parameter ({spec.family.label})", f"{spec.parameter:.6g}"),
         ("I", _matrix(spec.I)),
         ("II (1/m)", _matrix(spec.II)),
         ("Ū", f"{result.energy_density:.6g} J/m²"),

@@ -26,13 +26,13 @@ with ``m = B κ``. A symmetric variation that changes both ``I_01`` and ``I_10``
 from __future__ import annotations
 
 import math
-import numbers
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
+from .checks import finite_number
 from .jsonfile import read_json
 
 __all__ = [
@@ -153,7 +153,7 @@ class ShellMaterial:
 
     def __post_init__(self) -> None:
         for name in ("thickness",) + PARAMETER_NAMES:
-            object.__setattr__(self, name, _finite_float(getattr(self, name), name))
+            object.__setattr__(self, name, finite_number(getattr(self, name), name))
         if self.thickness <= 0.0:
             raise ValueError(f"thickness must be > 0 (m), got {self.thickness!r}")
 
@@ -224,7 +224,7 @@ class ShellMaterial:
                 ``D = 1 − nu_tp nu_pt ≤ 0``.
         """
         values = {"E_t": E_t, "E_p": E_p, "nu_tp": nu_tp, "nu_pt": nu_pt, "mu": mu}
-        values = {name: _finite_float(value, name) for name, value in values.items()}
+        values = {name: finite_number(value, name) for name, value in values.items()}
         for name in ("E_t", "E_p", "mu"):
             if values[name] <= 0.0:
                 raise ValueError(f"{name} must be > 0 (Pa), got {values[name]!r}")
@@ -330,7 +330,7 @@ class ShellMaterial:
         free-width stiffness of the engineering constants. Needs a positive-definite membrane."""
         if axis not in (0, 1):
             raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
-        stretch = _finite_float(stretch, "stretch")
+        stretch = finite_number(stretch, "stretch")
         if stretch <= 0.0:
             raise ValueError(f"stretch must be positive, got {stretch!r}")
         self._require_positive_definite("uniaxial tension states", membrane=True, bending=False)
@@ -440,17 +440,6 @@ class ShellMaterial:
 
 
 # -- helpers --------------------------------------------------------------------------------------
-
-
-def _finite_float(value: object, name: str) -> float:
-    """``value`` as a float, or ValueError naming the field if it is not a finite real number."""
-    # bool is an int subclass: True must not read as 1.
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be a real number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return value
 
 
 def _block_problems(d0: float, off: float, d1: float, diag: float, names: tuple[str, ...]) -> list[str]:

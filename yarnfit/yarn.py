@@ -68,7 +68,8 @@ import os
 from dataclasses import dataclass, fields
 
 from .jsonfile import read_json
-from .materials import SPINNING_SYSTEMS, FiberMaterial, finite_number, positive_or_none
+from .checks import finite_number, positive_or_none
+from .materials import SPINNING_SYSTEMS, FiberMaterial
 
 __all__ = ["SPINNING_DEFAULTS", "YARN_MODELS", "Yarn", "YarnConstruction", "load_yarn_file"]
 

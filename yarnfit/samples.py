@@ -1,0 +1,405 @@
+"""Sample families, the sample design, and the two sample types every stage shares.
+
+A sample is a constant surface deformation ``(I, II)`` of the fabric (first fundamental form,
+dimensionless, SPD; second fundamental form, 1/m, symmetric; the rest surface is flat with
+``I = Id``) that the homogenization solves at the yarn level and the shell fit fits. Every sample
+belongs to one :class:`Family`; this module is the one place a family is defined: its group
+(membrane samples have ``II = 0``, bending samples ``I = Id``), the scalar parameter it varies and
+its unit, its ``(I, II)`` at a parameter, the shell parameter it determines, its uniaxial axis
+(uniaxial tension with the transverse direction free) and whether the fit needs it.
+
+- :class:`SampleSpec`: what to solve (family, ``I``, ``II``, parameter); checked on construction.
+- :class:`SampleResult`: what the solve gave (Ū in J/m², the solver's residuals, iterations, time,
+  the final node positions); the fit, the material file and the recording all take it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from .checks import real_number
+from .engine import Residual
+from .shell import as_first_fundamental_form, as_second_fundamental_form
+
+__all__ = [
+    "BENDING_FAMILIES",
+    "FAMILIES",
+    "Family",
+    "Group",
+    "MEMBRANE_FAMILIES",
+    "OPTIONAL_FAMILIES",
+    "SampleRanges",
+    "SampleResult",
+    "SampleSpec",
+    "UNIAXIAL_FAMILIES",
+    "design_size",
+    "family_deformation",
+    "identity_sample",
+    "levels_for",
+    "sample_design",
+    "uniaxial_levels",
+]
+
+# Largest accepted |I − Id| entry of a bending sample (dimensionless strain). The homogenizer
+# prescribes I = Id; 1e-12 admits round-off in building it (~1e-16) and is far below the smallest
+# strain any sample resolves (~1e-4), so the membrane energy it carries (~s·h·1e-24 J/m²) is nil.
+PURE_STRAIN_ATOL = 1e-12
+# Largest accepted |II| entry of a membrane sample (1/m). For any shell thinner than 1 cm its
+# surface strain h|II|/2 stays below 5e-12, the same order as PURE_STRAIN_ATOL.
+PURE_CURVATURE_ATOL = 1e-9
+
+
+class Group(StrEnum):
+    """Membrane samples stretch the flat surface (``II = 0``); bending samples bend it without
+    stretching (``I = Id``). No shell parameter is shared between the two."""
+
+    MEMBRANE = "membrane"
+    BENDING = "bending"
+
+
+# How a family's parameters are laid out in the design (see :func:`sample_design`).
+_TENSION_AND_COMPRESSION = "tension and compression"
+_TENSION = "tension"
+_BOTH_SIGNS = "both signs"
+_LOWER_TENSION = "lower half of the tension levels"
+
+
+def _stretched(axis: int | None):
+    def deformation(e: float) -> tuple[np.ndarray, np.ndarray]:
+        I = (1.0 + e) ** 2 * np.eye(2) if axis is None else np.diag([1.0, 1.0])
+        if axis is not None:
+            I[axis, axis] = (1.0 + e) ** 2
+        return I, np.zeros((2, 2))
+    return deformation
+
+
+def _sheared(e: float) -> tuple[np.ndarray, np.ndarray]:
+    return np.array([[1.0, e], [e, 1.0]]), np.zeros((2, 2))
+
+
+def _bent(shape):
+    def deformation(e: float) -> tuple[np.ndarray, np.ndarray]:
+        return np.eye(2), shape(e)
+    return deformation
+
+
+class Family(StrEnum):
+    """The sample families (paper §4.6, plus saddles for b01 and uniaxial tension). A member is
+    its name (a ``str``: it compares equal to ``"weft_stretch"`` and is written as that), with:
+
+    - ``group``: :class:`Group`;
+    - ``quantity`` and ``unit``: what the parameter measures (λ − 1 along the stretched direction,
+      ``I12`` for shear, the curvature κ in 1/m for bends);
+    - ``determines``: the shell parameter whose diagonal or coupling the family pins (``None`` for
+      the uniaxial families, which add a tensile test's free width);
+    - ``uniaxial_axis``: 0 (weft) or 1 (warp) for uniaxial tension with the other direction free
+      (the solve finds its stretch μ; the spec holds μ = 1 as the search's start), else ``None``;
+    - ``optional``: the fit does without it (the pure families determine every parameter);
+    - ``layout``: which parameter values the design samples;
+    - :meth:`deformation`: ``(I, II)`` at a parameter value.
+    """
+
+    def __new__(cls, name, group, quantity, unit, determines, uniaxial_axis, optional, layout, deformation):
+        member = str.__new__(cls, name)
+        member._value_ = name
+        member.group = group
+        member.quantity = quantity
+        member.unit = unit
+        member.determines = determines
+        member.uniaxial_axis = uniaxial_axis
+        member.optional = optional
+        member.layout = layout
+        member._deformation = deformation
+        return member
+
+    WEFT_STRETCH = ("weft_stretch", Group.MEMBRANE, "λ − 1", "", "s00", None, False, _TENSION_AND_COMPRESSION,
+                    _stretched(0))
+    WARP_STRETCH = ("warp_stretch", Group.MEMBRANE, "λ − 1", "", "s11", None, False, _TENSION_AND_COMPRESSION,
+                    _stretched(1))
+    BIAXIAL_STRETCH = ("biaxial_stretch", Group.MEMBRANE, "λ − 1", "", "s01", None, False, _TENSION, _stretched(None))
+    SHEAR = ("shear", Group.MEMBRANE, "I12", "", "s22", None, False, _BOTH_SIGNS, _sheared)
+    # The transverse stretch is found by the solve; the deformation is where its search starts.
+    WEFT_UNIAXIAL = ("weft_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0, True, _LOWER_TENSION, _stretched(0))
+    WARP_UNIAXIAL = ("warp_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 1, True, _LOWER_TENSION, _stretched(1))
+    WEFT_BEND = ("weft_bend", Group.BENDING, "curvature", "1/m", "b00", None, False, _BOTH_SIGNS,
+                 _bent(lambda e: np.diag([e, 0.0])))
+    WARP_BEND = ("warp_bend", Group.BENDING, "curvature", "1/m", "b11", None, False, _BOTH_SIGNS,
+                 _bent(lambda e: np.diag([0.0, e])))
+    # Cylinder at +45° for positive parameters, at −45° (curvature |e|) for negative ones.
+    BIAS_BEND = ("bias_bend", Group.BENDING, "curvature", "1/m", "b22", None, False, _BOTH_SIGNS,
+                 _bent(lambda e: 0.5 * abs(e) * np.array([[1.0, np.sign(e)], [np.sign(e), 1.0]])))
+    SADDLE_BEND = ("saddle_bend", Group.BENDING, "curvature", "1/m", "b01", None, False, _BOTH_SIGNS,
+                   _bent(lambda e: np.diag([e, -e])))
+
+    def deformation(self, parameter: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(I, II)`` of this family's sample at ``parameter`` (see the class docstring)."""
+        return self._deformation(float(parameter))
+
+    @property
+    def label(self) -> str:
+        """The parameter with its unit, for plots: ``"λ − 1"``, ``"I12"``, ``"curvature (1/m)"``."""
+        return f"{self.quantity} ({self.unit})" if self.unit else self.quantity
+
+    @classmethod
+    def named(cls, name: object) -> "Family":
+        """The family called ``name``; ValueError listing the families otherwise."""
+        try:
+            return cls(name)
+        except ValueError:
+            raise ValueError(f"unknown sample family {name!r}; families: {', '.join(cls)}") from None
+
+
+FAMILIES = tuple(Family)
+MEMBRANE_FAMILIES = tuple(f for f in Family if f.group is Group.MEMBRANE)
+BENDING_FAMILIES = tuple(f for f in Family if f.group is Group.BENDING)
+OPTIONAL_FAMILIES = tuple(f for f in Family if f.optional)
+UNIAXIAL_FAMILIES = tuple(f for f in Family if f.uniaxial_axis is not None)
+
+
+def family_deformation(family: str, parameter: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(I, II)`` of a sample of ``family`` (a :class:`Family` or its name) at ``parameter``."""
+    return Family.named(family).deformation(parameter)
+
+
+@dataclass(frozen=True, eq=False)
+class SampleSpec:
+    """A sampled deformation: ``family`` (a :class:`Family`; its name is accepted), ``I`` ``(2, 2)``
+    SPD (the identity for bending families), ``II`` ``(2, 2)`` symmetric (1/m; zero for membrane
+    families) and the finite scalar ``parameter`` that varies along the family (``family.label``).
+    The forms are kept as read-only copies. ValueError names the field at fault."""
+
+    family: Family
+    I: np.ndarray
+    II: np.ndarray
+    parameter: float
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.family, str) or self.family not in FAMILIES:
+            raise ValueError(f"SampleSpec.family must be one of {', '.join(FAMILIES)}, got {self.family!r}")
+        family = Family(self.family)
+        I = _single_form(as_first_fundamental_form, self.I, "I")
+        II = _single_form(as_second_fundamental_form, self.II, "II")
+        if family.group is Group.MEMBRANE and np.max(np.abs(II)) > PURE_CURVATURE_ATOL:
+            raise ValueError(
+                f"SampleSpec.II must be zero for membrane family {family} (a sample never mixes "
+                f"membrane and bending; tolerance {PURE_CURVATURE_ATOL} 1/m), got {II.tolist()}"
+            )
+        if family.group is Group.BENDING and np.max(np.abs(I - np.eye(2))) > PURE_STRAIN_ATOL:
+            raise ValueError(
+                f"SampleSpec.I must be the identity for bending family {family} (a sample never mixes "
+                f"membrane and bending; tolerance {PURE_STRAIN_ATOL}), got {I.tolist()}"
+            )
+        parameter = real_number(self.parameter, "SampleSpec.parameter")
+        if not math.isfinite(parameter):
+            raise ValueError(f"SampleSpec.parameter must be finite, got {parameter!r}")
+        I.setflags(write=False)
+        II.setflags(write=False)
+        object.__setattr__(self, "family", family)
+        object.__setattr__(self, "I", I)
+        object.__setattr__(self, "II", II)
+        object.__setattr__(self, "parameter", parameter)
+
+    @classmethod
+    def at(cls, family: str, parameter: float) -> "SampleSpec":
+        """The sample of ``family`` at ``parameter`` (its forms from :meth:`Family.deformation`)."""
+        family = Family.named(family)
+        return cls(family, *family.deformation(parameter), parameter)
+
+    @property
+    def is_membrane(self) -> bool:
+        return self.family.group is Group.MEMBRANE
+
+
+@dataclass(frozen=True, eq=False)
+class SampleResult:
+    """A solved sample: its ``spec`` (for a uniaxial family, with the transverse stretch found),
+    ``energy_density`` Ū (J/m² of reference area; NaN only if not ``converged``), ``converged``,
+    the solver's ``residual`` (:class:`~yarnfit.engine.Residual`; NaN only if not converged: no
+    state was reached), ``iterations`` (Newton iterations of every solve), wall ``seconds`` and the
+    final node positions ``position (N, 3)`` (m; ``None`` when not kept).
+
+    Non-converged samples are reported and never fitted. ValueError names the field at fault."""
+
+    spec: SampleSpec
+    energy_density: float
+    converged: bool
+    residual: Residual
+    iterations: int = 0
+    seconds: float = 0.0
+    position: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.spec, SampleSpec):
+            raise ValueError(f"SampleResult.spec must be a SampleSpec, got {type(self.spec).__name__}")
+        if not isinstance(self.converged, (bool, np.bool_)):
+            raise ValueError(f"SampleResult.converged must be a bool, got {self.converged!r}")
+        converged = bool(self.converged)
+        energy = real_number(self.energy_density, "SampleResult.energy_density")
+        if converged and not math.isfinite(energy):
+            raise ValueError(f"SampleResult.energy_density must be finite for a converged sample, got {energy!r}")
+        if not isinstance(self.residual, Residual):
+            raise ValueError(f"SampleResult.residual must be a Residual, got {type(self.residual).__name__}")
+        for name in ("force", "torque"):
+            value = real_number(getattr(self.residual, name), f"SampleResult.residual.{name}")
+            if converged and not math.isfinite(value):
+                raise ValueError(f"SampleResult.residual.{name} must be finite for a converged sample, got {value!r}")
+            if value < 0.0:
+                raise ValueError(f"SampleResult.residual.{name} must be >= 0, got {value!r}")
+        object.__setattr__(self, "converged", converged)
+        object.__setattr__(self, "energy_density", energy)
+
+    # The spec's fields, read through (the fit and the recording work with results).
+    @property
+    def family(self) -> Family:
+        return self.spec.family
+
+    @property
+    def I(self) -> np.ndarray:
+        return self.spec.I
+
+    @property
+    def II(self) -> np.ndarray:
+        return self.spec.II
+
+    @property
+    def parameter(self) -> float:
+        return self.spec.parameter
+
+    @property
+    def is_membrane(self) -> bool:
+        return self.spec.is_membrane
+
+    @property
+    def worst_residual(self) -> float:
+        """The worse of the force and torque imbalances (dimensionless; NaN without a state)."""
+        return max(self.residual.force, self.residual.torque)
+
+    def to_dict(self) -> dict:
+        """JSON form (the material file's ``samples`` entries); NaN is written as ``None``."""
+        r = self.residual
+        return {
+            "family": str(self.family),
+            "parameter": self.parameter,
+            "I": self.I.tolist(),
+            "II": self.II.tolist(),
+            "energy_density_j_m2": _finite_or_none(self.energy_density),
+            "converged": self.converged,
+            # A sample with no state to measure (every solve left the mapped tiles) has NaN residuals.
+            "residual": {key: _finite_or_none(value) for key, value in (
+                ("force", r.force), ("torque", r.torque), ("energy_change", r.energy_change),
+                ("penetration", r.penetration))},
+            "iterations": self.iterations,
+            "seconds": self.seconds,
+        }
+
+
+# -- sample design --------------------------------------------------------------------------------
+
+# Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
+# four bend families of both signs; plus weft and warp uniaxial tension at the lower half of the
+# levels (each costs 5–15 solves; the small strains are what a tensile test's start measures).
+SAMPLES_PER_LEVEL = 13
+UNIAXIAL_PER_LEVEL = 2
+
+
+@dataclass(frozen=True)
+class SampleRanges:
+    """Largest sampled deformations: ``stretch`` (λ − 1 along a yarn direction, and ``I12`` for
+    shear), ``curvature`` (1/m) and ``compression``, the in-plane compression sampled along weft and
+    warp as a fraction of ``stretch`` (0, the default: none).
+
+    In-plane compression is off by default because a flat repeat cannot show what a fabric does
+    under it: real cloth buckles out of plane at once, while the flat-constrained repeat either goes
+    slack (single jersey: Ū = 0 to round-off at 2.5 % along the wales) or jams (HYLC stockinette:
+    three times its tensile stiffness at 10 %). Fitted together with tension, a quadratic shell
+    takes the average and the knits' membrane blocks came out indefinite.
+    """
+
+    stretch: float
+    curvature: float
+    compression: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("stretch", "curvature"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"sample range {name} must be positive, got {value!r}")
+        if not (math.isfinite(self.compression) and 0.0 <= self.compression < 1.0):
+            raise ValueError(f"sample range compression must be a fraction of the stretch range in [0, 1), "
+                             f"got {self.compression!r}")
+
+
+def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
+    """The samples (paper §4.6, plus saddles for b01): ``levels`` magnitudes per family and sign,
+    in :data:`FAMILIES` order (:meth:`Family.deformation` gives each one's ``I`` and ``II``).
+
+    - weft, warp stretch: ``I = diag(λ², 1)`` / ``diag(1, λ²)``, λ − 1 at ``j/levels`` of the
+      range, and one compression at ``ranges.compression`` of it if that is not 0; biaxial
+      ``I = λ² Id``, all in tension;
+    - shear: ``I = [[1, s], [s, 1]]``, ``s = ±j/levels`` of the stretch range;
+    - weft, warp uniaxial tension: λ as for the pure stretches at the lower half of the levels
+      (:func:`uniaxial_levels`), the other direction free (its stretch μ minimises Ū; the spec
+      holds μ = 1, the result the μ found);
+    - weft, warp bends: ``II = diag(κ, 0)`` / ``diag(0, κ)``, ``κ = ±j/levels`` of the curvature
+      range;
+    - bias bends: cylinders at ±45°, ``II = κ/2 [[1, ±1], [±1, 1]]``;
+    - saddles: ``II = ±κ diag(1, −1)`` (the only samples that separate b01 from b22).
+    """
+    if not (isinstance(levels, int) and levels >= 1):
+        raise ValueError(f"levels must be a positive integer, got {levels!r}")
+    fractions = np.arange(1, levels + 1) / levels
+    layouts = {
+        _TENSION_AND_COMPRESSION: np.concatenate([[-ranges.compression] if ranges.compression > 0 else [], fractions]),
+        _TENSION: fractions,
+        _BOTH_SIGNS: np.concatenate([-fractions[::-1], fractions]),
+        _LOWER_TENSION: fractions[:uniaxial_levels(levels)],
+    }
+    specs = []
+    for family in FAMILIES:
+        scale = ranges.stretch if family.group is Group.MEMBRANE else ranges.curvature
+        for value in layouts[family.layout] * scale:
+            specs.append(SampleSpec.at(family, float(value)))
+    return specs
+
+
+def uniaxial_levels(levels: int) -> int:
+    """Levels at which the uniaxial-tension families are sampled: the lower half, at least one."""
+    return (levels + 1) // 2
+
+
+def design_size(levels: int) -> int:
+    """Samples in a design of ``levels`` magnitudes per family and sign."""
+    return SAMPLES_PER_LEVEL * levels + UNIAXIAL_PER_LEVEL * uniaxial_levels(levels)
+
+
+def levels_for(samples: int) -> int:
+    """Magnitudes per family and sign for about ``samples`` samples in all (at least
+    ``design_size(1)``)."""
+    smallest = design_size(1)
+    if not (isinstance(samples, int) and samples >= smallest):
+        raise ValueError(f"the sample design needs at least {smallest} samples (one per family and sign), "
+                         f"got {samples!r}")
+    return min(range(1, samples // SAMPLES_PER_LEVEL + 2), key=lambda levels: abs(design_size(levels) - samples))
+
+
+def identity_sample() -> SampleSpec:
+    """The undeformed surface (``I = Id``, ``II = 0``): Ū must vanish."""
+    return SampleSpec.at(Family.WEFT_STRETCH, 0.0)
+
+
+def _finite_or_none(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
+def _single_form(check, value: object, name: str) -> np.ndarray:
+    try:
+        form = check(value)
+    except ValueError as exc:
+        raise ValueError(f"SampleSpec.{name}: {exc}") from None
+    if form.shape != (2, 2):
+        raise ValueError(f"SampleSpec.{name} must have shape (2, 2), got shape {form.shape}")
+    return form.copy()
