@@ -39,6 +39,9 @@ SMALL_DEFLECTION_RTOL = 0.01
 LARGE_DEFLECTION_RTOL = 3e-3
 # Where the discrete answer is closed form, only the solver's residual (1e-8) and round-off remain.
 DISCRETE_RTOL = 1e-7
+# Reactions balance the loads exactly at equilibrium (statics, whatever the discretisation); the
+# force residual 1e-8 of the force scale leaves that much imbalance, with margin.
+REACTION_RTOL = 1e-6
 
 
 def clamped_rod(n_edges: int, material: RodMaterial = MATERIAL) -> RodModel:
@@ -180,3 +183,38 @@ def test_roll_up_into_a_ring():
         assert radius == pytest.approx(LENGTH / (2 * math.pi), rel=2.0 / n_edges)
         gaps.append(np.linalg.norm(x[-1] - x[0]) / LENGTH)
     assert gaps[1] < 0.5 * gaps[0] and gaps[1] < 2e-3
+
+
+def test_reactions_balance_a_tip_loaded_cantilever():
+    # Statics: the clamp's force is −P, its moment about the clamp node −(x_tip × P); both are
+    # exact at equilibrium, for the deflected shape as solved.
+    model = clamped_rod(20)
+    loads = Loads.zeros(model)
+    load = np.array([0.0, 0.0, -0.5 * EI / LENGTH**2])
+    loads.node_force[-1] = load
+    result = QuasiStaticSolver(model, QuasiStaticOptions(contact=False)).solve(RodState.from_model(model), loads)
+    assert result.converged
+    scale = abs(load[2])
+    np.testing.assert_allclose(result.reaction_force.sum(axis=0), -load, rtol=0.0, atol=REACTION_RTOL * scale)
+    assert np.all(result.reaction_force[1:] == 0.0) and np.all(result.reaction_moment[1:] == 0.0)
+    tip = result.state.node_position[-1] - result.state.node_position[0]
+    np.testing.assert_allclose(result.reaction_moment[0], -np.cross(tip, load), rtol=0.0,
+                               atol=REACTION_RTOL * scale * LENGTH)
+
+
+def test_reactions_of_a_pure_twist():
+    # Each of the N − 1 joints turns by ψ = Φ / (N − 1) and carries the moment (G J / l0) sin ψ
+    # (the derivative of its energy (2 / l0) G J sin²(ψ / 2)): the held end frames feel it with
+    # opposite signs, about the rod's axis.
+    n_edges, phi = 20, 0.5 * math.pi
+    rod = Rod(straight_points(LENGTH, n_edges), RADIUS, MATERIAL, pinned_nodes=[0], pinned_frames=[0, n_edges - 1])
+    model = RodModel.from_rods([rod])
+    start = RodState.from_model(model)
+    turn = np.zeros((model.n_edges, 3))
+    turn[-1] = (phi, 0.0, 0.0)
+    start.edge_quaternion = _rotate_frames(start.edge_quaternion, turn)
+    result = QuasiStaticSolver(model, QuasiStaticOptions(contact=False)).solve(start, Loads.zeros(model))
+    assert result.converged
+    moment = GJ / (LENGTH / n_edges) * math.sin(phi / (n_edges - 1))
+    np.testing.assert_allclose(result.reaction_moment[-1], [moment, 0.0, 0.0], rtol=0.0, atol=DISCRETE_RTOL * moment)
+    np.testing.assert_allclose(result.reaction_moment[0], [-moment, 0.0, 0.0], rtol=0.0, atol=DISCRETE_RTOL * moment)

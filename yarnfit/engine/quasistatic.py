@@ -258,6 +258,11 @@ class QuasiStaticResult:
         residual: the residuals at the returned state.
         contact_pairs: the edge pairs touching at the end (with the image of their second edge).
         contact_force: ``(P,)`` their normal forces (N, summed over each pair's samples).
+        reaction_force: ``(N, 3)`` the force (N) each pinned node's support exerts on it, ``∂Π/∂x``
+            of the total potential (rods, contacts and loads): what holds the node where it is;
+            zero on free nodes. A tensile test's jaw force is the sum over the jaw's nodes.
+        reaction_moment: ``(E, 3)`` the moment (N·m, world frame) each pinned frame's support
+            exerts on it, ``∂Π/∂θ``; zero on free frames.
         history: the residual of every iteration.
     """
 
@@ -268,6 +273,8 @@ class QuasiStaticResult:
     residual: Residual
     contact_pairs: ContactPairs
     contact_force: np.ndarray
+    reaction_force: np.ndarray
+    reaction_moment: np.ndarray
     history: list = field(default_factory=list)
 
 
@@ -386,6 +393,9 @@ class _Work:
     moment_work: float = 0.0
     contacts: _Contacts = field(default_factory=_Contacts.none)
     contact_force: np.ndarray = field(default_factory=lambda: np.empty(0))
+    # Full gradient (every DOF, pinned ones included) of the last evaluation: the solve always
+    # ends on an evaluation at the returned state, so this gives the reactions there.
+    gradient: np.ndarray = field(default_factory=lambda: np.empty(0))
 
     @property
     def point(self) -> tuple[np.ndarray, np.ndarray, float]:
@@ -518,6 +528,9 @@ class QuasiStaticSolver:
             )
         pair_force = work.contacts.per_pair_sum(work.contact_force)
         touching = pair_force > 0.0
+        n3 = 3 * model.n_nodes
+        reaction_force = np.where(model.node_pinned[:, None], work.gradient[:n3].reshape(-1, 3), 0.0)
+        reaction_moment = np.where(model.edge_pinned[:, None], work.gradient[n3:].reshape(-1, 3), 0.0)
         return QuasiStaticResult(
             state=RodState(
                 node_position=work.position,
@@ -531,6 +544,8 @@ class QuasiStaticSolver:
             residual=residual,
             contact_pairs=work.contacts.pairs.subset(touching),
             contact_force=pair_force[touching],
+            reaction_force=reaction_force,
+            reaction_moment=reaction_moment,
             history=history,
         )
 
@@ -627,6 +642,7 @@ class QuasiStaticSolver:
         work.contacts = self._contacts(memory, work.position)
         ev = self._assess(work.point, work.contacts, node_force, moment, energy_change)
         work.contact_force = ev.contact_force
+        work.gradient = ev.gradient
         return ev
 
     def _assess(self, point, contacts: _Contacts, node_force, moment, energy_change=0.0) -> _Evaluation:

@@ -237,18 +237,6 @@ def _rotate_quaternions(q: np.ndarray, angle: float) -> np.ndarray:
     return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
-class _ReactionSolver(QuasiStaticSolver):
-    """The quasi-static solver, keeping the full gradient of its last evaluation (rods and
-    contacts, pinned nodes included: the jaws' reactions)."""
-
-    last_gradient: np.ndarray | None = None
-
-    def _evaluate(self, work, memory, node_force, moment, energy_change):
-        ev = super()._evaluate(work, memory, node_force, moment, energy_change)
-        self.last_gradient = ev.gradient
-        return ev
-
-
 def mid_width(swatch: Swatch, position: np.ndarray) -> float:
     """Width (m) at mid-length: the span across the strip (y) of the points where yarn centrelines
     pass through the plane halfway between the jaws' current positions, plus one yarn diameter.
@@ -289,7 +277,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
     model = swatch.model
     options = options or QuasiStaticOptions(**SWATCH_OPTIONS)
-    solver = _ReactionSolver(model, options)
+    solver = QuasiStaticSolver(model, options)
     band = 0.25 * swatch.width if width_band is None else float(width_band)
     rest = swatch.position
     width0 = mid_width(swatch, rest)
@@ -316,10 +304,9 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             warnings.simplefilter("ignore", ConvergenceWarning)
             result = solver.solve(guess)
         state = result.state
-        gradient = solver.last_gradient[: 3 * model.n_nodes].reshape(-1, 3)
         _, rod_gradient, _ = energy_gradient(model, state)
-        pull = float(gradient[swatch.moving, 0].sum())
-        back = float(gradient[swatch.fixed, 0].sum())
+        pull = float(result.reaction_force[swatch.moving, 0].sum())
+        back = float(result.reaction_force[swatch.fixed, 0].sum())
         rod_pull = float(rod_gradient[swatch.moving, 0].sum())
         width = mid_width(swatch, state.node_position)
         r = result.residual
