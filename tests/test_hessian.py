@@ -10,7 +10,8 @@ from scipy.spatial.transform import Rotation
 
 from yarnfit.engine import Loads, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState, straight_points
 from yarnfit.engine import _contact_kernels
-from yarnfit.engine.quasistatic import _Contacts, _rotate_frames, _Work
+from yarnfit.engine.contact_lagrangian import ContactSet
+from yarnfit.engine.quasistatic import _rotate_frames, _Work
 
 # Central differences of the analytic gradient at step h carry O(h²) truncation and O(ε/h)
 # round-off: ~1e-10 relative at the steps below; 1e-7 leaves room and still fails on any wrong term.
@@ -59,7 +60,7 @@ def test_rod_hessian_matches_differences_of_the_gradient(build):
     def gradient(step):
         dx, dtheta = solver._split(step)
         point = (position + dx, _rotate_frames(quaternion, dtheta), 0.0)
-        return solver._assess(point, _Contacts.none(), node_force, moment).gradient[solver._free]
+        return solver._assess(point, ContactSet.none(), node_force, moment).gradient[solver._free]
 
     h = 1e-7
     n = hessian.shape[0]

@@ -54,7 +54,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from . import _contact_kernels, _kernels
-from .contact import ContactPairs, find_pairs
+from .contact import ContactPairs
+from .contact_lagrangian import ContactLagrangian, ContactSet
 from .energy import EnergyTerms, internal_forces
 from .model import RodModel, quaternion_d3
 from .state import Loads, RodState
@@ -68,31 +69,6 @@ CHORD_STEPS = 3
 # Round-off floor of a residual, in units of one rounding of the largest coordinate times the
 # stiffness: the strain's subtraction and the sums over a node's elements add a few roundings more.
 ROUNDOFF_FACTOR = 10.0
-# Contact penalty: each pair starts at EA / (ra + rb) (a yarn under strain ε presses a contact in by
-# ~ε of the diameter before the multipliers take the force over). The multiplier iteration removes
-# the penetration by a factor ~K / (K + k) per update, K the structure's stiffness at the contact:
-# a yarn pressed over a crossing is stiffer than k by ~20 (jersey: 4 % less penetration per
-# update). So, as in Bertsekas' method of multipliers, an update that did not cut the worst
-# penetration to PENETRATION_PROGRESS of its previous value stiffens the pairs still penetrating
-# beyond tolerance tenfold, up to MAX_STIFFENING. Stiffening only at updates, where the iterate is
-# balanced: stiffening on any penetration seen mid-solve ratcheted transient overshoots of new
-# contacts up to the cap, and Newton then crossed the cap's kinks at every step.
-PENETRATION_PROGRESS = 0.25
-MAX_STIFFENING = 1e4
-# Half-width of the contact ramp's smoothing band, in units of k (ra + rb): the band is ±0.01 % of
-# the diameter around λ / k (~1.6e-8 m for a 80 µm yarn), wide against Newton's last corrections
-# (~1e-10 m). A touching contact with no multiplier pushes with δ/4 and a lightly loaded one
-# rests up to δ/k apart: an unloaded relaxed repeat is then not quite force-free, and the energy
-# it releases goes as δ². At 1e-3 the undeformed homogenization sample kept 3e-3 J/m² (3e-6 of a
-# 10 % stretch); at 1e-4, 7e-5 J/m², with every relaxation still converging.
-CONTACT_SMOOTHING = 1e-4
-# Spacing of the contact sample points along an edge, in radii. A crossing between samples is
-# seen up to h / 2 off its closest point, which hides h² / (32 r²) of the diameter: 0.2 % here.
-CONTACT_SAMPLE_SPACING = 0.25
-# Residual below which contact multipliers are first updated: late enough that the forces copied
-# into them are close to equilibrium, early enough to spare Newton iterations on a moving target.
-# Each update tightens it tenfold (down to the tolerances).
-MULTIPLIER_UPDATE_RESIDUAL = 1e-3
 # A step cut to less than this fraction of the Newton step (by the rotation or tunneling cap, or by
 # backtracking) marks the Newton model as poor and raises the damping; otherwise it falls, because
 # damping scaled by diag(H) ~ EA/l0 swamps the soft bending modes of slender rods.
@@ -279,98 +255,6 @@ class QuasiStaticResult:
 
 
 @dataclass
-class _Contacts:
-    """Contact pairs of one query with their sampled constraints: pair ``p`` owns constraints
-    ``start[p]:start[p + 1]`` (``edge_samples`` points on each of its edges), each with a
-    multiplier (N); penalties (N/m: a base value times a remembered stiffening factor) are per
-    pair."""
-
-    pairs: ContactPairs
-    start: np.ndarray
-    multiplier: np.ndarray
-    base_stiffness: np.ndarray
-    stiffening: np.ndarray
-
-    @classmethod
-    def none(cls) -> "_Contacts":
-        return cls(ContactPairs.empty(), np.zeros(1, dtype=np.int64), np.empty(0), np.empty(0), np.empty(0))
-
-    @property
-    def stiffness(self) -> np.ndarray:
-        """Penalty of each pair (N/m)."""
-        return self.base_stiffness * self.stiffening
-
-    @property
-    def counts(self) -> np.ndarray:
-        """Constraints per pair."""
-        return np.diff(self.start)
-
-    def per_constraint(self, values: np.ndarray) -> np.ndarray:
-        """A per-pair array repeated over each pair's constraints."""
-        return np.repeat(values, self.counts)
-
-    def per_pair_any(self, flags: np.ndarray) -> np.ndarray:
-        """Pairs with any constraint flagged."""
-        if len(self.pairs) == 0:
-            return np.zeros(0, dtype=np.bool_)
-        return np.add.reduceat(flags.astype(np.int64), self.start[:-1]) > 0
-
-    def per_pair_sum(self, values: np.ndarray) -> np.ndarray:
-        if len(self.pairs) == 0:
-            return np.zeros(0)
-        return np.add.reduceat(values, self.start[:-1])
-
-    def kernel_args(self) -> tuple:
-        """``(pairs, rotation, translation, start, multiplier, stiffness, smoothing)`` as the contact
-        kernels take them (after the model's edge arrays and sample counts)."""
-        return (*self.pairs.kernel_args(), self.start, self.multiplier, self.stiffness, CONTACT_SMOOTHING)
-
-
-class _ContactMemory:
-    """Multipliers and penalty factors remembered per edge pair across broad-phase queries (a
-    pair's constraint count depends only on its edges, so its multipliers keep their layout)."""
-
-    def __init__(self, n_edges: int):
-        self._n_edges = n_edges
-        self._keys = np.empty(0, dtype=np.int64)
-        self._start = np.zeros(1, dtype=np.int64)
-        self._multiplier = np.empty(0)
-        self._stiffening = np.empty(0)
-        self._level = 1.0
-
-    def recall(self, pairs: ContactPairs, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(multiplier per constraint, stiffening per pair)`` of ``pairs`` laid out by ``start``.
-        New pairs start with no multipliers and at the largest stiffening reached so far: the
-        penalty a problem needs is set by its loads, which a pair meeting late carries as well as
-        the early ones (seed stitch: new pairs at 1× under 10× neighbours sank 5 % in)."""
-        multiplier = np.zeros(start[-1])
-        stiffening = np.full(len(pairs), self._level)
-        if self._keys.size and len(pairs):
-            keys = pairs.keys(self._n_edges)
-            pos = np.minimum(np.searchsorted(self._keys, keys), self._keys.size - 1)
-            hit = np.flatnonzero(self._keys[pos] == keys)
-            stiffening[hit] = self._stiffening[pos[hit]]
-            counts = start[hit + 1] - start[hit]
-            offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-            multiplier[np.repeat(start[hit], counts) + offsets] = self._multiplier[
-                np.repeat(self._start[pos[hit]], counts) + offsets]
-        return multiplier, stiffening
-
-    def store(self, contacts: _Contacts) -> None:
-        """Remember the state of these pairs (pairs no longer detected are forgotten)."""
-        keys = contacts.pairs.keys(self._n_edges)
-        order = np.argsort(keys)
-        counts = contacts.counts[order]
-        self._keys = keys[order]
-        self._start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        source = np.repeat(contacts.start[:-1][order], counts) + (
-            np.arange(counts.sum()) - np.repeat(self._start[:-1], counts))
-        self._multiplier = contacts.multiplier[source]
-        self._stiffening = contacts.stiffening[order]
-        self._level = max(self._level, float(contacts.stiffening.max(initial=1.0)))
-
-
-@dataclass
 class _Evaluation:
     """Potential, gradient (full DOF vector) and residual measures of one configuration; contact
     forces (N) and gaps (m) per sampled constraint."""
@@ -391,7 +275,7 @@ class _Work:
     position: np.ndarray
     quaternion: np.ndarray
     moment_work: float = 0.0
-    contacts: _Contacts = field(default_factory=_Contacts.none)
+    contacts: ContactSet = field(default_factory=ContactSet.none)
     contact_force: np.ndarray = field(default_factory=lambda: np.empty(0))
     # Full gradient (every DOF, pinned ones included) of the last evaluation: the solve always
     # ends on an evaluation at the returned state, so this gives the reactions there.
@@ -414,15 +298,11 @@ class QuasiStaticSolver:
         self._dof_map = np.full(3 * (n + e), -1, dtype=np.int64)
         self._dof_map[self._free] = np.arange(self._free.size)
         self._node_free = ~model.node_pinned
-        self._min_radius = float(model.edge_radius.min())
         # Axial stiffness seen by each node (N/m) and carried by each edge (N), for round-off floors.
         edge_stiffness = np.maximum(model.edge_stretch_stiffness, model.edge_shear_stiffness)
         self._constraint = None
         self._constraint_gram = None
         self._spin_edges = np.empty(0, dtype=np.int64)
-        # Contact sample points per edge, both nodes included, CONTACT_SAMPLE_SPACING radii apart at most.
-        self._edge_samples = 1 + np.maximum(
-            1, np.ceil(model.edge_rest_length / (CONTACT_SAMPLE_SPACING * model.edge_radius))).astype(np.int64)
         self._node_stiffness = np.zeros(n)
         np.add.at(self._node_stiffness, model.edge_nodes.ravel(), np.repeat(edge_stiffness / model.edge_rest_length, 2))
         self._edge_stiffness = edge_stiffness
@@ -505,13 +385,13 @@ class QuasiStaticSolver:
             position=np.array(state.node_position, dtype=np.float64),
             quaternion=np.array(state.edge_quaternion, dtype=np.float64),
         )
-        memory = _ContactMemory(model.n_edges)
+        lagrangian = ContactLagrangian(model, opt)
         history: list[Residual] = []
         total_iterations = 0
         converged = False
         for step in range(1, opt.load_steps + 1):
             step_loads = loads.scaled(step / opt.load_steps)
-            converged, iterations = self._solve_step(work, memory, step_loads, history, callback, total_iterations)
+            converged, iterations = self._solve_step(work, lagrangian, step_loads, history, callback, total_iterations)
             total_iterations += iterations
         residual = history[-1]
         forces = internal_forces(model, work.position, work.quaternion)
@@ -551,19 +431,18 @@ class QuasiStaticSolver:
 
     # -- one load step ------------------------------------------------------------------------
 
-    def _solve_step(self, work, memory, loads, history, callback, iteration_base) -> tuple[bool, int]:
+    def _solve_step(self, work, lagrangian: ContactLagrangian, loads, history, callback, iteration_base) -> tuple[bool, int]:
         opt = self.options
         node_force = loads.total_node_force(self.model)
         moment = np.asarray(loads.edge_moment)
         damping = INITIAL_DAMPING
         energy_change = 0.0
-        # Augmented Lagrangian: multipliers are updated when the inner problem is solved to this
-        # threshold, which tightens tenfold per update, and never twice without a Newton step.
-        update_threshold = MULTIPLIER_UPDATE_RESIDUAL
-        last_violation = math.inf
+        # Augmented Lagrangian: multipliers are updated when the inner problem is solved to the
+        # policy's threshold (tightening per update), and never twice without a Newton step.
+        lagrangian.restart()
         stepped = True
         for it in range(opt.max_iterations + 1):
-            ev = self._evaluate(work, memory, node_force, moment, energy_change)
+            ev = self._evaluate(work, lagrangian, node_force, moment, energy_change)
             history.append(ev.residual)
             if callback is not None:
                 callback(Progress(iteration_base + it, ev.residual, work.position, ev.potential))
@@ -571,12 +450,8 @@ class QuasiStaticSolver:
                 return True, it
             if it == opt.max_iterations:
                 return False, it
-            if stepped and self._multipliers_due(ev, update_threshold):
-                violation = max(ev.residual.penetration, ev.residual.separation)
-                stiffen = violation > PENETRATION_PROGRESS * last_violation
-                last_violation = violation
-                self._update_multipliers(work, memory, ev, stiffen)
-                update_threshold = max(0.1 * update_threshold, opt.force_tolerance, opt.torque_tolerance)
+            if stepped and lagrangian.due(ev.residual):
+                lagrangian.update(work.contacts, ev.contact_gap, work.contact_force, ev.residual)
                 energy_change = 0.0
                 stepped = False
                 continue
@@ -584,68 +459,26 @@ class QuasiStaticSolver:
             direction, solve, damping = self._newton_direction(work, ev, damping)
             if direction is None:
                 return False, it
-            alpha, energy_change, damping = self._line_search(work, memory, ev, direction, solve, node_force,
+            alpha, energy_change, damping = self._line_search(work, lagrangian, ev, direction, solve, node_force,
                                                               moment, damping)
             if alpha == 0.0:
                 # No decrease is possible any more; report the residuals of the current state.
-                ev = self._evaluate(work, memory, node_force, moment, 0.0)
+                ev = self._evaluate(work, lagrangian, node_force, moment, 0.0)
                 history.append(ev.residual)
                 return ev.residual.within(opt), it + 1
         return False, opt.max_iterations
 
-    # -- contacts -----------------------------------------------------------------------------
-
-    def _contacts(self, memory: _ContactMemory, position: np.ndarray, position_end: np.ndarray | None = None) -> _Contacts:
-        """Candidate pairs near ``position`` (or anywhere on the way to ``position_end``) with
-        their remembered multipliers and penalties."""
-        m = self.model
-        if not self.options.contact:
-            return _Contacts.none()
-        pairs = find_pairs(m, position, self.options.contact_margin * self._min_radius, position_end)
-        counts = self._edge_samples[pairs.pairs].sum(axis=1) if len(pairs) else np.zeros(0, dtype=np.int64)
-        start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        multiplier, stiffening = memory.recall(pairs, start)
-        edges = pairs.pairs
-        if self.options.contact_stiffness is not None:
-            stiffness = np.full(len(pairs), float(self.options.contact_stiffness))
-        else:
-            ea = np.maximum(m.edge_stretch_stiffness[edges[:, 0]], m.edge_stretch_stiffness[edges[:, 1]])
-            stiffness = ea / (m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]])
-        return _Contacts(pairs, start, multiplier, stiffness, stiffening)
-
-    def _multipliers_due(self, ev: _Evaluation, threshold: float) -> bool:
-        """Update multipliers once the iterate is balanced to ``threshold`` and a contact
-        penetrates too far or carries force while apart."""
-        opt = self.options
-        if not ev.residual.balanced(opt, slack=threshold):
-            return False
-        return max(ev.residual.penetration, ev.residual.separation) > opt.penetration_tolerance
-
-    def _update_multipliers(self, work: _Work, memory: _ContactMemory, ev: _Evaluation, stiffen: bool) -> None:
-        """λ ← m(λ − k g) for every pair. With ``stiffen``, pairs whose gap is beyond tolerance
-        either way get a tenfold penalty (see PENETRATION_PROGRESS)."""
-        c = work.contacts
-        c.multiplier = work.contact_force.copy()
-        if stiffen and len(c.pairs):
-            m = self.model
-            edges = c.pairs.pairs
-            rsum = c.per_constraint(m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]])
-            off = np.abs(ev.contact_gap) > self.options.penetration_tolerance * rsum
-            loaded_or_deep = c.per_pair_any(off & ((ev.contact_gap < 0.0) | (ev.contact_force > 0.0)))
-            c.stiffening = np.where(loaded_or_deep, np.minimum(10.0 * c.stiffening, MAX_STIFFENING), c.stiffening)
-        memory.store(c)
-
     # -- evaluation ---------------------------------------------------------------------------
 
-    def _evaluate(self, work: _Work, memory: _ContactMemory, node_force, moment, energy_change) -> _Evaluation:
+    def _evaluate(self, work: _Work, lagrangian: ContactLagrangian, node_force, moment, energy_change) -> _Evaluation:
         """Detect contacts at the current iterate and assess it."""
-        work.contacts = self._contacts(memory, work.position)
+        work.contacts = lagrangian.query(work.position)
         ev = self._assess(work.point, work.contacts, node_force, moment, energy_change)
         work.contact_force = ev.contact_force
         work.gradient = ev.gradient
         return ev
 
-    def _assess(self, point, contacts: _Contacts, node_force, moment, energy_change=0.0) -> _Evaluation:
+    def _assess(self, point, contacts: ContactSet, node_force, moment, energy_change=0.0) -> _Evaluation:
         """Potential, gradient and residuals of a configuration for a fixed set of contacts."""
         m = self.model
         position, quaternion, moment_work = point
@@ -660,7 +493,7 @@ class QuasiStaticSolver:
         contact_energy = 0.0
         if n_pairs:
             contact_energy = _contact_kernels.contact_energy_gradient(
-                position, m.edge_nodes, m.edge_radius, self._edge_samples, *contacts.kernel_args(), node_gradient,
+                position, m.edge_nodes, m.edge_radius, *contacts.kernel_args(), node_gradient,
                 node_scale, gap, contact_force,
             )
         # A torque τ on an edge is carried by forces τ / l0 on its nodes, and a force F on a node
@@ -681,13 +514,7 @@ class QuasiStaticSolver:
         net_force = float(np.linalg.norm(net_node[self._node_free], axis=1).max(initial=0.0))
         net_torque = float(np.linalg.norm(net_edge[~m.edge_pinned], axis=1).max(initial=0.0))
         roundoff = ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(position).max(initial=0.0))
-        penetration = separation = 0.0
-        if n_pairs:
-            edges = contacts.pairs.pairs
-            rsum = contacts.per_constraint(m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]])
-            penetration = float(np.max(-gap / rsum, initial=0.0))
-            loaded = contact_force > CONTACT_SMOOTHING * contacts.per_constraint(contacts.stiffness) * rsum
-            separation = float(np.max(gap[loaded] / rsum[loaded], initial=0.0))
+        penetration, separation = contacts.measures(gap, contact_force)
 
         def relative(value: float, scale: float) -> float:
             return value / scale if scale > 0.0 else 0.0
@@ -731,7 +558,7 @@ class QuasiStaticSolver:
         )
         if len(c.pairs):
             count = _contact_kernels.contact_hessian_coo(
-                work.position, m.edge_nodes, m.edge_radius, self._edge_samples, *c.kernel_args(),
+                work.position, m.edge_nodes, m.edge_radius, *c.kernel_args(),
                 opt.fd_relative_step, rows, cols, vals, count,
             )
         r = self._dof_map[rows[:count]]
@@ -783,7 +610,7 @@ class QuasiStaticSolver:
         return (position + step_x, _rotate_frames(quaternion, step_theta),
                 moment_work + float(np.sum(moment * step_theta)))
 
-    def _line_search(self, work, memory, ev, direction, solve, node_force, moment, damping):
+    def _line_search(self, work, lagrangian: ContactLagrangian, ev, direction, solve, node_force, moment, damping):
         """Backtracking Armijo line search along ``direction``, then chord steps; moves ``work`` and
         returns ``(step length, relative potential change, damping)`` (step length 0: no decrease
         was found)."""
@@ -796,7 +623,7 @@ class QuasiStaticSolver:
         contacts = work.contacts
         if opt.contact:
             # Pairs that may touch anywhere along the step, and a cap so that none passes through another.
-            contacts = self._contacts(memory, work.position, work.position + alpha_max * dx)
+            contacts = lagrangian.query(work.position, work.position + alpha_max * dx)
             if len(contacts.pairs):
                 alpha_max *= _contact_kernels.tunneling_step_limit(
                     work.position, alpha_max * dx, m.edge_nodes, *contacts.pairs.kernel_args(), TUNNELING_FRACTION,

@@ -1,0 +1,133 @@
+"""The solver's contact policy on its own: constraint layout, measures, multiplier memory,
+update timing and penalty stiffening (yarnfit.engine.contact_lagrangian)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from yarnfit.engine import QuasiStaticOptions, Residual, Rod, RodMaterial, RodModel, straight_points
+from yarnfit.engine.contact_lagrangian import (
+    CONTACT_SAMPLE_SPACING,
+    CONTACT_SMOOTHING,
+    MAX_STIFFENING,
+    MULTIPLIER_UPDATE_RESIDUAL,
+    PENETRATION_PROGRESS,
+    ContactLagrangian,
+    ContactSet,
+)
+
+RADIUS = 1e-3  # m
+MATERIAL = RodMaterial(young_modulus=1e9, poisson_ratio=0.3, density=1000.0)
+
+
+def crossing(overlap: float) -> tuple[RodModel, np.ndarray]:
+    """Two 8-edge rods (edges 2r long) crossing at their middles at right angles, their axes
+    2r(1 − overlap) apart in z, and the rest positions."""
+    along_x = straight_points(16 * RADIUS, 8) - [8 * RADIUS, 0.0, 0.0]
+    along_y = along_x[:, [1, 0, 2]] + [0.0, 0.0, 2 * RADIUS * (1.0 - overlap)]
+    model = RodModel.from_rods([Rod(along_x, RADIUS, MATERIAL), Rod(along_y, RADIUS, MATERIAL)])
+    return model, np.array(model.node_rest_position)
+
+
+def balanced(penetration: float, separation: float = 0.0, force: float = 0.0) -> Residual:
+    return Residual(force=force, torque=0.0, energy_change=0.0, penetration=penetration, separation=separation)
+
+
+def test_constraints_are_laid_out_per_pair_with_the_base_penalty():
+    model, position = crossing(0.1)
+    lagrangian = ContactLagrangian(model, QuasiStaticOptions())
+    # Edges of 2r with samples at most CONTACT_SAMPLE_SPACING r apart, both nodes included.
+    assert np.all(lagrangian.edge_samples == 1 + int(np.ceil(2.0 / CONTACT_SAMPLE_SPACING)))
+    contacts = lagrangian.query(position)
+    assert len(contacts) > 0
+    a, b = contacts.pairs.pairs[:, 0], contacts.pairs.pairs[:, 1]
+    np.testing.assert_array_equal(contacts.counts, lagrangian.edge_samples[a] + lagrangian.edge_samples[b])
+    assert contacts.start[-1] == contacts.counts.sum() and np.all(contacts.multiplier == 0.0)
+    np.testing.assert_array_equal(contacts.radius_sum, 2 * RADIUS)
+    np.testing.assert_allclose(contacts.stiffness, model.edge_stretch_stiffness[a] / (2 * RADIUS), rtol=1e-15)
+    fixed = ContactLagrangian(model, QuasiStaticOptions(contact_stiffness=5.0)).query(position)
+    assert np.all(fixed.stiffness == 5.0)
+    assert len(ContactLagrangian(model, QuasiStaticOptions(contact=False)).query(position)) == 0
+
+
+def test_measures_are_the_deepest_overlap_and_the_widest_loaded_gap():
+    model, position = crossing(0.1)
+    contacts = ContactLagrangian(model, QuasiStaticOptions(contact_stiffness=100.0)).query(position)
+    n = contacts.start[-1]
+    rsum = 2 * RADIUS
+    band = CONTACT_SMOOTHING * 100.0 * rsum  # force of the smoothing band (N)
+    gap = np.full(n, 0.5 * rsum)
+    force = np.zeros(n)
+    gap[0], gap[1], gap[2] = -0.03 * rsum, -0.01 * rsum, 0.02 * rsum
+    force[2] = 2.0 * band  # apart yet loaded: counts as separation
+    gap[3], force[3] = 0.4 * rsum, 0.5 * band  # within the band: does not
+    penetration, separation = contacts.measures(gap, force)
+    assert penetration == pytest.approx(0.03, rel=1e-14)
+    assert separation == pytest.approx(0.02, rel=1e-14)
+    assert ContactSet.none().measures(np.empty(0), np.empty(0)) == (0.0, 0.0)
+
+
+def test_multipliers_are_remembered_per_pair_across_queries():
+    model, position = crossing(0.1)
+    lagrangian = ContactLagrangian(model, QuasiStaticOptions())
+    first = lagrangian.query(position)
+    n = first.start[-1]
+    force = np.arange(1.0, n + 1.0)
+    lagrangian.update(first, np.zeros(n), force, balanced(0.0))
+    # A query that finds the same pairs in another order gets each pair's own multipliers back.
+    again = lagrangian.query(position + 1e-6)
+    for p, key in enumerate(again.pairs.keys(model.n_edges)):
+        q = int(np.flatnonzero(first.pairs.keys(model.n_edges) == key)[0])
+        np.testing.assert_array_equal(again.multiplier[again.start[p]:again.start[p + 1]],
+                                      force[first.start[q]:first.start[q + 1]])
+
+
+def test_updates_wait_for_balance_and_tighten_tenfold():
+    model, position = crossing(0.1)
+    options = QuasiStaticOptions()
+    lagrangian = ContactLagrangian(model, options)
+    contacts = lagrangian.query(position)
+    n = contacts.start[-1]
+    deep = 10 * options.penetration_tolerance
+    assert not lagrangian.due(balanced(deep, force=2 * MULTIPLIER_UPDATE_RESIDUAL))  # not balanced yet
+    assert not lagrangian.due(balanced(0.5 * options.penetration_tolerance))  # nothing to correct
+    assert lagrangian.due(balanced(deep, force=0.5 * MULTIPLIER_UPDATE_RESIDUAL))
+    lagrangian.update(contacts, np.zeros(n), np.zeros(n), balanced(deep))
+    assert not lagrangian.due(balanced(deep, force=0.5 * MULTIPLIER_UPDATE_RESIDUAL))
+    assert lagrangian.due(balanced(deep, force=0.05 * MULTIPLIER_UPDATE_RESIDUAL))
+    lagrangian.restart()  # a new load step starts from the first threshold again
+    assert lagrangian.due(balanced(deep, force=0.5 * MULTIPLIER_UPDATE_RESIDUAL))
+
+
+def test_penalties_stiffen_only_where_updates_stall():
+    model, position = crossing(0.1)
+    options = QuasiStaticOptions()
+    lagrangian = ContactLagrangian(model, options)
+    contacts = lagrangian.query(position)
+    n = contacts.start[-1]
+    rsum = 2 * RADIUS
+    gap = np.full(n, 0.5 * rsum)  # every pair apart and unloaded ...
+    gap[contacts.start[0]] = -10 * options.penetration_tolerance * rsum  # ... but the first, too deep
+    # The first update has no previous violation to compare with: it counts as progress.
+    lagrangian.update(contacts, gap, np.zeros(n), balanced(1e-3))
+    assert np.all(contacts.stiffening == 1.0)
+    # Cut to PENETRATION_PROGRESS exactly is progress enough; above it is a stall.
+    lagrangian.update(contacts, gap, np.zeros(n), balanced(PENETRATION_PROGRESS * 1e-3))
+    assert np.all(contacts.stiffening == 1.0)
+    lagrangian.update(contacts, gap, np.zeros(n), balanced(PENETRATION_PROGRESS * 1e-3))
+    assert contacts.stiffening[0] == 10.0 and np.all(contacts.stiffening[1:] == 1.0)
+    for _ in range(10):
+        lagrangian.update(contacts, gap, np.zeros(n), balanced(PENETRATION_PROGRESS * 1e-3))
+    assert contacts.stiffening[0] == MAX_STIFFENING
+    # Pairs met before keep their own factor; a pair met later starts at the stiffest level
+    # reached (its load is the same problem's). The second rod (nodes 9–17) moved by three edges
+    # crosses other edges of the first.
+    known = set(contacts.pairs.keys(model.n_edges).tolist())
+    shifted = position.copy()
+    shifted[9:, 0] += 6 * RADIUS
+    later = lagrangian.query(shifted)
+    new = np.array([key not in known for key in later.pairs.keys(model.n_edges).tolist()])
+    assert new.any() and (~new).any()
+    assert np.all(later.stiffening[new] == MAX_STIFFENING)
+    assert np.all(later.stiffening[~new] <= MAX_STIFFENING) and later.stiffening[~new].min() == 1.0

@@ -1,0 +1,233 @@
+"""The quasi-static solver's contact policy: an augmented Lagrangian over sampled constraints.
+
+Each detected pair of edges carries constraints at sample points along both edges (nodes included,
+at most :data:`CONTACT_SAMPLE_SPACING` radii apart), each keeping ``ra + rb`` from the other
+segment with a multiplier λ (N) and a penalty k (N/m) per pair (the formulation and why it is
+smooth: :mod:`yarnfit.engine.quasistatic`). This module owns everything about those constraints
+that is not an energy kernel:
+
+- :class:`ContactSet`: one query's pairs, their constraints' layout, multipliers and penalties,
+  and the measures of how well they hold (penetration, separation of loaded constraints);
+- :class:`ContactLagrangian`: one solve's policy: detecting pairs (with multipliers and penalties
+  remembered per pair across queries), when to update the multipliers, and which penalties to
+  stiffen when the updates make too little progress.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .contact import ContactPairs, find_pairs
+from .model import RodModel
+
+__all__ = ["CONTACT_SAMPLE_SPACING", "CONTACT_SMOOTHING", "ContactLagrangian", "ContactSet"]
+
+# Contact penalty: each pair starts at EA / (ra + rb) (a yarn under strain ε presses a contact in by
+# ~ε of the diameter before the multipliers take the force over). The multiplier iteration removes
+# the penetration by a factor ~K / (K + k) per update, K the structure's stiffness at the contact:
+# a yarn pressed over a crossing is stiffer than k by ~20 (jersey: 4 % less penetration per
+# update). So, as in Bertsekas' method of multipliers, an update that did not cut the worst
+# penetration to PENETRATION_PROGRESS of its previous value stiffens the pairs still penetrating
+# beyond tolerance tenfold, up to MAX_STIFFENING. Stiffening only at updates, where the iterate is
+# balanced: stiffening on any penetration seen mid-solve ratcheted transient overshoots of new
+# contacts up to the cap, and Newton then crossed the cap's kinks at every step.
+PENETRATION_PROGRESS = 0.25
+MAX_STIFFENING = 1e4
+# Half-width of the contact ramp's smoothing band, in units of k (ra + rb): the band is ±0.01 % of
+# the diameter around λ / k (~1.6e-8 m for a 80 µm yarn), wide against Newton's last corrections
+# (~1e-10 m). A touching contact with no multiplier pushes with δ/4 and a lightly loaded one
+# rests up to δ/k apart: an unloaded relaxed repeat is then not quite force-free, and the energy
+# it releases goes as δ². At 1e-3 the undeformed homogenization sample kept 3e-3 J/m² (3e-6 of a
+# 10 % stretch); at 1e-4, 7e-5 J/m², with every relaxation still converging.
+CONTACT_SMOOTHING = 1e-4
+# Spacing of the contact sample points along an edge, in radii. A crossing between samples is
+# seen up to h / 2 off its closest point, which hides h² / (32 r²) of the diameter: 0.2 % here.
+CONTACT_SAMPLE_SPACING = 0.25
+# Residual below which contact multipliers are first updated: late enough that the forces copied
+# into them are close to equilibrium, early enough to spare Newton iterations on a moving target.
+# Each update tightens it tenfold (down to the tolerances).
+MULTIPLIER_UPDATE_RESIDUAL = 1e-3
+
+
+@dataclass
+class ContactSet:
+    """Contact pairs of one query with their sampled constraints: pair ``p`` owns constraints
+    ``start[p]:start[p + 1]`` (``edge_samples`` points on each of its edges), each with a
+    multiplier (N); penalties (N/m: a base value times a remembered stiffening factor) and the sums
+    of radii ``radius_sum`` (m) are per pair."""
+
+    pairs: ContactPairs
+    edge_samples: np.ndarray
+    start: np.ndarray
+    multiplier: np.ndarray
+    base_stiffness: np.ndarray
+    stiffening: np.ndarray
+    radius_sum: np.ndarray
+
+    @classmethod
+    def none(cls, edge_samples: np.ndarray | None = None) -> "ContactSet":
+        """No pairs (``edge_samples`` only travels with the set, to the kernels)."""
+        samples = np.zeros(0, dtype=np.int64) if edge_samples is None else edge_samples
+        return cls(ContactPairs.empty(), samples, np.zeros(1, dtype=np.int64), np.empty(0), np.empty(0), np.empty(0),
+                   np.empty(0))
+
+    def __len__(self) -> int:
+        return len(self.pairs)
+
+    @property
+    def stiffness(self) -> np.ndarray:
+        """Penalty of each pair (N/m)."""
+        return self.base_stiffness * self.stiffening
+
+    @property
+    def counts(self) -> np.ndarray:
+        """Constraints per pair."""
+        return np.diff(self.start)
+
+    def per_constraint(self, values: np.ndarray) -> np.ndarray:
+        """A per-pair array repeated over each pair's constraints."""
+        return np.repeat(values, self.counts)
+
+    def per_pair_any(self, flags: np.ndarray) -> np.ndarray:
+        """Pairs with any constraint flagged."""
+        if len(self.pairs) == 0:
+            return np.zeros(0, dtype=np.bool_)
+        return np.add.reduceat(flags.astype(np.int64), self.start[:-1]) > 0
+
+    def per_pair_sum(self, values: np.ndarray) -> np.ndarray:
+        if len(self.pairs) == 0:
+            return np.zeros(0)
+        return np.add.reduceat(values, self.start[:-1])
+
+    def kernel_args(self) -> tuple:
+        """``(edge_samples, pairs, rotation, translation, start, multiplier, stiffness, smoothing)``
+        as the contact kernels take them (after the model's edge nodes and radii)."""
+        return (self.edge_samples, *self.pairs.kernel_args(), self.start, self.multiplier, self.stiffness,
+                CONTACT_SMOOTHING)
+
+    def measures(self, gap: np.ndarray, force: np.ndarray) -> tuple[float, float]:
+        """``(penetration, separation)`` of constraint gaps ``gap`` (m) and normal forces
+        ``force`` (N): the deepest overlap, and the widest gap of a constraint still carrying a
+        force above the smoothing band, each over the pair's sum of radii (0 without pairs)."""
+        if len(self.pairs) == 0:
+            return 0.0, 0.0
+        rsum = self.per_constraint(self.radius_sum)
+        penetration = float(np.max(-gap / rsum, initial=0.0))
+        loaded = force > CONTACT_SMOOTHING * self.per_constraint(self.stiffness) * rsum
+        separation = float(np.max(gap[loaded] / rsum[loaded], initial=0.0))
+        return penetration, separation
+
+
+class _Memory:
+    """Multipliers and penalty factors remembered per edge pair across broad-phase queries (a
+    pair's constraint count depends only on its edges, so its multipliers keep their layout)."""
+
+    def __init__(self, n_edges: int):
+        self._n_edges = n_edges
+        self._keys = np.empty(0, dtype=np.int64)
+        self._start = np.zeros(1, dtype=np.int64)
+        self._multiplier = np.empty(0)
+        self._stiffening = np.empty(0)
+        self._level = 1.0
+
+    def recall(self, pairs: ContactPairs, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(multiplier per constraint, stiffening per pair)`` of ``pairs`` laid out by ``start``.
+        New pairs start with no multipliers and at the largest stiffening reached so far: the
+        penalty a problem needs is set by its loads, which a pair meeting late carries as well as
+        the early ones (seed stitch: new pairs at 1× under 10× neighbours sank 5 % in)."""
+        multiplier = np.zeros(start[-1])
+        stiffening = np.full(len(pairs), self._level)
+        if self._keys.size and len(pairs):
+            keys = pairs.keys(self._n_edges)
+            pos = np.minimum(np.searchsorted(self._keys, keys), self._keys.size - 1)
+            hit = np.flatnonzero(self._keys[pos] == keys)
+            stiffening[hit] = self._stiffening[pos[hit]]
+            counts = start[hit + 1] - start[hit]
+            offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+            multiplier[np.repeat(start[hit], counts) + offsets] = self._multiplier[
+                np.repeat(self._start[pos[hit]], counts) + offsets]
+        return multiplier, stiffening
+
+    def store(self, contacts: ContactSet) -> None:
+        """Remember the state of these pairs (pairs no longer detected are forgotten)."""
+        keys = contacts.pairs.keys(self._n_edges)
+        order = np.argsort(keys)
+        counts = contacts.counts[order]
+        self._keys = keys[order]
+        self._start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        source = np.repeat(contacts.start[:-1][order], counts) + (
+            np.arange(counts.sum()) - np.repeat(self._start[:-1], counts))
+        self._multiplier = contacts.multiplier[source]
+        self._stiffening = contacts.stiffening[order]
+        self._level = max(self._level, float(contacts.stiffening.max(initial=1.0)))
+
+
+class ContactLagrangian:
+    """One solve's contact policy (see the module docstring). ``options`` is the solve's
+    :class:`~yarnfit.engine.QuasiStaticOptions`: ``contact`` (off: every query is empty),
+    ``contact_margin``, ``contact_stiffness``, the penetration tolerance and the force and torque
+    tolerances the update threshold tightens to."""
+
+    def __init__(self, model: RodModel, options) -> None:
+        self.model = model
+        self.options = options
+        # Contact sample points per edge, both nodes included, CONTACT_SAMPLE_SPACING radii apart at most.
+        self.edge_samples = 1 + np.maximum(
+            1, np.ceil(model.edge_rest_length / (CONTACT_SAMPLE_SPACING * model.edge_radius))).astype(np.int64)
+        self._margin = options.contact_margin * float(model.edge_radius.min())
+        self._memory = _Memory(model.n_edges)
+        self.restart()
+
+    def restart(self) -> None:
+        """Start a load step: the update threshold back to MULTIPLIER_UPDATE_RESIDUAL (multipliers
+        and penalties are kept)."""
+        self._threshold = MULTIPLIER_UPDATE_RESIDUAL
+        self._last_violation = math.inf
+
+    def query(self, position: np.ndarray, position_end: np.ndarray | None = None) -> ContactSet:
+        """Candidate pairs near ``position`` (or anywhere on the way to ``position_end``) with
+        their remembered multipliers and penalties."""
+        m = self.model
+        if not self.options.contact:
+            return ContactSet.none(self.edge_samples)
+        pairs = find_pairs(m, position, self._margin, position_end)
+        counts = self.edge_samples[pairs.pairs].sum(axis=1) if len(pairs) else np.zeros(0, dtype=np.int64)
+        start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        multiplier, stiffening = self._memory.recall(pairs, start)
+        edges = pairs.pairs
+        radius_sum = m.edge_radius[edges[:, 0]] + m.edge_radius[edges[:, 1]]
+        if self.options.contact_stiffness is not None:
+            stiffness = np.full(len(pairs), float(self.options.contact_stiffness))
+        else:
+            ea = np.maximum(m.edge_stretch_stiffness[edges[:, 0]], m.edge_stretch_stiffness[edges[:, 1]])
+            stiffness = ea / radius_sum
+        return ContactSet(pairs, self.edge_samples, start, multiplier, stiffness, stiffening, radius_sum)
+
+    def due(self, residual) -> bool:
+        """Update multipliers once the iterate (its :class:`~yarnfit.engine.Residual`) is balanced
+        to the current threshold and a contact penetrates too far or carries force while apart."""
+        if not residual.balanced(self.options, slack=self._threshold):
+            return False
+        return max(residual.penetration, residual.separation) > self.options.penetration_tolerance
+
+    def update(self, contacts: ContactSet, gap: np.ndarray, force: np.ndarray, residual) -> None:
+        """λ ← m(λ − k g) for every constraint of ``contacts`` (``force``, N, at gaps ``gap``, m).
+        If the worst violation in ``residual`` did not fall to PENETRATION_PROGRESS of the last
+        update's, pairs whose gap is beyond tolerance either way get a tenfold penalty (up to
+        MAX_STIFFENING). The threshold for the next update tightens tenfold."""
+        violation = max(residual.penetration, residual.separation)
+        stiffen = violation > PENETRATION_PROGRESS * self._last_violation
+        self._last_violation = violation
+        contacts.multiplier = force.copy()
+        if stiffen and len(contacts.pairs):
+            rsum = contacts.per_constraint(contacts.radius_sum)
+            off = np.abs(gap) > self.options.penetration_tolerance * rsum
+            loaded_or_deep = contacts.per_pair_any(off & ((gap < 0.0) | (force > 0.0)))
+            contacts.stiffening = np.where(loaded_or_deep, np.minimum(10.0 * contacts.stiffening, MAX_STIFFENING),
+                                           contacts.stiffening)
+        self._memory.store(contacts)
+        opt = self.options
+        self._threshold = max(0.1 * self._threshold, opt.force_tolerance, opt.torque_tolerance)
