@@ -144,24 +144,14 @@ def _edge_end(pos, edge_nodes, edge_end_rotation, edge_offset, e):
 def rod_energy_gradient(
     pos,
     quat,
-    edge_nodes,
-    edge_end_rotation,
-    edge_offset,
-    edge_rest_length,
-    edge_shear_stiffness,
-    edge_stretch_stiffness,
-    edge_hardening,
-    joint_edges,
-    joint_frame_rotation,
-    joint_rest_darboux,
-    joint_rest_length,
-    joint_stiffness,
+    rod,
     node_grad,
     edge_grad,
     node_scale,
     edge_scale,
 ):
-    """Internal rod energy, its gradient, and the magnitude sums used as residual scales.
+    """Internal rod energy, its gradient, and the magnitude sums used as residual scales, of the
+    rods whose rest data ``rod`` bundles (:class:`~yarnfit.engine.model.RodArrays`).
 
     An edge's end point is its end node mapped by ``edge_end_rotation (E, 3, 3)`` and
     ``edge_offset (E, 3)`` (identity and zero within a tile; the map onto a neighbouring tile for a
@@ -172,6 +162,8 @@ def rod_energy_gradient(
     ``edge_scale (E,)`` (sum of the magnitudes of every contribution, the scale a residual is
     measured against). Returns ``(U_stretch, U_shear, U_bend, U_twist)`` in J.
     """
+    (edge_nodes, edge_end_rotation, edge_offset, edge_rest_length, edge_shear_stiffness, edge_stretch_stiffness,
+     edge_hardening, joint_edges, joint_frame_rotation, joint_rest_darboux, joint_rest_length, joint_stiffness) = rod
     u_stretch = 0.0
     u_shear = 0.0
     u_bend = 0.0
@@ -344,24 +336,14 @@ def _write_local(local, dofs, base, rows, cols, vals):
 def rod_hessian_coo(
     pos,
     quat,
-    edge_nodes,
-    edge_end_rotation,
-    edge_offset,
-    edge_rest_length,
-    edge_shear_stiffness,
-    edge_stretch_stiffness,
-    edge_hardening,
-    joint_edges,
-    joint_frame_rotation,
-    joint_rest_darboux,
-    joint_rest_length,
-    joint_stiffness,
+    rod,
     fd_relative_step,
     rows,
     cols,
     vals,
 ):
-    """Hessian of the internal rod energy as COO triplets (duplicates summed by the caller).
+    """Hessian of the internal rod energy (rest data bundled in ``rod``, a
+    :class:`~yarnfit.engine.model.RodArrays`) as COO triplets (duplicates summed by the caller).
 
     Degrees of freedom: node ``i`` owns ``3i..3i+2`` (m), edge ``e`` owns ``3N+3e..3N+3e+2``
     (world rotation vector, rad). Stretch–shear elements are analytic
@@ -371,6 +353,8 @@ def rod_hessian_coo(
     is the Hessian in the exponential chart, so only the O(step²) truncation error remains.
     Needs ``81 E + 36 J`` entries; returns the number written.
     """
+    (edge_nodes, edge_end_rotation, edge_offset, edge_rest_length, edge_shear_stiffness, edge_stretch_stiffness,
+     edge_hardening, joint_edges, joint_frame_rotation, joint_rest_darboux, joint_rest_length, joint_stiffness) = rod
     n_nodes = pos.shape[0]
     local9 = np.empty((9, 9))
     local6 = np.empty((6, 6))
@@ -553,55 +537,13 @@ def project_bend_twist_one(
             quat[b, k] = nb[k]
 
 
-@njit(cache=True)
-def project_rods_serial(
-    pos,
-    quat,
-    node_inv_mass,
-    edge_inv_qmass,
-    edge_nodes,
-    edge_offset,
-    edge_rest_length,
-    edge_shear_stiffness,
-    edge_stretch_stiffness,
-    edge_hardening,
-    joint_edges,
-    joint_rest_darboux,
-    joint_rest_length,
-    joint_stiffness,
-    lam_edge,
-    lam_joint,
-    inv_dt2,
-):
-    """One Gauss–Seidel sweep over every stretch–shear and bend–twist constraint, in order."""
-    for e in range(edge_nodes.shape[0]):
-        project_stretch_shear_one(
-            e, pos, quat, node_inv_mass, edge_inv_qmass, edge_nodes, edge_offset, edge_rest_length,
-            edge_shear_stiffness, edge_stretch_stiffness, edge_hardening, lam_edge, inv_dt2,
-        )
-    for j in range(joint_edges.shape[0]):
-        project_bend_twist_one(
-            j, quat, edge_inv_qmass, joint_edges, joint_rest_darboux, joint_rest_length, joint_stiffness,
-            lam_joint, inv_dt2,
-        )
-
-
 @njit(cache=True, parallel=True)
-def project_rods_colored(
+def project_rods(
     pos,
     quat,
     node_inv_mass,
     edge_inv_qmass,
-    edge_nodes,
-    edge_offset,
-    edge_rest_length,
-    edge_shear_stiffness,
-    edge_stretch_stiffness,
-    edge_hardening,
-    joint_edges,
-    joint_rest_darboux,
-    joint_rest_length,
-    joint_stiffness,
+    rod,
     lam_edge,
     lam_joint,
     inv_dt2,
@@ -610,12 +552,16 @@ def project_rods_colored(
     joint_order,
     joint_color_start,
 ):
-    """One sweep with constraints of a colour projected in parallel.
+    """One Gauss–Seidel sweep over every stretch–shear and bend–twist constraint of the rods whose
+    rest data ``rod`` bundles (:class:`~yarnfit.engine.model.RodArrays`), colour by colour.
 
     Constraints of one colour share no node and no edge frame (see :func:`greedy_coloring`), so a
-    colour is a set of independent projections; colours run one after another (Gauss–Seidel
-    between colours, Jacobi-free within).
+    colour is a set of independent projections, run in parallel threads; colours run one after
+    another. The result does not depend on the number of threads: on one, this is the serial sweep
+    in colour order.
     """
+    (edge_nodes, edge_end_rotation, edge_offset, edge_rest_length, edge_shear_stiffness, edge_stretch_stiffness,
+     edge_hardening, joint_edges, joint_frame_rotation, joint_rest_darboux, joint_rest_length, joint_stiffness) = rod
     for c in range(edge_color_start.shape[0] - 1):
         start = edge_color_start[c]
         for k in prange(edge_color_start[c + 1] - start):

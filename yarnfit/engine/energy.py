@@ -62,26 +62,8 @@ def internal_forces(model: RodModel, position: np.ndarray, quaternion: np.ndarra
     edge_gradient = np.zeros((model.n_edges, 3))
     node_scale = np.zeros(model.n_nodes)
     edge_scale = np.zeros(model.n_edges)
-    terms = _kernels.rod_energy_gradient(
-        position,
-        quaternion,
-        model.edge_nodes,
-        model.edge_end_rotation,
-        model.edge_offset,
-        model.edge_rest_length,
-        model.edge_shear_stiffness,
-        model.edge_stretch_stiffness,
-        model.edge_hardening,
-        model.joint_edges,
-        model.joint_frame_rotation,
-        model.joint_rest_darboux,
-        model.joint_rest_length,
-        model.joint_stiffness,
-        node_gradient,
-        edge_gradient,
-        node_scale,
-        edge_scale,
-    )
+    terms = _kernels.rod_energy_gradient(position, quaternion, model.arrays, node_gradient, edge_gradient,
+                                         node_scale, edge_scale)
     return InternalForces(terms, node_gradient, edge_gradient, node_scale, edge_scale)
 
 

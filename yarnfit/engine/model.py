@@ -24,9 +24,10 @@ turned by ``joint_frame_rotation``. Both are the identity for flat tilings.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -307,6 +308,25 @@ def _local_indices(indices: Sequence[int], count: int, what: str, rod_label: str
     return np.asarray(out, dtype=np.int64)
 
 
+class RodArrays(NamedTuple):
+    """The rest data every rod-energy and projection kernel reads, bundled once per model
+    (:attr:`RodModel.arrays`; names, shapes and units as in :class:`RodModel`). A kernel takes it
+    as one argument and unpacks it in this order."""
+
+    edge_nodes: np.ndarray
+    edge_end_rotation: np.ndarray
+    edge_offset: np.ndarray
+    edge_rest_length: np.ndarray
+    edge_shear_stiffness: np.ndarray
+    edge_stretch_stiffness: np.ndarray
+    edge_hardening: np.ndarray
+    joint_edges: np.ndarray
+    joint_frame_rotation: np.ndarray
+    joint_rest_darboux: np.ndarray
+    joint_rest_length: np.ndarray
+    joint_stiffness: np.ndarray
+
+
 @dataclass(frozen=True, eq=False)
 class RodModel:
     """Frozen rest data of a set of rods. Build with :meth:`from_rods`.
@@ -398,6 +418,11 @@ class RodModel:
     def curved(self) -> bool:
         """Periodic images are rigid motions of each node rather than translations."""
         return self.tiling is not None
+
+    @functools.cached_property
+    def arrays(self) -> RodArrays:
+        """The kernels' rest data (:class:`RodArrays`)."""
+        return RodArrays(*(getattr(self, name) for name in RodArrays._fields))
 
     @property
     def node_inv_mass(self) -> np.ndarray:

@@ -551,11 +551,8 @@ class QuasiStaticSolver:
         rows = np.empty(n_entries, dtype=np.int64)
         cols = np.empty(n_entries, dtype=np.int64)
         vals = np.empty(n_entries)
-        count = _kernels.rod_hessian_coo(
-            work.position, work.quaternion, m.edge_nodes, m.edge_end_rotation, m.edge_offset, m.edge_rest_length,
-            m.edge_shear_stiffness, m.edge_stretch_stiffness, m.edge_hardening, m.joint_edges, m.joint_frame_rotation,
-            m.joint_rest_darboux, m.joint_rest_length, m.joint_stiffness, opt.fd_relative_step, rows, cols, vals,
-        )
+        count = _kernels.rod_hessian_coo(work.position, work.quaternion, m.arrays, opt.fd_relative_step, rows, cols,
+                                         vals)
         if len(c.pairs):
             count = _contact_kernels.contact_hessian_coo(
                 work.position, m.edge_nodes, m.edge_radius, *c.kernel_args(),

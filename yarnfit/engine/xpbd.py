@@ -2,8 +2,9 @@
 with compliance, hard unilateral yarn–yarn contact and position-based static/kinetic friction.
 
 Each substep of length h predicts positions and frames (symplectic Euler), resets the
-multipliers, projects every constraint ``iterations`` times (Gauss–Seidel; constraints of one colour
-in parallel when ``parallel`` is set) and recovers velocities from the position change. This is
+multipliers, projects every constraint ``iterations`` times (Gauss–Seidel colour by colour; the
+constraints of one colour in parallel threads when ``parallel`` is set, on one thread otherwise:
+the result is the same) and recovers velocities from the position change. This is
 the dynamic engine; for equilibria use :class:`~yarnfit.engine.quasistatic.QuasiStaticSolver`,
 whose answer does not depend on a step size (``docs/design.md`` §5).
 
@@ -19,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from . import _contact_kernels, _kernels
@@ -40,7 +42,8 @@ class XPBDOptions:
         kinetic_friction: μk; sliding contacts lose up to μk times the normal impulse.
         contact_margin: broad-phase margin in units of the smallest radius (pairs are found once
             per substep from the swept boxes of the prediction).
-        parallel: project constraints of one colour in parallel threads.
+        parallel: project the constraints of one colour in parallel threads (the result is the same
+            as on one thread, only faster on several cores).
     """
 
     substeps: int = 1
@@ -90,7 +93,7 @@ class XPBDSolver:
         self._lam_edge = np.zeros((model.n_edges, 3))
         self._lam_joint = np.zeros((model.n_joints, 3))
         self._min_radius = float(model.edge_radius.min())
-        self._coloring = _color_constraints(model) if self.options.parallel else None
+        self._coloring = _color_constraints(model)
 
     def step(self, state: RodState, loads: Loads | None, dt: float) -> StepInfo:
         """Advance ``state`` in place by ``dt`` seconds."""
@@ -138,16 +141,18 @@ class XPBDSolver:
         return find_pairs(self.model, start, self.options.contact_margin * self._min_radius, end)
 
     def _project_rods(self, x: np.ndarray, q: np.ndarray, inv_h2: float) -> None:
-        m = self.model
-        args = (
-            x, q, self._node_inv_mass, self._edge_inv_qmass, m.edge_nodes, m.edge_offset, m.edge_rest_length,
-            m.edge_shear_stiffness, m.edge_stretch_stiffness, m.edge_hardening, m.joint_edges, m.joint_rest_darboux,
-            m.joint_rest_length, m.joint_stiffness, self._lam_edge, self._lam_joint, inv_h2,
-        )
-        if self._coloring is None:
-            _kernels.project_rods_serial(*args)
-        else:
-            _kernels.project_rods_colored(*args, *self._coloring)
+        args = (x, q, self._node_inv_mass, self._edge_inv_qmass, self.model.arrays, self._lam_edge, self._lam_joint,
+                inv_h2, *self._coloring)
+        if self.options.parallel:
+            _kernels.project_rods(*args)
+            return
+        # The same sweep on one thread (its result does not depend on the thread count).
+        threads = numba.get_num_threads()
+        numba.set_num_threads(1)
+        try:
+            _kernels.project_rods(*args)
+        finally:
+            numba.set_num_threads(threads)
 
 
 def _color_constraints(model: RodModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
