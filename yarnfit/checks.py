@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Collection, Mapping
 
 import numpy as np
 
-__all__ = ["finite_number", "positive_or_none", "real_number"]
+__all__ = ["check_keys", "finite_number", "non_negative_number", "positive_number", "positive_or_none", "real_number"]
 
 
 def real_number(value: object, name: str) -> float:
@@ -30,11 +31,40 @@ def finite_number(value: object, name: str) -> float:
     return value
 
 
-def positive_or_none(value: object, name: str) -> float | None:
-    """``None`` as is, else ``value`` as a positive finite float."""
-    if value is None:
-        return None
+def positive_number(value: object, name: str) -> float:
+    """``value`` as a float, or ValueError if it is not a finite real number > 0."""
     value = finite_number(value, name)
     if value <= 0.0:
         raise ValueError(f"{name} must be > 0, got {value!r}")
     return value
+
+
+def non_negative_number(value: object, name: str) -> float:
+    """``value`` as a float, or ValueError if it is not a finite real number >= 0."""
+    value = finite_number(value, name)
+    if value < 0.0:
+        raise ValueError(f"{name} must be >= 0, got {value!r}")
+    return value
+
+
+def positive_or_none(value: object, name: str) -> float | None:
+    """``None`` as is, else ``value`` as a positive finite float."""
+    return None if value is None else positive_number(value, name)
+
+
+def check_keys(data: Mapping, required: Collection[str], where: str, allowed: Collection[str] | None = None,
+               prefix: str = "") -> None:
+    """ValueError ``"<where>: missing keys: …; unknown keys: … (allowed: …)"`` for a JSON object
+    lacking one of ``required`` or holding a key outside ``allowed`` (default: ``required``),
+    keys shown behind ``prefix``. Both are reported together: a misspelt key shows up as one of
+    each."""
+    allowed = required if allowed is None else allowed
+    problems = []
+    missing = [f"{prefix}{key}" for key in required if key not in data]
+    unknown = sorted(f"{prefix}{key}" for key in data if key not in allowed)
+    if missing:
+        problems.append(f"missing keys: {', '.join(missing)}")
+    if unknown:
+        problems.append(f"unknown keys: {', '.join(unknown)} (allowed: {', '.join(prefix + k for k in allowed)})")
+    if problems:
+        raise ValueError(f"{where}: {'; '.join(problems)}")

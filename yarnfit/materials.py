@@ -50,7 +50,7 @@ import math
 import os
 from dataclasses import dataclass
 
-from .checks import finite_number, positive_or_none
+from .checks import check_keys, finite_number, positive_or_none
 from .jsonfile import read_json
 
 __all__ = ["FIBERS", "FiberMaterial", "UnknownFiberError", "get_fiber", "load_fiber_file"]
@@ -413,16 +413,7 @@ def load_fiber_file(path: str | os.PathLike) -> FiberMaterial:
         kind = type(data).__name__
         raise ValueError(f"{where}: expected a JSON object with keys {', '.join(_REQUIRED_KEYS)}, got a {kind}")
 
-    # Report missing and unknown keys together: a misspelt key shows up as one of each.
-    problems = []
-    missing = [key for key in _REQUIRED_KEYS if key not in data]
-    unknown = sorted(key for key in data if key not in _ALLOWED_KEYS)
-    if missing:
-        problems.append(f"missing keys: {', '.join(missing)}")
-    if unknown:
-        problems.append(f"unknown keys: {', '.join(unknown)} (allowed: {', '.join(_ALLOWED_KEYS)})")
-    if problems:
-        raise ValueError(f"{where}: {'; '.join(problems)}")
+    check_keys(data, _REQUIRED_KEYS, where, allowed=_ALLOWED_KEYS)
 
     if "fineness_dtex" in data and "diameter_m" in data:
         raise ValueError(f"{where}: give fineness_dtex or diameter_m, not both")

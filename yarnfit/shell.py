@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import finite_number
+from .checks import check_keys, finite_number
 from .jsonfile import read_json
 
 __all__ = [
@@ -507,15 +507,7 @@ def _check_keys(data: object, required: tuple[str, ...], where: str, prefix: str
     if not isinstance(data, Mapping):
         name = prefix.rstrip(".") or "material"
         raise ValueError(f"{where}: {name} must be an object with keys {', '.join(required)}, got {data!r}")
-    problems = []
-    missing = [f"{prefix}{key}" for key in required if key not in data]
-    unknown = sorted(f"{prefix}{key}" for key in data if key not in required)
-    if missing:
-        problems.append(f"missing keys: {', '.join(missing)}")
-    if unknown:
-        problems.append(f"unknown keys: {', '.join(unknown)} (allowed: {', '.join(prefix + k for k in required)})")
-    if problems:
-        raise ValueError(f"{where}: {'; '.join(problems)}")
+    check_keys(data, required, where, prefix=prefix)
 
 
 def _json_number(value: object, where: str, key: str) -> float:

@@ -31,6 +31,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from ..checks import non_negative_number, positive_number
 # A quaternion whose norm differs from one by more than this is rejected: callers must pass
 # frames normalised to round-off (float32 round trips stay well inside).
 UNIT_QUATERNION_TOLERANCE = 1e-6
@@ -41,18 +42,6 @@ FRAME_ALIGNMENT_TOLERANCE = 1e-6
 # Straight neighbours are within 2r only when their arc gap is below 2r; a gap of π r is the half
 # turn of a yarn bent to its own radius, the tightest physical loop.
 CONTACT_EXCLUSION_FACTOR = 0.5 * math.pi
-
-
-def _positive_finite(value: float, what: str) -> float:
-    if isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"{what} must be a positive finite number, got {value!r}")
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{what} must be a positive finite number, got {value!r}") from None
-    if not math.isfinite(value) or value <= 0.0:
-        raise ValueError(f"{what} must be a positive finite number, got {value!r}")
-    return value
 
 
 @dataclass(frozen=True)
@@ -84,7 +73,7 @@ class RodSection:
 
     def __post_init__(self) -> None:
         for name in ("tensile_rigidity", "shear_rigidity", "torsional_rigidity", "mass_per_length"):
-            object.__setattr__(self, name, _positive_finite(getattr(self, name), name))
+            object.__setattr__(self, name, positive_number(getattr(self, name), name))
         pair = self.bending_rigidity
         # An ordered pair only: a string or a set would unpack silently into the wrong numbers.
         if isinstance(pair, np.ndarray):
@@ -92,16 +81,10 @@ class RodSection:
         if not isinstance(pair, (tuple, list)) or len(pair) != 2:
             raise ValueError(f"bending_rigidity must be a pair (EI1, EI2), got {self.bending_rigidity!r}")
         ei1, ei2 = pair
-        object.__setattr__(self, "bending_rigidity", (_positive_finite(ei1, "bending_rigidity[0]"),
-                                                      _positive_finite(ei2, "bending_rigidity[1]")))
+        object.__setattr__(self, "bending_rigidity", (positive_number(ei1, "bending_rigidity[0]"),
+                                                      positive_number(ei2, "bending_rigidity[1]")))
         for name in ("hardening_tension", "hardening_compression"):
-            try:
-                h = float(getattr(self, name))
-            except (TypeError, ValueError):
-                h = math.nan
-            if not math.isfinite(h) or h < 0.0:
-                raise ValueError(f"{name} must be a finite number >= 0, got {getattr(self, name)!r}")
-            object.__setattr__(self, name, h)
+            object.__setattr__(self, name, non_negative_number(getattr(self, name), name))
 
 
 @dataclass(frozen=True)
@@ -127,8 +110,8 @@ class RodMaterial:
     hardening_compression: float = 0.0
 
     def __post_init__(self) -> None:
-        _positive_finite(self.young_modulus, "young_modulus")
-        _positive_finite(self.density, "density")
+        positive_number(self.young_modulus, "young_modulus")
+        positive_number(self.density, "density")
         nu = float(self.poisson_ratio)
         if not math.isfinite(nu) or not -1.0 < nu < 0.5:
             raise ValueError(f"poisson_ratio must lie in (-1, 0.5), got {self.poisson_ratio!r}")
@@ -144,7 +127,7 @@ class RodMaterial:
 
     def section(self, radius: float) -> RodSection:
         """The :class:`RodSection` of a solid circular cylinder of this material, radius ``radius`` (m)."""
-        r = _positive_finite(radius, "radius")
+        r = positive_number(radius, "radius")
         area = math.pi * r**2
         inertia = 0.25 * math.pi * r**4
         return RodSection(
@@ -548,7 +531,7 @@ def _build_rod(index: int, rod: Rod, lattice: np.ndarray) -> dict:
     if pts.shape[0] < min_nodes:
         raise ValueError(f"{label}: needs at least {min_nodes} points, got {pts.shape[0]}")
     check_positions(pts, pts.shape[0], f"{label}: points")
-    radius = _positive_finite(rod.radius, f"{label}: radius")
+    radius = positive_number(rod.radius, f"{label}: radius")
     n_nodes = pts.shape[0]
     n_edges = n_nodes if rod.closed else n_nodes - 1
     n_joints = n_nodes if rod.closed else n_nodes - 2

@@ -39,6 +39,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from ..checks import non_negative_number, positive_number
 from ..jsonfile import read_json
 from ..shell import ShellMaterial
 from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE,
@@ -218,9 +219,9 @@ def build_scene(
     if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) or resolution < 2:
         raise ValueError(f"resolution must be an integer of at least 2 vertices per side, got {resolution!r}")
     for name, value in (("size", size), ("timestep", timestep), ("width", width), ("max_strain", max_strain)):
-        _require(value, name, positive=True)
+        positive_number(value, name)
     for name, value in (("friction", friction), ("damping", damping), ("angle", abs(angle))):
-        _require(value, name, positive=False)
+        non_negative_number(value, name)
     key = integrator.lower()
     if key not in INTEGRATOR_ENUM:
         raise ValueError(f"unknown integrator {integrator!r}; integrators: {', '.join(INTEGRATORS)}")
@@ -451,12 +452,6 @@ def _clamp(spec: mujoco.MjSpec, shell: ShellMaterial, length: float, width: floa
     spec.add_sensor(name="pull_extension", type=mujoco.mjtSensor.mjSENS_JOINTPOS,
                     objtype=mujoco.mjtObj.mjOBJ_JOINT, objname="pull")
     return clamp
-
-
-def _require(value, name: str, positive: bool) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
-            or not math.isfinite(value) or value < 0 or (positive and value == 0):
-        raise ValueError(f"{name} must be a {'positive' if positive else 'non-negative'} finite number, got {value!r}")
 
 
 def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles: np.ndarray,
