@@ -22,7 +22,7 @@ from yarnfit.engine import (
     straight_points,
 )
 from yarnfit.engine.model import quaternion_conj_mul
-from yarnfit.engine.quasistatic import _rotate_frames
+from yarnfit.engine.quasistatic import CHORD_STEPS, _rotate_frames
 
 LENGTH = 1.0  # m
 # Slender enough that shear and axial compliance change deflections by ~(r/L)² = 1e-4 only.
@@ -75,6 +75,26 @@ def test_axial_stretch_linear():
     loads = Loads.zeros(model)
     loads.node_force[-1, 0] = force
     stretch = solve(model, loads).node_position[-1, 0] - LENGTH
+    assert stretch == pytest.approx(force * LENGTH / (MATERIAL.young_modulus * AREA), rel=1e-6)
+
+
+def test_no_step_moves_a_node_beyond_the_model_extent():
+    # A 300 % stretch is one Newton step for the linear force law (Δx = F L / (E A), 3 L): the solver
+    # takes it in steps (Newton and chord) of at most the rest extent L, and lands on the same answer.
+    # An iteration is one Newton step and up to CHORD_STEPS chord steps.
+    model = clamped_rod(10)
+    force = 3.0 * MATERIAL.young_modulus * AREA
+    loads = Loads.zeros(model)
+    loads.node_force[-1, 0] = force
+    tips = []
+    result = QuasiStaticSolver(model, QuasiStaticOptions(contact=False)).solve(
+        RodState.from_model(model), loads, callback=lambda p: tips.append(p.position[-1, 0]))
+    assert result.converged
+    assert np.max(np.abs(np.diff(tips))) <= (1 + CHORD_STEPS) * LENGTH * (1.0 + 1e-12)
+    # The first Newton step is cut to the extent, and the chord step after it (the remaining 2 L) is
+    # not taken.
+    assert tips[1] - tips[0] == pytest.approx(LENGTH, rel=1e-12)
+    stretch = result.state.node_position[-1, 0] - LENGTH
     assert stretch == pytest.approx(force * LENGTH / (MATERIAL.young_modulus * AREA), rel=1e-6)
 
 

@@ -76,6 +76,10 @@ POOR_STEP = 0.1
 # A step never moves two segments closer by more than this fraction of their current centreline
 # distance, so yarns cannot pass through each other between two contact checks.
 TUNNELING_FRACTION = 0.9
+# A step never moves a node further than the model's reach (one tile of a periodic model, the rest
+# configuration's extent otherwise): a Newton step beyond it means the quadratic model has failed,
+# and the contact search along it would have to map that many tiles (a HYLC satin at r = 1 mm, in a
+# halved continuation step, proposed a step that overflowed the image count).
 # Levenberg–Marquardt damping bounds, relative to diag(H). The floor is far below the Hessian's
 # own error (~1e-10 relative); it only regularises exactly singular directions.
 INITIAL_DAMPING = 1e-8
@@ -298,6 +302,13 @@ class QuasiStaticSolver:
         self._dof_map = np.full(3 * (n + e), -1, dtype=np.int64)
         self._dof_map[self._free] = np.arange(self._free.size)
         self._node_free = ~model.node_pinned
+        if model.periodic:
+            tiles = np.linalg.norm(model.lattice, axis=1)
+            self._max_displacement = float(tiles[tiles > 0.0].min())
+        else:
+            rest = model.node_rest_position
+            self._max_displacement = max(float(np.linalg.norm(rest.max(axis=0) - rest.min(axis=0))),
+                                         float(model.edge_rest_length.max(initial=0.0)))
         # Axial stiffness seen by each node (N/m) and carried by each edge (N), for round-off floors.
         edge_stiffness = np.maximum(model.edge_stretch_stiffness, model.edge_shear_stiffness)
         self._constraint = None
@@ -617,6 +628,9 @@ class QuasiStaticSolver:
         rot = float(np.linalg.norm(dtheta, axis=1).max(initial=0.0))
         if rot > opt.max_rotation_step:
             alpha_max = opt.max_rotation_step / rot
+        reach = alpha_max * float(np.linalg.norm(dx, axis=1).max(initial=0.0))
+        if reach > self._max_displacement:
+            alpha_max *= self._max_displacement / reach
         contacts = work.contacts
         if opt.contact:
             # Pairs that may touch anywhere along the step, and a cap so that none passes through another.
@@ -671,7 +685,8 @@ class QuasiStaticSolver:
             if not np.all(np.isfinite(step)) or slope >= 0.0:
                 break
             cx, ctheta = self._split(step)
-            if float(np.linalg.norm(ctheta, axis=1).max(initial=0.0)) > self.options.max_rotation_step:
+            if (float(np.linalg.norm(ctheta, axis=1).max(initial=0.0)) > self.options.max_rotation_step
+                    or float(np.linalg.norm(cx, axis=1).max(initial=0.0)) > self._max_displacement):
                 break
             candidate = self._moved(point, moment, cx, ctheta)
             result = assess(candidate)
