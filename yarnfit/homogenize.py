@@ -36,12 +36,12 @@ from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .engine import (ConvergenceWarning, LinearConstraints, QuasiStaticOptions, QuasiStaticSolver, Residual, RodModel,
                      RodState)
 from .engine.contact import TilingReachError, image_range
 from .engine.model import aligned_frames
+from .engine.rotations import rotate_frames
 from .engine.tiling import CurvedTiling, retile
 from .relax import RelaxedRepeat
 from .samples import SampleRanges, SampleResult, SampleSpec
@@ -228,8 +228,7 @@ def _turned_frames(model: RodModel, quaternion: np.ndarray, reference: np.ndarra
     start = reference[model.edge_nodes[:, 0]]
     end = reference[model.edge_nodes[:, 1]] + model.edge_tile * np.asarray(repeat)
     frame = surface.evaluate(0.5 * (start + end))[2]
-    xyzw = (Rotation.from_matrix(frame) * Rotation.from_quat(quaternion[:, [1, 2, 3, 0]])).as_quat()
-    return np.ascontiguousarray(np.column_stack([xyzw[:, 3], xyzw[:, :3]]))
+    return rotate_frames(frame, quaternion)
 
 
 def _rve_constraints(model: RodModel, frame: np.ndarray) -> LinearConstraints:
@@ -359,9 +358,7 @@ def transfer_fluctuation(source: TiledRepeat, state: RodState, target: TiledRepe
     base_target, _, frame_target = target.surface.evaluate(target.reference, target.height)
     turn = np.einsum("nij,nkj->nik", frame_target, frame_source)
     position = base_target + np.einsum("nij,nj->ni", turn, state.node_position - base_source)
-    edge_turn = Rotation.from_matrix(turn[target.model.edge_nodes[:, 0]])
-    xyzw = (edge_turn * Rotation.from_quat(state.edge_quaternion[:, [1, 2, 3, 0]])).as_quat()
-    quaternion = np.ascontiguousarray(np.column_stack([xyzw[:, 3], xyzw[:, :3]]))
+    quaternion = rotate_frames(turn[target.model.edge_nodes[:, 0]], state.edge_quaternion)
     target.state.node_position[:] = position
     target.state.edge_quaternion[:] = aligned_frames(target.model, position, quaternion)
 

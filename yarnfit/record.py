@@ -166,7 +166,7 @@ def blueprint() -> rrb.Blueprint:
             ),
             column_shares=[3, 2],
         ),
-        *_folded_panels(TIMELINE),
+        *folded_panels(TIMELINE),
     )
 
 
@@ -191,41 +191,41 @@ def fit_blueprint() -> rrb.Blueprint:
             rrb.Grid(*curves, grid_columns=2, name="fit curves"),
             column_shares=[3, 2, 3],
         ),
-        *_folded_panels(SAMPLE_TIMELINE),
+        *folded_panels(SAMPLE_TIMELINE),
     )
 
 
-def _folded_panels(timeline: str) -> tuple:
+def folded_panels(timeline: str) -> tuple:
     """The time panel open on ``timeline`` (not rerun's wall-clock ``log_time``), the blueprint
     and selection panels folded away."""
     return (rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
             rrb.TimePanel(state="expanded", timeline=timeline))
 
 
-class _Recording:
+class Recording:
     """One run's ``.rrd`` file: its own stream, the file sink, the recording name, the viewer
     layout and the view coordinates of the ``root`` entity (right-handed, z up)."""
 
     def __init__(self, name: str, path, layout: rrb.Blueprint, root: str) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._rec = rr.RecordingStream(APPLICATION_ID)
+        self.stream = rr.RecordingStream(APPLICATION_ID)
         # The file sink must be attached before anything is logged, or that data is lost.
-        self._rec.save(self.path)
-        self._rec.send_recording_name(name)
-        self._rec.send_blueprint(layout)
-        self._rec.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self.stream.save(self.path)
+        self.stream.send_recording_name(name)
+        self.stream.send_blueprint(layout)
+        self.stream.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
     def close(self) -> None:
         """Flush everything logged and close the file (writing its footer). Idempotent."""
-        self._rec.flush()
-        self._rec.disconnect()
+        self.stream.flush()
+        self.stream.disconnect()
 
-    def _log_markdown(self, entity: str, text: str, static: bool = False) -> None:
-        self._rec.log(entity, rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=static)
+    def log_markdown(self, entity: str, text: str, static: bool = False) -> None:
+        self.stream.log(entity, rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=static)
 
 
-class RelaxRecording(_Recording):
+class RelaxRecording(Recording):
     """Records relaxations of a periodic yarn repeat to a ``.rrd`` file (see the module docstring
     for the entity paths and the timeline).
 
@@ -260,11 +260,11 @@ class RelaxRecording(_Recording):
 
         self._advance()
         radius = np.float32(pattern.radius)
-        self._rec.log("relax/repeat/yarns", rr.LineStrips3D.from_fields(radii=radius, colors=_yarn_colors(len(yarns))))
-        self._rec.log("relax/tiling/yarns", rr.LineStrips3D.from_fields(radii=radius,
+        self.stream.log("relax/repeat/yarns", rr.LineStrips3D.from_fields(radii=radius, colors=_yarn_colors(len(yarns))))
+        self.stream.log("relax/tiling/yarns", rr.LineStrips3D.from_fields(radii=radius,
                                                                         colors=_tiling_colors(len(yarns))))
         outline = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]], dtype=np.float64) @ lattice
-        self._rec.log("relax/repeat/tile", rr.LineStrips3D([outline], radii=TILE_LINE_RADIUS * radius,
+        self.stream.log("relax/repeat/tile", rr.LineStrips3D([outline], radii=TILE_LINE_RADIUS * radius,
                                                            colors=NEIGHBOUR_COLOR))
         self._log_yarns(pattern.node_position[np.concatenate([y.nodes for y in yarns])])
 
@@ -274,8 +274,8 @@ class RelaxRecording(_Recording):
         self._log_yarns(progress.position)
         residual = progress.residual
         for key in RESIDUALS:
-            self._rec.log(f"relax/residual/{key}", rr.Scalars(float(getattr(residual, key))))
-        self._rec.log("relax/energy/potential", rr.Scalars(float(progress.potential)))
+            self.stream.log(f"relax/residual/{key}", rr.Scalars(float(getattr(residual, key))))
+        self.stream.log("relax/energy/potential", rr.Scalars(float(progress.potential)))
 
     def finish(self, result) -> None:
         """Log the relaxed repeat ``result`` (a :class:`yarnfit.relax.RelaxedRepeat`): its yarns,
@@ -284,15 +284,15 @@ class RelaxRecording(_Recording):
         # The rest model keeps the phase-1 node layout (rods in yarn order), as progress does.
         self._log_yarns(result.state.node_position)
         for key in ENERGY_TERMS:
-            self._rec.log(f"relax/energy/{key}", rr.Scalars(float(getattr(result.energy, key))))
-        self._log_markdown("relax/summary", summary(result))
+            self.stream.log(f"relax/energy/{key}", rr.Scalars(float(getattr(result.energy, key))))
+        self.log_markdown("relax/summary", summary(result))
         self.close()
 
     # -- helpers --------------------------------------------------------------------------------
 
     def _advance(self) -> None:
         self._step += 1
-        self._rec.set_time(TIMELINE, sequence=self._step)
+        self.stream.set_time(TIMELINE, sequence=self._step)
 
     def _log_yarns(self, position: np.ndarray) -> None:
         """Log the closed yarn strips of ``position`` ``(N, 3)`` m (yarn order) and their tiling."""
@@ -302,12 +302,12 @@ class RelaxRecording(_Recording):
         if position.shape != (self._n_nodes, 3):
             raise ValueError(f"expected yarn positions of shape ({self._n_nodes}, 3), got {position.shape}")
         points = position[self._gather] + self._shift
-        self._rec.log("relax/repeat/yarns", rr.LineStrips3D.from_fields(strips=np.split(points, self._ends[:-1])))
+        self.stream.log("relax/repeat/yarns", rr.LineStrips3D.from_fields(strips=np.split(points, self._ends[:-1])))
         tiled = (points[None] + self._tile_shift[:, None]).reshape(-1, 3)
-        self._rec.log("relax/tiling/yarns", rr.LineStrips3D.from_fields(strips=np.split(tiled, self._tile_ends[:-1])))
+        self.stream.log("relax/tiling/yarns", rr.LineStrips3D.from_fields(strips=np.split(tiled, self._tile_ends[:-1])))
 
 
-class FitRecording(_Recording):
+class FitRecording(Recording):
     """Records a shell fit run — the relaxed repeat, every homogenization sample, the fit curves
     and a summary — to a ``.rrd`` file (see the module docstring for the entity paths and the
     ``sample`` timeline).
@@ -328,7 +328,7 @@ class FitRecording(_Recording):
         """Log the relaxed repeat (a :class:`yarnfit.relax.RelaxedRepeat`) as static yarn strips
         in its flat tile, positions in m."""
         strips = yarn_strips(relaxed.model, relaxed.state.node_position)
-        self._rec.log("fit/relaxed/yarns", rr.LineStrips3D(strips, radii=np.float32(relaxed.radius),
+        self.stream.log("fit/relaxed/yarns", rr.LineStrips3D(strips, radii=np.float32(relaxed.radius),
                                                            colors=_yarn_colors(len(strips))), static=True)
 
     def sample(self, index: int, relaxed, result) -> None:
@@ -351,11 +351,11 @@ class FitRecording(_Recording):
         if position.shape != (model.n_nodes, 3):
             raise ValueError(f"expected sample positions of shape ({model.n_nodes}, 3), got {position.shape}")
         strips = [strip for tile in _TILE_OFFSETS for strip in yarn_strips(model, position, tile)]
-        self._rec.set_time(SAMPLE_TIMELINE, sequence=int(index))
-        self._rec.log("fit/sample/yarns", rr.LineStrips3D(strips, radii=np.float32(relaxed.radius),
+        self.stream.set_time(SAMPLE_TIMELINE, sequence=int(index))
+        self.stream.log("fit/sample/yarns", rr.LineStrips3D(strips, radii=np.float32(relaxed.radius),
                                                           colors=_tiling_colors(model.n_rods)))
-        self._rec.log("fit/sample/energy", rr.Scalars(float(result.energy_density)))
-        self._log_markdown("fit/sample/info", sample_summary(int(index), result))
+        self.stream.log("fit/sample/energy", rr.Scalars(float(result.energy_density)))
+        self.log_markdown("fit/sample/info", sample_summary(int(index), result))
 
     def finish(self, fabric_fit) -> None:
         """Log the fit curves of every sampled family and the summary of ``fabric_fit`` (a
@@ -365,7 +365,7 @@ class FitRecording(_Recording):
             results = [r for r in fabric_fit.samples if r.spec.family == family]
             if results:
                 self._log_curves(family, results, material)
-        self._log_markdown("fit/summary", fit_summary(fabric_fit), static=True)
+        self.log_markdown("fit/summary", fit_summary(fabric_fit), static=True)
         self.close()
 
     def _log_curves(self, family: str, results, material) -> None:
@@ -384,13 +384,13 @@ class FitRecording(_Recording):
                                         -1.0 / w_extent if w_extent > 0 else -1.0, 1.0])
         root = f"fit/curves/{family}"
         used = converged & plotted
-        self._rec.log(f"{root}/yarn", rr.Points2D(np.column_stack([parameter[used], energy[used]]),
+        self.stream.log(f"{root}/yarn", rr.Points2D(np.column_stack([parameter[used], energy[used]]),
                                                   radii=SAMPLE_POINT_SIZE, colors=SAMPLE_COLOR), display, static=True)
         if excluded.any():
-            self._rec.log(f"{root}/excluded", rr.Points2D(np.column_stack([parameter[excluded], energy[excluded]]),
+            self.stream.log(f"{root}/excluded", rr.Points2D(np.column_stack([parameter[excluded], energy[excluded]]),
                                                           radii=SAMPLE_POINT_SIZE, colors=EXCLUDED_COLOR),
                           display, static=True)
-        self._rec.log(f"{root}/shell", rr.LineStrips2D([np.column_stack([curve_p, curve_w])], radii=SHELL_LINE_SIZE,
+        self.stream.log(f"{root}/shell", rr.LineStrips2D([np.column_stack([curve_p, curve_w])], radii=SHELL_LINE_SIZE,
                                                        colors=SHELL_COLOR), display, static=True)
 
 
@@ -442,7 +442,7 @@ def _strip_layout(yarns, lattice: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
 # -- markdown summaries ----------------------------------------------------------------------------
 
 
-def _markdown_table(rows, header=("quantity", "value")) -> str:
+def markdown_table(rows, header=("quantity", "value")) -> str:
     """A markdown table of ``rows`` (tuples of cells, as many as ``header``)."""
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
@@ -471,7 +471,7 @@ def summary(result) -> str:
         ("relaxations", f"{result.relaxations}"),
         ("wall time", f"{result.seconds:.3g} s"),
     ]
-    return f"## Relaxed repeat\n\n{_markdown_table(rows)}"
+    return f"## Relaxed repeat\n\n{markdown_table(rows)}"
 
 
 def yarn_rows(yarn) -> list[tuple[str, str]]:
@@ -510,7 +510,7 @@ def sample_summary(index: int, result) -> str:
         ("residual energy change / penetration", f"{r.energy_change:.3g} / {r.penetration:.3g}"),
         ("wall time", f"{result.seconds:.3g} s"),
     ]
-    return f"## Sample {index}\n\n{_markdown_table(rows)}"
+    return f"## Sample {index}\n\n{markdown_table(rows)}"
 
 
 # Engineering constants as the summary shows them: key of ShellMaterial.engineering(), label, SI
@@ -545,7 +545,7 @@ def fit_summary(fabric_fit) -> str:
             si = f"{value:.5g} {unit}".rstrip()
             user = f"{value / GF_CM2_PER_CM:.5g} gf·cm²/cm" if unit == "N·m" else si
             rows.append((label, si, user))
-        constants = _markdown_table(rows, header=("constant", "SI", "user units"))
+        constants = markdown_table(rows, header=("constant", "SI", "user units"))
     quality = [(family, f["samples"], f"{f['r2']:.6g}", f"{f['relative_rms']:.3g}")
                for family, f in fit.families.items() if f["samples"] > 0]
     samples = fabric_fit.samples
@@ -564,6 +564,6 @@ def fit_summary(fabric_fit) -> str:
     ]
     notes = "".join(f"- {note}\n" for note in fit.notes)
     return (f"## Shell fit\n\n### Engineering constants\n\n{constants}\n### Fit quality\n\n"
-            f"{_markdown_table(quality, header=('family', 'samples', 'R²', 'relative RMS'))}\n"
+            f"{markdown_table(quality, header=('family', 'samples', 'R²', 'relative RMS'))}\n"
             + (f"### Bounds reached\n\n{notes}\n" if notes else "")
-            + f"### Run\n\n{_markdown_table(run)}")
+            + f"### Run\n\n{markdown_table(run)}")

@@ -8,3 +8,5 @@ lists or dicts. This file imports nothing heavy: the command line builds its par
 """
 
 SCENES = ("stretch", "yarn", "sphere", "wall", "body")
+# The directions a strip is pulled in: the pull axis's angle from the weft, in degrees.
+DIRECTIONS = {"weft": 0.0, "warp": 90.0, "bias": 45.0}

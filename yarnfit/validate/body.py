@@ -60,13 +60,14 @@ import rerun as rr
 import rerun.blueprint as rrb
 import trimesh
 
-from ..record import _folded_panels, _markdown_table, _Recording
+from ..engine.rotations import quaternion_between, xyzw
+from ..mujoco import DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_TIMESTEP
 from ..mujoco.scenes import FLEX_RADIUS, SceneMaterial, add_cloth_flex, compile_quietly
+from ..record import folded_panels, markdown_table, Recording
 
 __all__ = ["MOTION", "HUMANOID", "build_body_scene", "garment_panel", "motion_targets", "run_body"]
 
 HUMANOID = Path(__file__).resolve().parents[2] / "mjcf" / "humanoid.xml"
-TIMESTEP = 1e-3  # s, the export's default (design notes §7)
 # m, pattern grid spacing (full run): 3.5 cm cells, 1730 garment vertices, ~40 ms per step
 # on this machine (2.5 cm: 3180 vertices, ~100 ms per step with two runs on its two cores)
 SPACING = 0.035
@@ -74,6 +75,8 @@ QUICK_SPACING = 0.05  # m (quick run)
 SETTLE_S = 1.0  # s of sewing and settling with the body at rest; the checks start after it
 QUICK_SECONDS = 2.0  # s: the quick run stops after the arms come down
 FRAME_S = 1.0 / 30  # s between recorded frames
+# Rerun's Capsules3D run along +z; each capsule is turned from it onto its geom's axis.
+UP = np.array([0.0, 0.0, 1.0])
 PENETRATION_TARGET = 0.01  # m
 DISTANCE_TARGET = 0.15  # m
 # Seams: connect equalities, critically damped, whose time constant falls geometrically from
@@ -87,8 +90,6 @@ SEAM_SOLREF = (0.05, 1.0)
 SEAM_TIME_CONSTANT_SEWN = 0.02
 SEAM_TIGHTEN_S = (0.3, 0.8)
 WAIST_PIN_HALF_WIDTH = 0.12  # m
-FRICTION = 0.5
-DAMPING = 1e-3  # s, the export's default
 
 # Panel placement (m): the planes x = ±d of the front and back panels.
 SHIRT_DEPTH = 0.16
@@ -183,7 +184,7 @@ def garment_panel(kind: str, spacing: float) -> tuple[trimesh.Trimesh, np.ndarra
 
 
 def build_body_scene(material_shirt: SceneMaterial, material_pants: SceneMaterial, *, spacing: float = SPACING,
-                     timestep: float = TIMESTEP) -> tuple[mujoco.MjSpec, dict]:
+                     timestep: float = DEFAULT_TIMESTEP) -> tuple[mujoco.MjSpec, dict]:
     """The humanoid with both garments (see the module docstring). Returns the spec and, per
     garment, its panel flex names and vertex counts."""
     spec = mujoco.MjSpec.from_file(str(HUMANOID))
@@ -199,8 +200,8 @@ def build_body_scene(material_shirt: SceneMaterial, material_pants: SceneMateria
             name = f"{kind}_{side}"
             points = base + [sign * depth, 0.0, 0.0]
             # Opposite orientations so both panels' normals point away from the body once sewn.
-            add_cloth_flex(spec, name, points, faces if sign > 0 else faces[:, ::-1], material, damping=DAMPING,
-                           friction=FRICTION, contype=1, conaffinity=0)
+            add_cloth_flex(spec, name, points, faces if sign > 0 else faces[:, ::-1], material, damping=DEFAULT_DAMPING,
+                           friction=DEFAULT_FRICTION, contype=1, conaffinity=0)
             for v in np.flatnonzero(seam):
                 spec.body(f"{name}_{v}").add_site(name=f"{name}_seam_{v}", size=[FLEX_RADIUS] * 3)
             if kind == "pants":
@@ -337,7 +338,7 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
     return result
 
 
-class _BodyRecording(_Recording):
+class _BodyRecording(Recording):
     """The ``.rrd`` file of one run (paths in the module docstring)."""
 
     def __init__(self, path, name: str, model: mujoco.MjModel, garments: dict, geom_names: list[str]) -> None:
@@ -351,9 +352,8 @@ class _BodyRecording(_Recording):
                 ),
                 column_shares=[3, 1],
             ),
-            *_folded_panels("sim_time"))
+            *folded_panels("sim_time"))
         super().__init__(f"body: {name}", path, layout, "body")
-        self.rec = self._rec
         colors = {"shirt": [60, 110, 200], "pants": [70, 70, 80]}
         for kind, g in garments.items():
             triangles, offset = [], 0
@@ -362,22 +362,22 @@ class _BodyRecording(_Recording):
                 adr, num = model.flex_elemdataadr[fid], model.flex_elemnum[fid]
                 triangles.append(model.flex_elem[adr:adr + 3 * num].reshape(-1, 3) + offset)
                 offset += model.flex_vertnum[fid]
-            self.rec.log(f"body/cloth/{kind}", rr.Mesh3D.from_fields(
+            self.stream.log(f"body/cloth/{kind}", rr.Mesh3D.from_fields(
                 triangle_indices=np.concatenate(triangles), albedo_factor=colors[kind]), static=True)
         self.geom_names = geom_names
 
     def frame(self, t, garments, a, radius, b, pen, dist) -> None:
-        self.rec.set_time("sim_time", duration=t)
+        self.stream.set_time("sim_time", duration=t)
         for kind, points in garments.items():
-            self.rec.log(f"body/cloth/{kind}", rr.Mesh3D.from_fields(vertex_positions=points))
+            self.stream.log(f"body/cloth/{kind}", rr.Mesh3D.from_fields(vertex_positions=points))
         for g, name in enumerate(self.geom_names):
             axis = b[g] - a[g]
             length = float(np.linalg.norm(axis))
-            quat = _quat_z_to(axis / length if length > 0 else np.array([0.0, 0.0, 1.0]))
-            self.rec.log(f"body/bodies/{name}", rr.Capsules3D(lengths=[length], radii=[radius[g]], translations=[a[g]],
-                                                               quaternions=[rr.Quaternion(xyzw=quat)]))
-        self.rec.log("body/plots/penetration", rr.Scalars(pen))
-        self.rec.log("body/plots/distance", rr.Scalars(dist))
+            quat = quaternion_between(UP, axis / length if length > 0 else UP)
+            self.stream.log(f"body/bodies/{name}", rr.Capsules3D(lengths=[length], radii=[radius[g]], translations=[a[g]],
+                                                               quaternions=[rr.Quaternion(xyzw=xyzw(quat))]))
+        self.stream.log("body/plots/penetration", rr.Scalars(pen))
+        self.stream.log("body/plots/distance", rr.Scalars(dist))
 
     def finish(self, result: dict) -> None:
         rows = [("stable", result["stable"]), ("bad QACC warnings", result["bad_qacc"]),
@@ -386,20 +386,9 @@ class _BodyRecording(_Recording):
                 ("simulated (s)", f"{result['simulated_s']:.3g}"), ("ms/step", f"{result['ms_per_step']:.3g}"),
                 ("wall time (s)", f"{result['wall_time_s']:.3g}"), ("shirt", result["material_shirt"]),
                 ("pants", result["material_pants"]), ("panel grid spacing (m)", result["spacing_m"])]
-        self._log_markdown("body/summary", "# full body\n\n" + _markdown_table(rows), static=True)
+        self.log_markdown("body/summary", "# full body\n\n" + markdown_table(rows), static=True)
         self.close()
 
 
 def _flex_id(model: mujoco.MjModel, name: str) -> int:
     return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, name)
-
-
-def _quat_z_to(direction: np.ndarray) -> list[float]:
-    """Quaternion ``(x, y, z, w)`` turning +z onto the unit vector ``direction``."""
-    z = np.array([0.0, 0.0, 1.0])
-    w = 1.0 + float(direction @ z)
-    if w < 1e-12:
-        return [1.0, 0.0, 0.0, 0.0]
-    xyz = np.cross(z, direction)
-    q = np.array([*xyz, w])
-    return list(q / np.linalg.norm(q))

@@ -41,7 +41,7 @@ import rerun.blueprint as rrb
 from scipy.signal import find_peaks
 
 from ..mujoco.scenes import SceneMaterial, build_scene, compile_quietly
-from ..record import _markdown_table, _Recording
+from ..record import markdown_table, Recording
 
 SIZE = 0.3  # m: the swatch's side
 # Vertices per side: 1.5 cm and 2.5 cm cells. Finer is not stable at the export's 1 ms step: the
@@ -206,7 +206,7 @@ def _kinetic(model, data) -> float:
     return energy
 
 
-class _DrapeRecording(_Recording):
+class _DrapeRecording(Recording):
     """``logs/<material>/<scene>.rrd`` (see the module docstring)."""
 
     def __init__(self, name: str, scene: str, path, model) -> None:
@@ -221,19 +221,19 @@ class _DrapeRecording(_Recording):
         self.scene = scene
         geom = model.geom(scene if scene == "wall" else "sphere")
         if geom.type[0] == mujoco.mjtGeom.mjGEOM_SPHERE:
-            self._rec.log(f"{scene}/bodies/obstacle", rr.Ellipsoids3D(centers=[geom.pos], half_sizes=[[geom.size[0]] * 3],
+            self.stream.log(f"{scene}/bodies/obstacle", rr.Ellipsoids3D(centers=[geom.pos], half_sizes=[[geom.size[0]] * 3],
                                                                       fill_mode="solid"), static=True)
         else:
-            self._rec.log(f"{scene}/bodies/obstacle", rr.Boxes3D(centers=[geom.pos], half_sizes=[geom.size],
+            self.stream.log(f"{scene}/bodies/obstacle", rr.Boxes3D(centers=[geom.pos], half_sizes=[geom.size],
                                                                  fill_mode="solid"), static=True)
 
     def frame(self, t: float, positions, triangles, kinetic_per_mass: float) -> None:
-        self._rec.set_time("sim_time", duration=t)
-        self._rec.log(f"{self.scene}/cloth", rr.Mesh3D(vertex_positions=positions, triangle_indices=triangles))
-        self._rec.log(f"{self.scene}/plots/kinetic_energy", rr.Scalars(kinetic_per_mass))
-        self._rec.log(f"{self.scene}/plots/lowest_point", rr.Scalars(float(positions[:, 2].min())))
+        self.stream.set_time("sim_time", duration=t)
+        self.stream.log(f"{self.scene}/cloth", rr.Mesh3D(vertex_positions=positions, triangle_indices=triangles))
+        self.stream.log(f"{self.scene}/plots/kinetic_energy", rr.Scalars(kinetic_per_mass))
+        self.stream.log(f"{self.scene}/plots/lowest_point", rr.Scalars(float(positions[:, 2].min())))
 
     def finish(self, summary: dict) -> None:
         rows = [(k, f"{v:.4g}" if isinstance(v, float) else v) for k, v in summary.items()]
-        self._log_markdown(f"{self.scene}/summary", _markdown_table(rows), static=True)
+        self.log_markdown(f"{self.scene}/summary", markdown_table(rows), static=True)
         self.close()

@@ -105,7 +105,8 @@ def compare_thickness(fabric: Fabric, *, factor: float = THICKNESS_FACTOR, max_s
     """Check (b): fit ``fabric`` and its :func:`thicker_yarns` twin, pull both 8 × 5 strips (quick
     mesh) in each direction; force per width (N/m) and stress (force per width over the shell
     thickness, Pa) at each level, and whether the thicker twin is higher at every level."""
-    from .stretch import DIRECTIONS, pull_strip
+    from . import DIRECTIONS
+    from .stretch import pull_strip
 
     from ..relax import relax
 

@@ -25,11 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
+from . import DIRECTIONS
+
 # Unit → factor to SI (strain: 1, force per width: N/m). 1 gf = 9.80665e-3 N.
 STRAIN_UNITS = {"1": 1.0, "-": 1.0, "%": 0.01}
 FORCE_UNITS = {"N/m": 1.0, "N/cm": 100.0, "N/mm": 1000.0, "gf/cm": 0.980665}
 RATIO_UNITS = {"1": 1.0, "-": 1.0}
-DIRECTIONS = ("weft", "warp", "bias")
 _HEADER = re.compile(r"^\s*([A-Za-z_ ]+?)\s*(?:\[(.*)\])?\s*$")
 
 

@@ -46,12 +46,12 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ..record import _markdown_table, _Recording
 from ..mujoco.scenes import SceneMaterial, build_scene, compile_quietly
+from ..record import Recording, markdown_table
+from . import DIRECTIONS
 
 # FAB strips (m): length between the clamps × width.
 STRIPS = {"8x5": (0.08, 0.05), "2x5": (0.02, 0.05)}
-DIRECTIONS = {"weft": 0.0, "warp": math.pi / 2, "bias": math.pi / 4}
 # Engineering strain levels of the pull (the 2 %, 5 % and 10 % the yarn comparison reads, and
 # small ones for the law).
 STRAIN_LEVELS = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1)
@@ -124,7 +124,7 @@ def pull_strip(material: SceneMaterial, strip: str, direction: str, *, quick: bo
     import mujoco
 
     length, width = STRIPS[strip] if dimensions is None else dimensions
-    angle = DIRECTIONS[direction]
+    angle = math.radians(DIRECTIONS[direction])
     levels = [e for e in STRAIN_LEVELS if e <= max_strain + 1e-12]
     if not levels:
         raise ValueError(f"max_strain must be at least {STRAIN_LEVELS[0]}, got {max_strain!r}")
@@ -288,7 +288,7 @@ def run_stretch(material: SceneMaterial | str | Path, *, quick: bool = False, re
     return summary
 
 
-class _StretchRecording(_Recording):
+class _StretchRecording(Recording):
     """``logs/<material>/stretch.rrd`` (see the module docstring)."""
 
     def __init__(self, name: str, path) -> None:
@@ -301,7 +301,7 @@ class _StretchRecording(_Recording):
         super().__init__(name, path, layout, "stretch")
 
     def level_logger(self, name: str) -> Callable:
-        stream = self._rec
+        stream = self.stream
 
         def log(index, strain, positions, triangles, force, ratio):
             stream.set_time("strain_step", sequence=index)
@@ -312,7 +312,7 @@ class _StretchRecording(_Recording):
         return log
 
     def log_reference(self, reference, strips: dict) -> None:
-        stream = self._rec
+        stream = self.stream
         for direction, curve in reference.curves.items():
             levels = next(iter(s["strain"] for n, s in strips.items() if n.endswith(direction)), [])
             for index, strain in enumerate(levels, start=1):
@@ -327,6 +327,6 @@ class _StretchRecording(_Recording):
                 for name, s in summary["strips"].items()
                 for e, f, c in zip(s["strain"], s["force_per_width_n_per_m"], s["compression_ratio"])]
         header = ("strip", "strain", "N/m", "compression", "clamped law N/m", "uniaxial law N/m")
-        self._log_markdown("stretch/summary", _markdown_table(rows, header),
+        self.log_markdown("stretch/summary", markdown_table(rows, header),
                            static=True)
         self.close()

@@ -12,6 +12,7 @@ strips (``fab_8x5``), both by :func:`compare_shell_yarn`; with ``stretch``,
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 from typing import Callable
@@ -125,7 +126,8 @@ def shell_strips_like_swatch(material, yarn: dict, *, quick: bool = False) -> di
     criss-cross grid (:data:`FINE_MESH_RESOLUTION` vertices along), and ``mesh_stiffening``, the
     scene mesh's clamped law over it (design notes §7: meshes with one diagonal per cell lock)."""
     from ..mujoco.scenes import grid_mesh, strip_columns
-    from .stretch import DIRECTIONS, clamped_strip_stiffness, pull_strip
+    from . import DIRECTIONS
+    from .stretch import clamped_strip_stiffness, pull_strip
 
     out = {"strips": {}}
     for direction, curve in yarn.get("directions", {}).items():
@@ -135,7 +137,7 @@ def shell_strips_like_swatch(material, yarn: dict, *, quick: bool = False) -> di
                             dimensions=(length, width), resolution=LIKE_SWATCH_RESOLUTION[quick])
         fine_mesh = grid_mesh(FINE_MESH_RESOLUTION, strip_columns(FINE_MESH_RESOLUTION, length, width), length,
                               width, crisscross=True)
-        fine = clamped_strip_stiffness(material.shell, *fine_mesh, DIRECTIONS[direction])
+        fine = clamped_strip_stiffness(material.shell, *fine_mesh, math.radians(DIRECTIONS[direction]))
         out["strips"][result.name] = {**result.summary(material.shell), "resolution": LIKE_SWATCH_RESOLUTION[quick],
                                       "fine_mesh_law_n_per_m": fine,
                                       "mesh_stiffening": result.clamped_law_n_per_m / fine}

@@ -63,6 +63,8 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
 
 from ..engine import (
     ConvergenceWarning,
@@ -75,9 +77,10 @@ from ..engine import (
     RodState,
     energy_gradient,
 )
+from ..engine.rotations import rotate_frames
+from ..record import Recording, folded_panels, markdown_table
+from . import DIRECTIONS
 
-# Strip directions: angle of the pull axis u from the weft (x) axis, degrees.
-DIRECTIONS = {"weft": 0.0, "warp": 90.0, "bias": 45.0}
 # The strains the FAB-style test reports (nominal engineering strain of the gauge).
 STRAINS = (0.02, 0.05, 0.10)
 # Strip size in repeats of the larger repeat side: gauge length, width and each jaw's band. Cost
@@ -207,7 +210,7 @@ def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | Rod
             if b - a < 3 or rest[a:b - 1].sum() < min_piece:
                 continue
             pts = world[a:b]
-            frames_world = _rotate_quaternions(frames[a:b - 1], angle)
+            frames_world = rotate_frames(rotation, frames[a:b - 1])
             x = pts[:, 0]
             slack = CLAMP_SLACK * length
             pinned = np.flatnonzero((x <= -gauge / 2 + slack) | (x >= gauge / 2 - slack))
@@ -226,15 +229,6 @@ def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | Rod
     return Swatch(model=built, position=np.array(built.node_rest_position), moving=moving, fixed=fixed,
                   length=length, width=width, gauge=gauge, clamp=clamp,
                   radius=float(built.edge_radius.max()), direction=direction, angle_deg=DIRECTIONS[direction])
-
-
-def _rotate_quaternions(q: np.ndarray, angle: float) -> np.ndarray:
-    """``r ⊗ q`` for the rotation r by ``−angle`` about z (material → world, as positions)."""
-    h = -0.5 * angle
-    rw, rz = math.cos(h), math.sin(h)
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    out = np.stack([rw * w - rz * z, rw * x - rz * y, rw * y + rz * x, rw * z + rz * w], axis=1)
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
 def mid_width(swatch: Swatch, position: np.ndarray) -> float:
@@ -483,25 +477,14 @@ def fabric_from_inputs(inputs, where: str = "material"):
 STRAIN_TIMELINE = "strain"
 
 
-class SwatchRecording:
+class SwatchRecording(Recording):
     """Writes a yarn-level stretch run to one ``.rrd`` file (see the module docstring)."""
 
     def __init__(self, name: str, path) -> None:
-        import rerun as rr
-
-        from ..record import APPLICATION_ID
-
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._rr = rr
-        self._rec = rr.RecordingStream(APPLICATION_ID)
-        self._rec.save(self.path)
-        self._rec.send_recording_name(name)
-        self._rec.send_blueprint(blueprint())
-        self._rec.log("yarn", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        super().__init__(name, path, blueprint(), "yarn")
 
     def step(self, k: int, swatch: Swatch, position: np.ndarray, strain: float, point: dict) -> None:
-        rr, rec = self._rr, self._rec
+        rec = self.stream
         rec.set_time(STRAIN_TIMELINE, sequence=k)
         m = swatch.model
         strips = [position[m.rod_node_start[r]:m.rod_node_start[r + 1]] for r in range(m.n_rods)]
@@ -512,20 +495,12 @@ class SwatchRecording:
         rec.log("yarn/plots/strain", rr.Scalars(strain))
 
     def finish(self, out: dict) -> None:
-        rr = self._rr
-        self._rec.log("yarn/summary", rr.TextDocument(summary_markdown(out), media_type=rr.MediaType.MARKDOWN),
-                      static=True)
-
-    def close(self) -> None:
-        self._rec.flush()
-        self._rec.disconnect()
+        self.log_markdown("yarn/summary", summary_markdown(out), static=True)
 
 
 def blueprint():
     """The swatch in 3D on the left; force and compression plots and the summary on the right;
     time panel on the ``strain`` timeline."""
-    import rerun.blueprint as rrb
-
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Spatial3DView(origin="yarn/swatch", name="swatch"),
@@ -535,23 +510,22 @@ def blueprint():
             ),
             column_shares=[3, 2],
         ),
-        rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="expanded", timeline=STRAIN_TIMELINE),
+        *folded_panels(STRAIN_TIMELINE),
     )
 
 
 def summary_markdown(out: dict) -> str:
     """Markdown table of a run: per direction and strain, force per width, compression ratio,
     convergence, iterations, residuals and wall time."""
-    lines = [f"# yarn-level stretch: {out.get('name', '')}", "",
-             "| direction | strain | force (N/m) | compression ratio | converged | iterations | force residual | seconds |",
-             "|---|---|---|---|---|---|---|---|"]
+    rows = []
     for direction, curve in out["directions"].items():
         for p in curve["points"][1:]:
             res = p["residual"]["force"] if p["residual"] else float("nan")
-            lines.append(f"| {direction} | {100 * p['strain']:g} % | {p['force_n_per_m']:.5g} | "
-                         f"{p['compression_ratio']:.4f} | {'yes' if p['converged'] else '**no**'} | {p['iterations']} | "
-                         f"{res:.2e} | {p['seconds']:.1f} |")
+            rows.append((direction, f"{100 * p['strain']:g} %", f"{p['force_n_per_m']:.5g}", f"{p['compression_ratio']:.4f}",
+                         "yes" if p["converged"] else "**no**", p["iterations"], f"{res:.2e}", f"{p['seconds']:.1f}"))
+    header = ("direction", "strain", "force (N/m)", "compression ratio", "converged", "iterations", "force residual",
+              "seconds")
+    lines = [f"# yarn-level stretch: {out.get('name', '')}", "", markdown_table(rows, header)]
     for direction, curve in out["directions"].items():
         lines.append(f"\n{direction}: {curve['nodes']} nodes, {curve['pieces']} yarn pieces, gauge "
                      f"{1e3 * curve['gauge_m']:.3g} mm × width {1e3 * curve['width_m']:.3g} mm")
