@@ -164,7 +164,8 @@ def test_fit_bad_input_is_one_line_and_exit_status_2(case, tmp_path):
 
 
 def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documented_recording(tmp_path):
-    from yarnfit.shell import GF_CM2_PER_CM, ShellMaterial
+    from yarnfit.material_file import MaterialFile
+    from yarnfit.shell import GF_CM2_PER_CM
 
     recording, output = tmp_path / "plain-fit.rrd", tmp_path / "plain.json"
     out = subprocess.run([str(Path(sys.executable).parent / "yarnfit"), "fit", "--fiber", "cotton", "--pattern",
@@ -174,7 +175,7 @@ def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documente
     # Progress went to stderr: the relaxation, then samples done with the time left.
     assert "relaxed in" in out.stderr and re.search(r"samples (\d+)/\1: .* s left\]", out.stderr), out.stderr
 
-    material = ShellMaterial.from_json(output)
+    material = MaterialFile.read(output).shell
     engineering = material.engineering()
     summary = {line.split("  ")[1].strip(): line for line in out.stdout.splitlines() if line.startswith("  ")}
     for key, label in (("weft_stretch_n_per_m", "weft stretch"), ("shear_n_per_m", "shear")):

@@ -30,6 +30,7 @@ from yarnfit.homogenize import (
     transfer_fluctuation,
 )
 from yarnfit.material import DEFAULT_SAMPLES, FabricFit, fit_fabric, shell_thickness
+from yarnfit.material_file import MaterialFile
 from yarnfit.materials import FiberMaterial, get_fiber
 from yarnfit.patterns import YarnPattern
 from yarnfit.relax import relax, relax_pattern
@@ -43,7 +44,6 @@ from yarnfit.samples import (
     levels_for,
     sample_design,
 )
-from yarnfit.shell import ShellMaterial
 from yarnfit.yarn import YarnConstruction
 
 # Second differences of the map at step 1e-5 m: truncation ~κ³ h² ~ 1e-6 relative at κ = 300/m.
@@ -295,7 +295,7 @@ def test_the_material_file_reads_back(tmp_path):
     assert set(data["engineering"]) == {"weft_stretch_n_per_m", "warp_stretch_n_per_m", "poisson_weft",
                                         "poisson_warp", "shear_n_per_m", "bending_weft_nm", "bending_warp_nm",
                                         "bending_bias_nm"}
-    assert ShellMaterial.from_json(path) == result.material
+    assert MaterialFile.read(path).shell == result.material
     assert len(data["samples"]) == len(result.samples)
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
+from yarnfit.material_file import MaterialFile
 from yarnfit.shell import (
     GF_CM2_PER_CM,
     PARAMETER_NAMES,
@@ -253,10 +254,10 @@ def test_json_round_trip_through_a_material_file(tmp_path):
     path = tmp_path / "cotton_twill.json"
     document = {"fabric": {"fibre": "cotton"}, "shell": MATERIAL.to_dict(), "engineering": MATERIAL.engineering()}
     path.write_text(json.dumps(document), encoding="utf-8")
-    assert ShellMaterial.from_json(path) == MATERIAL
-    assert ShellMaterial.from_json(str(path)) == MATERIAL
-    assert ShellMaterial.from_json(document) == MATERIAL
-    assert ShellMaterial.from_json(MATERIAL.to_dict()) == MATERIAL
+    assert MaterialFile.read(path).shell == MATERIAL
+    assert MaterialFile.read(str(path)).shell == MATERIAL
+    assert MaterialFile.read(document).shell == MATERIAL
+    assert ShellMaterial.from_dict(MATERIAL.to_dict()) == MATERIAL
     assert ShellMaterial.from_dict(json.loads(json.dumps(MATERIAL.to_dict()))) == MATERIAL
     assert MATERIAL.to_dict()["membrane_pa"]["s01"] == MATERIAL.s01
     assert MATERIAL.to_dict()["thickness_m"] == H
@@ -271,26 +272,26 @@ def test_json_errors_name_the_key_and_the_file(tmp_path):
 
     good = MATERIAL.to_dict()
     with pytest.raises(ValueError, match=r"material\.json: missing key 'shell'"):
-        ShellMaterial.from_json(write({"fabric": {}}))
+        MaterialFile.read(write({"fabric": {}})).shell
     no_b22 = {**good, "bending_pa": {k: v for k, v in good["bending_pa"].items() if k != "b22"}}
     with pytest.raises(ValueError, match=r"material\.json: shell: missing keys: bending_pa\.b22"):
-        ShellMaterial.from_json(write({"shell": no_b22}))
+        MaterialFile.read(write({"shell": no_b22})).shell
     with pytest.raises(ValueError, match=r"material\.json: shell: missing keys: thickness_m"):
-        ShellMaterial.from_json(write({"shell": {k: v for k, v in good.items() if k != "thickness_m"}}))
+        MaterialFile.read(write({"shell": {k: v for k, v in good.items() if k != "thickness_m"}})).shell
     misspelt = {**good, "membrane_pa": {**good["membrane_pa"], "s10": 1.0}}
     with pytest.raises(ValueError, match=r"unknown keys: membrane_pa\.s10"):
-        ShellMaterial.from_json(write({"shell": misspelt}))
+        MaterialFile.read(write({"shell": misspelt})).shell
     with pytest.raises(ValueError, match=r"material\.json: shell: membrane_pa\.s00 must be a number, got '3e6'"):
-        ShellMaterial.from_json(write({"shell": {**good, "membrane_pa": {**good["membrane_pa"], "s00": "3e6"}}}))
+        MaterialFile.read(write({"shell": {**good, "membrane_pa": {**good["membrane_pa"], "s00": "3e6"}}})).shell
     with pytest.raises(ValueError, match=r"bending_pa must be an object"):
-        ShellMaterial.from_json(write({"shell": {**good, "bending_pa": [1, 2, 3, 4]}}))
+        MaterialFile.read(write({"shell": {**good, "bending_pa": [1, 2, 3, 4]}})).shell
     with pytest.raises(ValueError, match=r"thickness must be > 0"):
-        ShellMaterial.from_json(write({"shell": {**good, "thickness_m": -1e-4}}))
+        MaterialFile.read(write({"shell": {**good, "thickness_m": -1e-4}})).shell
     path.write_text("{not json", encoding="utf-8")
     with pytest.raises(ValueError, match=r"material\.json: invalid JSON at line 1"):
-        ShellMaterial.from_json(path)
+        MaterialFile.read(path).shell
     with pytest.raises(ValueError, match="no such material file"):
-        ShellMaterial.from_json(tmp_path / "absent.json")
+        MaterialFile.read(tmp_path / "absent.json").shell
 
 
 # -- bad input ------------------------------------------------------------------------------------------

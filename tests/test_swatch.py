@@ -161,7 +161,7 @@ def test_fabric_from_inputs_rebuilds_the_preset():
     from dataclasses import asdict
 
     from yarnfit.fabric import Fabric
-    from yarnfit.validate.swatch import fabric_from_inputs
+    from yarnfit.material_file import fabric_from_inputs
 
     from yarnfit.yarn import YarnConstruction
 

@@ -26,14 +26,12 @@ with ``m = B κ``. A symmetric variation that changes both ``I_01`` and ``I_10``
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from .checks import check_keys, finite_number
-from .jsonfile import read_json
 
 __all__ = [
     "BENDING_PARAMETERS",
@@ -410,33 +408,6 @@ class ShellMaterial:
             return cls(**fields)
         except ValueError as exc:
             raise ValueError(f"{where}: {exc}") from None
-
-    @classmethod
-    def from_json(cls, source: str | os.PathLike | Mapping) -> ShellMaterial:
-        """A material from a material file or its parsed contents.
-
-        Args:
-            source: a path to a JSON material file (an object holding the :meth:`to_dict` form
-                under the key ``"shell"``, as ``yarnfit fit`` writes it; other keys are ignored), or
-                such an object already parsed. A mapping without ``"shell"`` is read as the
-                :meth:`to_dict` form itself.
-
-        Raises:
-            ValueError: ``<file>: ...`` for an unreadable file, invalid JSON, a missing ``"shell"``
-                key or any error of :meth:`from_dict`.
-        """
-        if isinstance(source, Mapping):
-            where = "material dict"
-            data = source
-        else:
-            where, data = read_json(source, "material file")
-            if not isinstance(data, dict):
-                raise ValueError(f"{where}: expected a JSON object with key 'shell', got a {type(data).__name__}")
-            if "shell" not in data:
-                raise ValueError(f"{where}: missing key 'shell' (the fitted shell material)")
-        if "shell" in data:
-            return cls.from_dict(data["shell"], f"{where}: shell")
-        return cls.from_dict(data, where)
 
 
 # -- helpers --------------------------------------------------------------------------------------

@@ -40,7 +40,7 @@ import mujoco
 import numpy as np
 
 from ..checks import non_negative_number, positive_number
-from ..jsonfile import read_json
+from ..material_file import MaterialFile
 from ..shell import ShellMaterial
 from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE,
                DEFAULT_TIMESTEP, INTEGRATORS, SCENES)
@@ -119,34 +119,23 @@ class SceneMaterial:
             ValueError: ``<file>: ...`` for an unreadable or malformed file, a missing ``shell``,
                 or no usable areal density.
         """
-        where, data = read_json(path, "material file")
-        if not isinstance(data, dict):
-            raise ValueError(f"{where}: expected a JSON object with key 'shell', got a {type(data).__name__}")
-        if "shell" not in data:
-            raise ValueError(f"{where}: missing key 'shell' (the fitted shell material)")
-        shell = ShellMaterial.from_dict(data["shell"], f"{where}: shell")
+        file = MaterialFile.read(path)
+        shell = file.shell
         try:
             shell.check_positive_definite()
         except ValueError as exc:
-            raise ValueError(f"{where}: shell: {exc}") from None
-        inputs = data.get("inputs") if isinstance(data.get("inputs"), dict) else {}
-        if areal_density_kg_m2 is None:
-            yarn = data.get("yarn") if isinstance(data.get("yarn"), dict) else {}
-            for key, block in (("inputs", inputs), ("yarn", yarn)):
-                if block.get("areal_density_kg_m2") is not None:
-                    areal_density_kg_m2 = block["areal_density_kg_m2"]
-                    try:
-                        return cls(_name(inputs, where), shell, areal_density_kg_m2)
-                    except ValueError as exc:
-                        raise ValueError(f"{where}: {key}.areal_density_kg_m2: {exc}") from None
-            raise ValueError(f"{where}: no areal density (inputs.areal_density_kg_m2 or yarn.areal_density_kg_m2); "
-                             "give one")
-        return cls(_name(inputs, where), shell, areal_density_kg_m2)
-
-
-def _name(inputs: dict, where: str) -> str:
-    name = inputs.get("fabric")
-    return name if isinstance(name, str) and name.strip() else Path(where).stem
+            raise ValueError(f"{file.where}: shell: {exc}") from None
+        if areal_density_kg_m2 is not None:
+            return cls(file.name, shell, areal_density_kg_m2)
+        found = file.areal_density()
+        if found is None:
+            raise ValueError(f"{file.where}: no areal density (inputs.areal_density_kg_m2 or "
+                             "yarn.areal_density_kg_m2); give one")
+        density, key = found
+        try:
+            return cls(file.name, shell, density)
+        except ValueError as exc:
+            raise ValueError(f"{file.where}: {key}: {exc}") from None
 
 
 @dataclass(frozen=True)

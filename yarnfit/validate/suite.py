@@ -18,15 +18,10 @@ from pathlib import Path
 from typing import Callable
 
 from .. import __version__
-from ..jsonfile import read_json
+from ..material_file import MaterialFile
 from . import SCENES
 
 
-class IncompatibleMaterial(ValueError):
-    """A material file this version cannot use (missing keys, another major version)."""
-
-
-REQUIRED_KEYS = ("yarnfit_version", "inputs", "shell", "engineering")
 # How far past the shell's last measured strain a yarn point may lie and still be compared
 # (relative): the servo leaves the measured strain below the nominal level, ~1 % for wovens, up to
 # 5 % for the clamped strips of knits (a jersey's bias strip stops at 9.52 % of 10 %).
@@ -42,19 +37,10 @@ FINE_MESH_RESOLUTION = 97
 
 def check_material_file(path: str | Path) -> dict:
     """Read a material file and check it is one this version can validate; returns its data.
-    Raises :class:`IncompatibleMaterial` (one line, naming the problem)."""
-    where, data = read_json(path, "material file")
-    if not isinstance(data, dict):
-        raise IncompatibleMaterial(f"{where}: expected a JSON object (a `yarnfit fit` material file)")
-    missing = [key for key in REQUIRED_KEYS if key not in data]
-    if missing:
-        raise IncompatibleMaterial(f"{where}: missing key{'s' if len(missing) > 1 else ''} "
-                                   f"{', '.join(missing)} (write it with `yarnfit fit`)")
-    version = data["yarnfit_version"]
-    if not isinstance(version, str) or version.split(".")[:2] != __version__.split(".")[:2]:
-        raise IncompatibleMaterial(f"{where}: written by yarnfit {version!r}, this is {__version__}: refit it "
-                                   "with `yarnfit fit` (the file format follows the minor version)")
-    return data
+    Raises :class:`~yarnfit.material_file.IncompatibleMaterial` (one line, naming the problem)."""
+    file = MaterialFile.read(path)
+    file.check_version()
+    return file.data
 
 
 def _runner(scene: str) -> Callable:

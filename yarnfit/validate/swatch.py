@@ -78,6 +78,7 @@ from ..engine import (
     energy_gradient,
 )
 from ..engine.rotations import rotate_frames
+from ..material_file import MaterialFile
 from ..record import Recording, folded_panels, markdown_table
 from . import DIRECTIONS
 
@@ -399,18 +400,23 @@ def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection |
 
 def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Callable[[str], None] | None = None,
              directions: Sequence[str] | None = None, size: dict | None = None) -> dict:
-    """The yarn-level stretch test of a material file (path or its decoded dict): rebuild the fabric
-    from its ``inputs``, relax its repeat, cut strips along weft and warp (and bias unless
-    ``quick``) and pull each to 2, 5 and 10 %. ``recording_path`` defaults to
+    """The yarn-level stretch test of a material file (path or its decoded dict): take the relaxed
+    repeat the file keeps (a file without one has the fabric of its ``inputs`` relaxed again, with a
+    note through ``progress``), cut strips along weft and warp (and bias unless ``quick``) and pull
+    each to 2, 5 and 10 %. ``recording_path`` defaults to
     ``logs/<material>/yarn.rrd`` (``False``: no recording). Returns a JSON-able dict with the
     curves per direction (see :func:`stretch_swatch`) and the relaxation. ``size`` overrides the
     strip size (see :func:`stretch_repeat`)."""
     from ..relax import relax
 
-    data, where = _material_data(material)
-    fabric = fabric_from_inputs(data.get("inputs"), where)
+    file = MaterialFile.read(material)
+    where, fabric = file.where, file.fabric()
     start = time.perf_counter()
-    relaxed = relax(fabric)
+    relaxed = file.relaxed_repeat()
+    if relaxed is None:
+        if progress is not None:
+            progress(f"{where} keeps no relaxed repeat (written before yarnfit kept it): relaxing {fabric.name} again")
+        relaxed = relax(fabric)
     relax_seconds = time.perf_counter() - start
     if not relaxed.valid:
         raise ValueError(f"{where}: the relaxation of {fabric.name!r} is not usable ({relaxed.residual})")
@@ -429,46 +435,6 @@ def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Ca
                          "repeat_size_m": [float(v) for v in relaxed.repeat_size]}
     out["recording"] = None if recording_path is None else str(recording_path)
     return out
-
-
-def _material_data(material) -> tuple[dict, str]:
-    if isinstance(material, dict):
-        return material, "material"
-    from ..jsonfile import read_json
-
-    where, data = read_json(material, "material file")
-    if not isinstance(data, dict):
-        raise ValueError(f"{where}: expected a JSON object")
-    return data, where
-
-
-def fabric_from_inputs(inputs, where: str = "material"):
-    """The :class:`yarnfit.fabric.Fabric` a material file's ``inputs`` block describes."""
-    from ..fabric import Fabric, named_patterns
-    from ..materials import OPTIONAL_FIBER_FIELDS, FiberMaterial
-    from ..yarn import YarnConstruction
-
-    if not isinstance(inputs, dict):
-        raise ValueError(f"{where}: missing 'inputs' (the fabric the material was fitted for)")
-    try:
-        fiber = inputs["fiber"]
-        optional = ("source",) + OPTIONAL_FIBER_FIELDS
-        fiber = FiberMaterial(**{k: fiber[k] for k in ("name", "density_kg_m3", "young_min_pa", "young_max_pa",
-                                                        "breaking_strain", "poisson", "friction")},
-                              **{k: fiber[k] for k in optional if k in fiber})
-        # Files written before the fibre-assembly yarn (no inputs.yarn) were fitted with the paper's
-        # solid rod: rebuild them with it.
-        yarn = (YarnConstruction.from_dict(inputs["yarn"], f"{where}: inputs.yarn") if "yarn" in inputs
-                else YarnConstruction(model="solid"))
-        pattern = inputs["pattern"]
-        counts = inputs.get("counts_per_m")
-        structure = pattern if pattern in named_patterns() else None
-        return Fabric(name=str(inputs.get("fabric") or "fabric"), fiber=fiber, structure=structure,
-                      areal_density=inputs.get("areal_density_kg_m2"),
-                      counts=None if counts is None else (float(counts[0]), float(counts[1])),
-                      pattern_file=None if structure is not None else pattern, yarn=yarn)
-    except (KeyError, TypeError) as exc:
-        raise ValueError(f"{where}: inputs: cannot rebuild the fabric ({exc!r})") from None
 
 
 # -- recording ---------------------------------------------------------------------------------

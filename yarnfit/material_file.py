@@ -1,0 +1,249 @@
+"""The material file: one owner for writing, reading, version-checking and rebuilding from it.
+
+``yarnfit fit`` writes one JSON file per fabric, SI units, stable keys:
+
+- ``yarnfit_version``;
+- ``inputs``: ``fabric`` (name), ``fiber`` (name, density_kg_m3, young_min_pa, young_max_pa,
+  breaking_strain, poisson, friction, source, and where known fineness_dtex,
+  flexural_rigidity_nm2_per_tex2, torsional_rigidity_nm2_per_tex2, spinning), ``yarn`` (the
+  construction as given: model, spinning, packing_fraction, twist_angle_deg and measured
+  rigidities, null for defaults), ``pattern`` (named structure or file), ``family``,
+  ``counts_per_m`` (``[ends, picks]`` or ``[courses, wales]``, null for a file used as written),
+  ``areal_density_kg_m2`` (null likewise);
+- ``yarn``: the yarn (:meth:`yarnfit.yarn.Yarn.to_dict`: ``model``, ``spinning``,
+  ``linear_density_tex``, ``fibres_per_section``, ``packing_fraction``, ``twist_angle_deg``,
+  ``radius_m``, ``tensile_rigidity_n``, ``hardening_n``, ``shear_rigidity_n``,
+  ``bending_rigidity_nm2``, ``torsional_rigidity_nm2``, ``bending_vs_solid``, ``limits``), the
+  fibre's ``young_modulus_pa`` (E_min), ``hardening_pa``, ``poisson``, ``density_kg_m3``,
+  ``friction``, and ``shrink``, ``repeat_size_m``, ``yarn_length_per_area_m_per_m2``,
+  ``areal_density_kg_m2`` (of the relaxed repeat) and the relaxation's ``converged``,
+  ``iterations``, ``residual`` and ``worst_overlap``;
+- ``shell``: ``thickness_m``, ``membrane_pa`` {s00, s01, s11, s22}, ``bending_pa`` {b00, b01,
+  b11, b22} (:attr:`MaterialFile.shell` reads it back);
+- ``engineering``: the constants of ``docs/design.md`` §3 (``weft_stretch_n_per_m``, …);
+- ``fit``: the fit's quality (model, parameters and standard errors, R² and relative RMS per
+  family, active bounds, weights, used and excluded samples);
+- ``samples``: every sample — ``family``, ``parameter``, ``I``, ``II``, ``energy_density_j_m2``,
+  ``converged``, ``residual`` {force, torque, penetration, energy_change}, ``iterations``,
+  ``seconds`` — including those that did not converge (excluded from the fit, never used);
+- ``relaxed_repeat``: ``pyp``, the relaxed repeat as ``.pyp`` text (:meth:`RelaxedRepeat.relaxed_pattern
+  <yarnfit.relax.RelaxedRepeat.relaxed_pattern>`: relaxed positions, the rest lengths they balance
+  and the relaxed frames' directors, floats written to round trip), from which
+  :meth:`MaterialFile.relaxed_repeat` rebuilds the repeat without relaxing from scratch;
+- ``seconds``: wall time per stage.
+
+The shell thickness is the relaxed repeat's: the span of the yarn centrelines across the fabric
+plus one diameter. It only scales S and B; the engineering constants do not depend on it.
+
+:class:`MaterialFile` is the only code that reads or writes it: :meth:`MaterialFile.from_fit` and
+:meth:`~MaterialFile.write` for ``yarnfit fit``, :meth:`~MaterialFile.read` for everyone else, with
+typed views of what a reader needs (the shell, the areal density, the fabric it was fitted for, the
+relaxed repeat). Errors are one line starting with the file's path.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from . import __version__
+from .jsonfile import read_json
+from .materials import OPTIONAL_FIBER_FIELDS, FiberMaterial
+from .shell import ShellMaterial
+
+if TYPE_CHECKING:  # the heavy stages are imported where they are used
+    from .fabric import Fabric
+    from .material import FabricFit
+    from .relax import RelaxedRepeat
+
+__all__ = ["IncompatibleMaterial", "MaterialFile", "REQUIRED_KEYS", "fabric_from_inputs"]
+
+# What a file must hold to be validated (older files lack the rest, which only reports read).
+REQUIRED_KEYS = ("yarnfit_version", "inputs", "shell", "engineering")
+
+
+class IncompatibleMaterial(ValueError):
+    """A material file this version cannot use (missing keys, or written by another minor version)."""
+
+
+@dataclass(frozen=True, eq=False)
+class MaterialFile:
+    """A material file's decoded contents ``data`` and ``where`` they came from (a path, or
+    ``"material"`` for data built in memory)."""
+
+    data: dict
+    where: str = "material"
+
+    # -- writing ------------------------------------------------------------------------------
+
+    @classmethod
+    def from_fit(cls, fit: "FabricFit") -> "MaterialFile":
+        """The file of a fabric fitted end to end (see the module docstring)."""
+        from .patterns import format_pyp
+
+        fabric, relaxed, fiber = fit.fabric, fit.relaxed, fit.fabric.fiber
+        residual = relaxed.residual
+        data = {
+            "yarnfit_version": __version__,
+            "inputs": {
+                "fabric": fabric.name,
+                "fiber": {
+                    "name": fiber.name,
+                    "density_kg_m3": fiber.density_kg_m3,
+                    "young_min_pa": fiber.young_min_pa,
+                    "young_max_pa": fiber.young_max_pa,
+                    "breaking_strain": fiber.breaking_strain,
+                    "poisson": fiber.poisson,
+                    "friction": fiber.friction,
+                    "source": fiber.source,
+                    **{key: getattr(fiber, key) for key in OPTIONAL_FIBER_FIELDS if getattr(fiber, key) is not None},
+                },
+                "yarn": fabric.yarn.to_dict(),
+                "pattern": fabric.structure if fabric.structure is not None else str(fabric.pattern_file),
+                "family": relaxed.pattern.family,
+                "counts_per_m": None if fabric.uses_file_as_is else list(fabric.counts_per_m(relaxed.pattern)),
+                "areal_density_kg_m2": fabric.areal_density,
+            },
+            "yarn": {
+                **relaxed.yarn.to_dict(),
+                "young_modulus_pa": fiber.young_min_pa,
+                "hardening_pa": fiber.hardening_pa,
+                "poisson": fiber.poisson,
+                "density_kg_m3": fiber.density_kg_m3,
+                "friction": fiber.friction,
+                "shrink": relaxed.shrink,
+                "repeat_size_m": [float(v) for v in relaxed.repeat_size],
+                "yarn_length_per_area_m_per_m2": relaxed.yarn_length_per_area,
+                "areal_density_kg_m2": relaxed.areal_density,
+                "relaxation": {
+                    "converged": relaxed.converged,
+                    "iterations": relaxed.iterations,
+                    "relaxations": relaxed.relaxations,
+                    "residual": {"force": residual.force, "torque": residual.torque,
+                                 "energy_change": residual.energy_change, "penetration": residual.penetration},
+                    "worst_overlap": relaxed.penetration,
+                    "seconds": relaxed.seconds,
+                },
+            },
+            "shell": fit.material.to_dict(),
+            "engineering": fit.material.engineering(),
+            "fit": {**fit.fit.quality_dict(), "stretch_range": fit.ranges.stretch,
+                    "curvature_range_per_m": fit.ranges.curvature},
+            "samples": [s.to_dict() for s in fit.samples],
+            "seconds": dict(fit.seconds),
+            "relaxed_repeat": {"pyp": format_pyp(relaxed.relaxed_pattern())},
+        }
+        return cls(data, "material")
+
+    def write(self, path: str | os.PathLike) -> Path:
+        """Write the file (directories created; strict JSON); returns its path."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.data, indent=2, allow_nan=False) + "\n")
+        return path
+
+    # -- reading ------------------------------------------------------------------------------
+
+    @classmethod
+    def read(cls, source: str | os.PathLike | Mapping) -> "MaterialFile":
+        """The file at ``source`` (or its decoded contents, a mapping). ValueError ``<path>: ...``
+        for an unreadable file, invalid JSON or anything but a JSON object."""
+        if isinstance(source, Mapping):
+            return cls(dict(source), "material")
+        where, data = read_json(source, "material file")
+        if not isinstance(data, dict):
+            raise ValueError(f"{where}: expected a JSON object (a `yarnfit fit` material file), "
+                             f"got a {type(data).__name__}")
+        return cls(data, where)
+
+    def check_version(self) -> None:
+        """:class:`IncompatibleMaterial` unless the file has :data:`REQUIRED_KEYS` and was written
+        by this minor version of yarnfit (the format follows the minor version)."""
+        missing = [key for key in REQUIRED_KEYS if key not in self.data]
+        if missing:
+            raise IncompatibleMaterial(f"{self.where}: missing key{'s' if len(missing) > 1 else ''} "
+                                       f"{', '.join(missing)} (write it with `yarnfit fit`)")
+        version = self.data["yarnfit_version"]
+        if not isinstance(version, str) or version.split(".")[:2] != __version__.split(".")[:2]:
+            raise IncompatibleMaterial(f"{self.where}: written by yarnfit {version!r}, this is {__version__}: "
+                                       "refit it with `yarnfit fit` (the file format follows the minor version)")
+
+    @property
+    def shell(self) -> ShellMaterial:
+        """The fitted shell (``shell``); ValueError naming the file and the key at fault."""
+        if "shell" not in self.data:
+            raise ValueError(f"{self.where}: missing key 'shell' (the fitted shell material)")
+        return ShellMaterial.from_dict(self.data["shell"], f"{self.where}: shell")
+
+    @property
+    def name(self) -> str:
+        """The fabric's name (``inputs.fabric``), else the file's stem."""
+        inputs = self._block("inputs")
+        name = inputs.get("fabric")
+        return name if isinstance(name, str) and name.strip() else Path(self.where).stem
+
+    def areal_density(self) -> tuple[float, str] | None:
+        """``(kg/m², key)`` of the fabric: ``inputs.areal_density_kg_m2`` if the fabric was given
+        one, else the relaxed repeat's ``yarn.areal_density_kg_m2``; ``None`` if neither is there."""
+        for key in ("inputs", "yarn"):
+            value = self._block(key).get("areal_density_kg_m2")
+            if value is not None:
+                return value, f"{key}.areal_density_kg_m2"
+        return None
+
+    def fabric(self) -> "Fabric":
+        """The :class:`~yarnfit.fabric.Fabric` the material was fitted for (``inputs``)."""
+        return fabric_from_inputs(self.data.get("inputs"), self.where)
+
+    def relaxed_repeat(self) -> "RelaxedRepeat | None":
+        """The relaxed repeat the material was fitted from (``relaxed_repeat``), or ``None`` for a
+        file written before it was kept. Rebuilt by relaxing the stored repeat as written (shrink
+        1): it starts at its own equilibrium and only the contact multipliers (not kept) are found
+        again, ~15 Newton iterations; positions come back to ~1e-10 of the radius."""
+        block = self.data.get("relaxed_repeat")
+        if block is None:
+            return None
+        from .patterns import parse_pyp
+        from .relax import relax_pattern
+
+        if not isinstance(block, dict) or not isinstance(block.get("pyp"), str):
+            raise ValueError(f"{self.where}: relaxed_repeat must be an object with the key 'pyp' (.pyp text)")
+        fabric = self.fabric()
+        pattern = parse_pyp(block["pyp"], fabric.name, f"{self.where}: relaxed_repeat.pyp")
+        return relax_pattern(pattern, fabric.fiber, shrink=1.0, name=fabric.name, yarn=fabric.yarn)
+
+    def _block(self, key: str) -> dict:
+        block = self.data.get(key)
+        return block if isinstance(block, dict) else {}
+
+
+def fabric_from_inputs(inputs, where: str = "material") -> "Fabric":
+    """The :class:`~yarnfit.fabric.Fabric` a material file's ``inputs`` block describes."""
+    from .fabric import Fabric, named_patterns
+    from .yarn import YarnConstruction
+
+    if not isinstance(inputs, dict):
+        raise ValueError(f"{where}: missing 'inputs' (the fabric the material was fitted for)")
+    try:
+        fiber = inputs["fiber"]
+        optional = ("source",) + OPTIONAL_FIBER_FIELDS
+        fiber = FiberMaterial(**{k: fiber[k] for k in ("name", "density_kg_m3", "young_min_pa", "young_max_pa",
+                                                        "breaking_strain", "poisson", "friction")},
+                              **{k: fiber[k] for k in optional if k in fiber})
+        # Files written before the fibre-assembly yarn (no inputs.yarn) were fitted with the paper's
+        # solid rod: rebuild them with it.
+        yarn = (YarnConstruction.from_dict(inputs["yarn"], f"{where}: inputs.yarn") if "yarn" in inputs
+                else YarnConstruction(model="solid"))
+        pattern = inputs["pattern"]
+        counts = inputs.get("counts_per_m")
+        structure = pattern if pattern in named_patterns() else None
+        return Fabric(name=str(inputs.get("fabric") or "fabric"), fiber=fiber, structure=structure,
+                      areal_density=inputs.get("areal_density_kg_m2"),
+                      counts=None if counts is None else (float(counts[0]), float(counts[1])),
+                      pattern_file=None if structure is not None else pattern, yarn=yarn)
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"{where}: inputs: cannot rebuild the fabric ({exc!r})") from None
