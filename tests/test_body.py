@@ -11,7 +11,7 @@ import rerun as rr
 
 import yarnfit.validate.body as body
 from fabric_shell import FABRIC
-from yarnfit.mujoco.scenes import SceneMaterial, compile_quietly
+from yarnfit.mujoco.scenes import ClothMaterial, compile_quietly
 from yarnfit.validate.body import DISTANCE_TARGET, PENETRATION_TARGET, build_body_scene, garment_panel, motion_targets, run_body
 
 AREAL_DENSITY = 0.2  # kg/m²: a medium-weight woven
@@ -22,7 +22,7 @@ QUICK_DISTANCE_LIMIT = DISTANCE_TARGET
 
 
 def material():
-    return SceneMaterial("test-woven", FABRIC, AREAL_DENSITY)
+    return ClothMaterial("test-woven", FABRIC, AREAL_DENSITY)
 
 
 @functools.lru_cache(maxsize=None)

@@ -39,7 +39,7 @@ def test_help():
 
 def test_materials_lists_fibres_and_presets_one_line_each():
     from yarnfit.fabric import PRESETS
-    from yarnfit.materials import FIBERS
+    from yarnfit.fibers import FIBERS
 
     out = run("materials")
     assert out.returncode == 0, out.stderr

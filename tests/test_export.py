@@ -16,7 +16,7 @@ import pytest
 from fabric_shell import FABRIC
 from yarnfit.mujoco import SCENES
 from yarnfit.mujoco.run import run_scene
-from yarnfit.mujoco.scenes import FLEX_RADIUS, SceneMaterial, build_scene, export_scene
+from yarnfit.mujoco.scenes import FLEX_RADIUS, ClothMaterial, build_scene, export_scene
 from yarnfit.mujoco.split import (MJCF_DIGITS, POISSON_LIMIT, builtin_elasticity, builtin_isotropic,
                                   isotropic_fallback, isotropic_stiffness)
 from yarnfit.shell import ShellMaterial
@@ -218,7 +218,7 @@ def test_dropped_cloth_lands_on_its_obstacle(scene, material_file):
     # Both obstacles are 0.6 size = 0.3 m tall; the cloth starts DROP_GAP above and must rest on top
     # (its highest vertex one collision radius above it), not fall past: MuJoCo collides vertices,
     # and this coarse grid's columns straddle a 2 cm wall unless the scene thickens it.
-    built = build_scene(SceneMaterial.from_file(material_file), scene, resolution=RESOLUTION)
+    built = build_scene(ClothMaterial.from_file(material_file), scene, resolution=RESOLUTION)
     model = built.spec.compile()
     data = mujoco.MjData(model)
     while data.time < 1.5 * SECONDS:
@@ -228,7 +228,7 @@ def test_dropped_cloth_lands_on_its_obstacle(scene, material_file):
 
 
 def test_vertex_masses_carry_the_areal_density(material_file):
-    built = build_scene(SceneMaterial.from_file(material_file), "sphere", resolution=RESOLUTION, size=0.4)
+    built = build_scene(ClothMaterial.from_file(material_file), "sphere", resolution=RESOLUTION, size=0.4)
     model = built.spec.compile()
     bodies = np.unique(model.flex_vertbodyid)
     assert model.body_mass[bodies].sum() == pytest.approx(AREAL_DENSITY * 0.4**2, rel=ROUND_OFF_RTOL)
@@ -237,7 +237,7 @@ def test_vertex_masses_carry_the_areal_density(material_file):
 def test_stretch_clamp_pulls_and_reads_a_tension(material_file):
     # Ramped to 10 % strain over the run: the servo force is the strip's tension, between the
     # free-width uniaxial stiffness and the width-held (s00 h) one times the extension.
-    built = build_scene(SceneMaterial.from_file(material_file), "stretch", resolution=9)
+    built = build_scene(ClothMaterial.from_file(material_file), "stretch", resolution=9)
     model = built.spec.compile()
     data = mujoco.MjData(model)
     pull = model.actuator("pull").id
@@ -259,7 +259,7 @@ def test_stretch_clamp_pulls_and_reads_a_tension(material_file):
 def test_run_scene_reports_an_unstable_scene(material_file):
     # Explicit Euler at 1 ms is above this coarse grid's explicit limit (measured: stable from 0.25 ms
     # down with the default damping, which Euler also integrates explicitly).
-    built = build_scene(SceneMaterial.from_file(material_file), "cloth", resolution=RESOLUTION,
+    built = build_scene(ClothMaterial.from_file(material_file), "cloth", resolution=RESOLUTION,
                         integrator="euler", timestep=1e-3)
     report = run_scene(built.spec, SECONDS)
     assert not report.stable and report.bad_qacc >= 1
@@ -267,7 +267,7 @@ def test_run_scene_reports_an_unstable_scene(material_file):
 
 
 def test_bad_scene_options_fail_clearly(material_file):
-    material = SceneMaterial.from_file(material_file)
+    material = ClothMaterial.from_file(material_file)
     with pytest.raises(ValueError, match="unknown scene 'drape'"):
         build_scene(material, "drape")
     with pytest.raises(ValueError, match="resolution must be an integer of at least 2"):
@@ -278,16 +278,16 @@ def test_bad_scene_options_fail_clearly(material_file):
 
 def test_material_file_errors_name_the_problem(tmp_path):
     with pytest.raises(ValueError, match="no such material file"):
-        SceneMaterial.from_file(tmp_path / "missing.json")
+        ClothMaterial.from_file(tmp_path / "missing.json")
     bad = tmp_path / "bad.json"
     bad.write_text("{ not json")
     with pytest.raises(ValueError, match="invalid JSON"):
-        SceneMaterial.from_file(bad)
+        ClothMaterial.from_file(bad)
     no_density = tmp_path / "no-density.json"
     no_density.write_text(json.dumps({"shell": FABRIC.to_dict()}))
     with pytest.raises(ValueError, match="no areal density"):
-        SceneMaterial.from_file(no_density)
-    assert SceneMaterial.from_file(no_density, 0.15).areal_density_kg_m2 == 0.15
+        ClothMaterial.from_file(no_density)
+    assert ClothMaterial.from_file(no_density, 0.15).areal_density_kg_m2 == 0.15
 
 
 # -- command line ------------------------------------------------------------------------------

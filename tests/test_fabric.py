@@ -15,7 +15,7 @@ from yarnfit.fabric import (
     named_patterns,
     radius_from_areal_density,
 )
-from yarnfit.materials import get_fiber
+from yarnfit.fibers import get_fiber
 from yarnfit.patterns import read_pyp
 from yarnfit.yarn import SPINNING_DEFAULTS, YarnConstruction
 

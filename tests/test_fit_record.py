@@ -20,8 +20,8 @@ from yarnfit.engine import Residual
 from yarnfit.engine.tiling import yarn_strips
 from yarnfit.fabric import Fabric
 from yarnfit.homogenize import tile_repeat
-from yarnfit.material import fit_fabric
-from yarnfit.materials import get_fiber
+from yarnfit.fabric_fit import fit_fabric
+from yarnfit.fibers import get_fiber
 from yarnfit.record import EXCLUDED_COLOR, SAMPLE_TIMELINE, FitRecording
 from yarnfit.samples import Family, SampleResult, family_deformation, identity_sample
 from yarnfit.shell import GF_CM2_PER_CM

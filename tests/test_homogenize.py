@@ -29,9 +29,9 @@ from yarnfit.homogenize import (
     tile_repeat,
     transfer_fluctuation,
 )
-from yarnfit.material import DEFAULT_SAMPLES, FabricFit, fit_fabric, shell_thickness
+from yarnfit.fabric_fit import DEFAULT_SAMPLES, FabricFit, fit_fabric, shell_thickness
 from yarnfit.material_file import MaterialFile
-from yarnfit.materials import FiberMaterial, get_fiber
+from yarnfit.fibers import Fiber, get_fiber
 from yarnfit.patterns import YarnPattern
 from yarnfit.relax import relax, relax_pattern
 from yarnfit.samples import (
@@ -236,7 +236,7 @@ def test_straight_parallel_yarns_give_the_closed_form_stiffness(model):
     # engineering strain agree to 1 %. Closed forms in the yarn's rigidities: stretch EA/d,
     # bending EI/d (solid rod: E π r²/d and E π r⁴/(4d)).
     r, d, E = 1e-4, 3e-4, 2e9
-    fiber = FiberMaterial(name="linear", density_kg_m3=1000.0, young_min_pa=E, young_max_pa=E, breaking_strain=0.02,
+    fiber = Fiber(name="linear", density_kg_m3=1000.0, young_min_pa=E, young_max_pa=E, breaking_strain=0.02,
                           poisson=0.3, friction=0.2, fineness_dtex=2.0, flexural_rigidity_nm2_per_tex2=0.5e-9,
                           torsional_rigidity_nm2_per_tex2=0.2e-9)
     x = np.linspace(0.0, 2e-3, 16, endpoint=False)

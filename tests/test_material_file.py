@@ -11,9 +11,9 @@ import pytest
 
 import yarnfit
 from yarnfit.fabric import Fabric
-from yarnfit.material import fit_fabric
+from yarnfit.fabric_fit import fit_fabric
 from yarnfit.material_file import IncompatibleMaterial, MaterialFile
-from yarnfit.materials import get_fiber
+from yarnfit.fibers import get_fiber
 from yarnfit.validate.swatch import run_yarn
 
 # The kept repeat starts at its own equilibrium: positions come back to round-off of the solve's

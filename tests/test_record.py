@@ -12,7 +12,7 @@ import rerun as rr
 
 import yarnfit.record
 from yarnfit.engine import Progress, Residual
-from yarnfit.materials import get_fiber
+from yarnfit.fibers import get_fiber
 from yarnfit.patterns import DRAFTS, weave
 from yarnfit.record import RelaxRecording
 from yarnfit.relax import relax_pattern
@@ -147,7 +147,7 @@ def test_relaxations_record_every_documented_entity(tmp_path):
     for radius in (8e-5, 9e-5):
         relaxation = pattern.scaled(pattern.repeat_size, radius)
         recording.start(relaxation)
-        result = relax_pattern(relaxation, fiber, progress=progress)
+        result = relax_pattern(relaxation, fiber, on_iteration=progress)
     recording.finish(result)
 
     assert path.is_file() and path.stat().st_size > 0

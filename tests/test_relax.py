@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from yarnfit.fabric import Fabric, named_patterns
-from yarnfit.materials import FiberMaterial, get_fiber
+from yarnfit.fibers import Fiber, get_fiber
 from yarnfit.patterns import DRAFTS
 from yarnfit.engine import RodMaterial
 from yarnfit.relax import OVERLAP_TOLERANCE, relax, relax_pattern, relaxed_energy
@@ -147,7 +147,7 @@ def test_the_solid_yarn_is_the_papers_rod():
     assert relaxed.yarn.section() == paper
     np.testing.assert_array_equal(relaxed.model.joint_stiffness[:, 0], paper.bending_rigidity[0])
     np.testing.assert_array_equal(relaxed.model.edge_stretch_stiffness, paper.tensile_rigidity)
-    linear = FiberMaterial(name="linear", density_kg_m3=1000.0, young_min_pa=2e9, young_max_pa=2e9,
+    linear = Fiber(name="linear", density_kg_m3=1000.0, young_min_pa=2e9, young_max_pa=2e9,
                            breaking_strain=0.2, poisson=0.3, friction=0.2)
     assert Yarn.build(linear, YarnConstruction(model="solid"), 90e-6).section().hardening_tension == 0.0
 
@@ -156,7 +156,7 @@ def test_progress_reports_positions_in_yarn_order():
     fabric = Fabric(name="plain", fiber=get_fiber("cotton"), structure="plain", areal_density=0.2)
     pattern = fabric.pattern()
     seen = []
-    relax_pattern(pattern, fabric.fiber, progress=lambda p: seen.append(p.position.copy()))
+    relax_pattern(pattern, fabric.fiber, on_iteration=lambda p: seen.append(p.position.copy()))
     expected = np.concatenate([pattern.node_position[y.nodes] for y in pattern.yarns()])
     np.testing.assert_array_equal(seen[0], expected)
 

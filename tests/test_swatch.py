@@ -102,7 +102,7 @@ def test_small_weave_balances_with_contacts():
     # A real relaxed plain weave in a tiny strip: the moving and the fixed jaw pull equally (global
     # balance, contacts included) and it does not widen.
     from yarnfit.fabric import Fabric
-    from yarnfit.materials import get_fiber
+    from yarnfit.fibers import get_fiber
     from yarnfit.relax import relax
 
     from yarnfit.yarn import YarnConstruction
@@ -156,7 +156,7 @@ def test_recording_reads_back(tmp_path):
 
 
 def test_fabric_from_inputs_rebuilds_the_preset():
-    # The material file's `inputs` block (yarnfit.material.FabricFit.to_dict) names the fabric the
+    # The material file's `inputs` block (yarnfit.fabric_fit.FabricFit.to_dict) names the fabric the
     # swatch is built from; for a preset it must give back that preset.
     from dataclasses import asdict
 

@@ -8,7 +8,7 @@ import pytest
 import rerun as rr
 
 from fabric_shell import FABRIC
-from yarnfit.mujoco.scenes import SceneMaterial, grid_mesh
+from yarnfit.mujoco.scenes import ClothMaterial, grid_mesh
 from yarnfit.shell import ShellMaterial
 from yarnfit.validate.reference import read_reference
 from yarnfit.validate import DIRECTIONS
@@ -22,18 +22,18 @@ SERVO_LAG_RTOL = 0.04
 # Areal density of the test materials (kg/m²).
 DENSITY = 0.2
 
-WOVEN = SceneMaterial("woven", FABRIC, DENSITY)
+WOVEN = ClothMaterial("woven", FABRIC, DENSITY)
 # Isotropic, Poisson 0: clamped ends hold nothing back, the strip is in uniaxial tension.
 H = 3.0e-4
 E = 1.0e3 / H
-NO_POISSON = SceneMaterial("no-poisson", ShellMaterial(thickness=H, s00=E, s01=0.0, s11=E, s22=E / 2,
+NO_POISSON = ClothMaterial("no-poisson", ShellMaterial(thickness=H, s00=E, s01=0.0, s11=E, s22=E / 2,
                                                         b00=1e-5 / H**3, b01=0.0, b11=1e-5 / H**3, b22=5e-6 / H**3),
                            DENSITY)
 
 
 # A knit-like orthotropic material: Poisson ratios 0.7 and 1.0, soft in shear, so that clamped
 # ends stiffen an 8 × 5 strip well beyond the uniaxial law (factor ~2.5).
-KNIT = SceneMaterial("knit", ShellMaterial(thickness=H, s00=2.0e6, s01=2.5e6, s11=4.0e6, s22=0.5e6,
+KNIT = ClothMaterial("knit", ShellMaterial(thickness=H, s00=2.0e6, s01=2.5e6, s11=4.0e6, s22=0.5e6,
                                            b00=1e-5 / H**3, b01=0.0, b11=1e-5 / H**3, b22=5e-6 / H**3), DENSITY)
 
 

@@ -14,11 +14,11 @@ import trimesh
 
 import yarnfit
 from fabric_shell import FABRIC
-from yarnfit.mujoco.scenes import SceneMaterial
+from yarnfit.mujoco.scenes import ClothMaterial
 from yarnfit.validate.drape import RESOLUTION, SIZE, fold_count, projected_area, run_drape
 
 DENSITY = 0.2  # kg/m²
-WOVEN = SceneMaterial("woven", FABRIC, DENSITY)
+WOVEN = ClothMaterial("woven", FABRIC, DENSITY)
 # The raster of projected_area resolves a square to a cell row along each edge: 1/400 per side.
 AREA_RTOL = 0.01
 
@@ -81,7 +81,7 @@ def test_stiffer_fabrics_drape_differently_on_the_sphere():
     stiff = dataclasses.replace(FABRIC, b00=5 * FABRIC.b00, b01=5 * FABRIC.b01, b11=5 * FABRIC.b11,
                                 b22=5 * FABRIC.b22)
     soft = run_drape(WOVEN, "sphere", quick=True)["drape_coefficient"]
-    hard = run_drape(SceneMaterial("stiff", stiff, DENSITY), "sphere", quick=True)["drape_coefficient"]
+    hard = run_drape(ClothMaterial("stiff", stiff, DENSITY), "sphere", quick=True)["drape_coefficient"]
     assert hard > soft + 0.02
 
 

@@ -24,7 +24,7 @@ from scipy.integrate import quad
 import yarnfit.relax
 from yarnfit.cli import main
 from yarnfit.engine import Loads, QuasiStaticOptions, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState, straight_points
-from yarnfit.materials import FiberMaterial, get_fiber, load_fiber_file
+from yarnfit.fibers import Fiber, get_fiber, load_fiber_file
 from yarnfit.yarn import (
     SPINNING_DEFAULTS,
     Yarn,
@@ -39,7 +39,7 @@ from yarnfit.yarn import (
 # -- the hand-worked case -------------------------------------------------------------------------
 # A fibre with round numbers: ρ = 1500 kg/m³, E 6 → 8 GPa at ε_max = 0.1 (k = 2e10 Pa), ν = 0.25
 # (G = 2.4 GPa), 2 dtex = 0.2 tex, R_b = 0.5e-9, R_t = 0.2e-9 N·m²/tex².
-FIBRE = FiberMaterial(
+FIBRE = Fiber(
     name="roundfibre", density_kg_m3=1500.0, young_min_pa=6e9, young_max_pa=8e9, breaking_strain=0.1, poisson=0.25,
     friction=0.3, fineness_dtex=2.0, flexural_rigidity_nm2_per_tex2=0.5e-9, torsional_rigidity_nm2_per_tex2=0.2e-9,
 )
@@ -258,7 +258,7 @@ def test_no_slip_bending_factor_is_continuous_at_the_series_switch():
 # -- 2. limits -------------------------------------------------------------------------------------
 
 
-def solid_material(fiber: FiberMaterial) -> RodMaterial:
+def solid_material(fiber: Fiber) -> RodMaterial:
     k = fiber.hardening_pa
     return RodMaterial(fiber.young_min_pa, fiber.poisson, fiber.density_kg_m3, k, k)
 

@@ -194,8 +194,8 @@ def bench_fit() -> None:
     from pathlib import Path
 
     from yarnfit.fabric import PRESETS, Fabric
-    from yarnfit.material import fit_fabric
-    from yarnfit.materials import get_fiber
+    from yarnfit.fabric_fit import fit_fabric
+    from yarnfit.fibers import get_fiber
 
     stockinette = Path(__file__).parents[1] / "tests" / "data" / "hylc" / "stockinette.pyp"
     fabrics = [Fabric.preset(name) for name in PRESETS]
@@ -245,12 +245,12 @@ def bench_mujoco() -> None:
 
     import mujoco
 
-    from yarnfit.mujoco.scenes import SceneMaterial, build_scene
+    from yarnfit.mujoco.scenes import ClothMaterial, build_scene
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from fabric_shell import FABRIC  # a realistic medium-weight woven
 
-    material = SceneMaterial("medium woven", FABRIC, 0.2)
+    material = ClothMaterial("medium woven", FABRIC, 0.2)
     for scene in ("cloth", "sphere"):
         built = build_scene(material, scene, resolution=40)
         models = {"with": built.spec.compile(), "without": _without_plugin(built.spec).compile()}

@@ -5,7 +5,7 @@
     python validation/export_scenes.py --seconds 0.5 --resolution 20 --fallback
 
 Material files are cached in ``--materials`` (default ``<tmp>/yarnfit-materials``, outside the
-repository): a preset whose file is missing there is fitted (``yarnfit.material.fit_fabric``, 5–50 s
+repository): a preset whose file is missing there is fitted (``yarnfit.fabric_fit.fit_fabric``, 5–50 s
 each) and written. Scenes go to ``<materials>/scenes/``. Prints one row per preset and scene
 (steps, ms/step, bad-QACC warnings, largest vertex speed) and exits with status 1 if any scene
 became unstable.
@@ -19,10 +19,10 @@ import tempfile
 from pathlib import Path
 
 from yarnfit.fabric import PRESETS, Fabric
-from yarnfit.material import fit_fabric
+from yarnfit.fabric_fit import fit_fabric
 from yarnfit.mujoco import DEFAULT_INTEGRATOR, DEFAULT_TIMESTEP, INTEGRATORS, SCENES
 from yarnfit.mujoco.run import run_scene
-from yarnfit.mujoco.scenes import SceneMaterial, export_scene
+from yarnfit.mujoco.scenes import ClothMaterial, export_scene
 
 
 def material_file(preset: str, folder: Path) -> Path:
@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     print("-" * len(header))
     unstable = 0
     for preset in args.presets:
-        material = SceneMaterial.from_file(material_file(preset, args.materials))
+        material = ClothMaterial.from_file(material_file(preset, args.materials))
         for scene in args.scenes:
             for fallback in variants:
                 variant = "fallback" if fallback else "split"

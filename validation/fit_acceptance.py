@@ -19,8 +19,8 @@ import numpy as np
 from yarnfit.fabric import Fabric
 from yarnfit.fit import fit_shell
 from yarnfit.homogenize import default_ranges, solve_sample, solve_samples
-from yarnfit.material import fit_fabric, shell_thickness
-from yarnfit.materials import FiberMaterial, get_fiber
+from yarnfit.fabric_fit import fit_fabric, shell_thickness
+from yarnfit.fibers import Fiber, get_fiber
 from yarnfit.patterns import YarnPattern
 from yarnfit.relax import relax_pattern
 from yarnfit.samples import Family, SampleSpec, identity_sample, sample_design
@@ -29,7 +29,7 @@ from yarnfit.yarn import YarnConstruction
 
 def analytic() -> None:
     radius, spacing, young = 1e-4, 3e-4, 2e9
-    linear = FiberMaterial(name="linear", density_kg_m3=1000.0, young_min_pa=young, young_max_pa=young,
+    linear = Fiber(name="linear", density_kg_m3=1000.0, young_min_pa=young, young_max_pa=young,
                            breaking_strain=0.02, poisson=0.3, friction=0.2)
     nodes = np.linspace(0.0, 2e-3, 16, endpoint=False)
     yarn = np.column_stack([nodes, np.full_like(nodes, 0.5 * spacing), np.zeros_like(nodes)])

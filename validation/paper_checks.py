@@ -19,19 +19,19 @@ import time
 from pathlib import Path
 
 from yarnfit.fabric import PRESETS, Fabric, named_patterns
-from yarnfit.mujoco.scenes import SceneMaterial
+from yarnfit.mujoco.scenes import ClothMaterial
 from yarnfit.validate.paper import bias_softness, compare_fibre_drapes, compare_thickness
 from yarnfit.validate.stretch import run_stretch
 
 
-def preset_material(folder: Path, preset: str) -> SceneMaterial:
+def preset_material(folder: Path, preset: str) -> ClothMaterial:
     path = folder / f"{preset}.json"
     if not path.is_file():
-        from yarnfit.material import fit_fabric
+        from yarnfit.fabric_fit import fit_fabric
 
         print(f"fitting {preset} -> {path}", flush=True)
         fit_fabric(Fabric.preset(preset)).write(path)
-    return SceneMaterial.from_file(path)
+    return ClothMaterial.from_file(path)
 
 
 def main() -> int:

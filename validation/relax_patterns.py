@@ -16,7 +16,7 @@ import warnings
 from pathlib import Path
 
 from yarnfit.fabric import Fabric, named_patterns
-from yarnfit.materials import get_fiber
+from yarnfit.fibers import get_fiber
 from yarnfit.relax import relax
 
 # The acceptance bound of issue 3 on overlaps after relaxation (fraction of the diameter).

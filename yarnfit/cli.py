@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from . import __version__
-from .materials import SPINNING_SYSTEMS
+from .fibers import SPINNING_SYSTEMS
 from .yarn import YARN_MODELS
 
 EXIT_FAILED = 1
@@ -186,7 +186,7 @@ def fabric_from_arguments(args: argparse.Namespace):
     """The :class:`~yarnfit.fabric.Fabric` an argument namespace describes (UsageError if it
     describes none)."""
     from .fabric import Fabric
-    from .materials import get_fiber, load_fiber_file
+    from .fibers import get_fiber, load_fiber_file
 
     counts = parse_counts(args.counts) if args.counts is not None else None
     if args.gsm is not None and not (math.isfinite(args.gsm) and args.gsm > 0):
@@ -258,7 +258,7 @@ def _renamed(fabric, name: str):
 
 def cmd_materials(args: argparse.Namespace) -> int:
     from .fabric import PRESETS
-    from .materials import FIBERS
+    from .fibers import FIBERS
     from .yarn import SPINNING_DEFAULTS
 
     print("fibres:")
@@ -346,11 +346,11 @@ def cmd_relax(args: argparse.Namespace) -> int:
         recording.start(pattern)
         line.start_relaxation(pattern)
 
-    def progress(p):
+    def on_iteration(p):
         recording(p)
         line(p)
 
-    result = relax(fabric, progress=progress, on_start=on_start)
+    result = relax(fabric, on_iteration=on_iteration, on_start=on_start)
     line.close()
     recording.finish(result)
     if args.output:
@@ -369,7 +369,7 @@ def cmd_relax(args: argparse.Namespace) -> int:
 def cmd_fit(args: argparse.Namespace) -> int:
     from .fit import COUPLING_LIMIT
     from .samples import design_size
-    from .material import DEFAULT_SAMPLES, fit_fabric
+    from .fabric_fit import DEFAULT_SAMPLES, fit_fabric
     from .record import FitRecording
 
     fabric = fabric_from_arguments(args)
@@ -389,7 +389,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
         line.message(f"relaxed in {relaxed.seconds:.1f} s (radius {relaxed.radius * 1e6:.2f} µm); solving samples",
                      force=True)
 
-    def progress(done, total, result):
+    def on_sample(done, total, result):
         now = time.perf_counter()
         left = (now - sampling_started[0]) / done * (total - done)
         excluded = "" if result.converged else " (did not converge: excluded from the fit)"
@@ -399,7 +399,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
     line.message(f"{fabric.name}: relaxing the repeat", force=True)
     fitted = fit_fabric(fabric, samples=samples, model=args.model, workers=args.workers, on_relaxed=on_relaxed,
-                        progress=progress, relax_progress=line, on_relax_start=line.start_relaxation,
+                        on_sample=on_sample, on_relax_iteration=line, on_relax_start=line.start_relaxation,
                         coupling_limit=None if args.strict else COUPLING_LIMIT)
     line.close()
     fitted.write(output)
@@ -413,7 +413,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from .mujoco.scenes import SceneMaterial, export_scene
+    from .mujoco.scenes import ClothMaterial, export_scene
 
     if args.resolution is not None and args.resolution < 2:
         raise UsageError(f"--resolution must be at least 2 vertices per side, got {args.resolution}")
@@ -428,7 +428,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise UsageError(f"--angle must be a finite number of degrees, got {args.angle:g}")
     if args.width is not None and args.scene != "stretch":
         raise UsageError("--width is the stretch strip's width: give it with --scene stretch only")
-    material = SceneMaterial.from_file(args.material, None if args.gsm is None else args.gsm * 1e-3)
+    material = ClothMaterial.from_file(args.material, None if args.gsm is None else args.gsm * 1e-3)
     suffix = "-fallback" if args.fallback else ""
     output = Path(args.output) if args.output else Path(f"{material.name}-{args.scene}{suffix}.xml")
     strip = {} if args.width is None else {"width": args.width}
@@ -561,7 +561,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     from .fit import IndefiniteFitError
-    from .material import UnusableRelaxation
+    from .fabric_fit import UnusableRelaxation
     from .patterns import PatternError
 
     try:

@@ -26,7 +26,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .materials import FiberMaterial, get_fiber
+from .fibers import Fiber, get_fiber
 from .patterns import DRAFTS, STITCHES, PatternError, YarnPattern, knit, read_pyp, weave
 from .yarn import YarnConstruction
 
@@ -110,7 +110,7 @@ class Fabric:
     """
 
     name: str
-    fiber: FiberMaterial
+    fiber: Fiber
     structure: str | None = None
     areal_density: float | None = None
     counts: tuple[float, float] | None = None

@@ -545,10 +545,10 @@ def solve_samples(
     relaxed: RelaxedRepeat,
     specs: Sequence[SampleSpec],
     workers: int | None = None,
-    progress: Callable[[int, int, SampleResult], None] | None = None,
+    on_sample: Callable[[int, int, SampleResult], None] | None = None,
 ) -> list[SampleResult]:
     """Solve every sample, on ``workers`` processes (default: every core; 1 runs in this
-    process). ``progress(done, total, result)`` is called as each finishes. Results come back in
+    process). ``on_sample(done, total, result)`` is called as each finishes. Results come back in
     the order of ``specs``."""
     workers = (os.cpu_count() or 1) if workers is None else int(workers)
     if workers < 1:
@@ -558,8 +558,8 @@ def solve_samples(
     if workers <= 1:
         for i, spec in enumerate(specs):
             results[i] = solve_sample(relaxed, spec)
-            if progress is not None:
-                progress(i + 1, len(specs), results[i])
+            if on_sample is not None:
+                on_sample(i + 1, len(specs), results[i])
         return results
     # Fork where the platform has it: a spawned worker re-imports the caller's main module, which
     # re-runs any unguarded script (it hung the first trial). The workers touch neither the
@@ -579,8 +579,8 @@ def solve_samples(
                 i, result = future.result()
                 results[i] = result
                 done += 1
-                if progress is not None:
-                    progress(done, len(specs), result)
+                if on_sample is not None:
+                    on_sample(done, len(specs), result)
     return results
 
 

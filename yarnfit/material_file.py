@@ -51,13 +51,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import __version__
+from .fibers import OPTIONAL_FIBER_FIELDS, Fiber
 from .jsonfile import read_json
-from .materials import OPTIONAL_FIBER_FIELDS, FiberMaterial
 from .shell import ShellMaterial
 
 if TYPE_CHECKING:  # the heavy stages are imported where they are used
     from .fabric import Fabric
-    from .material import FabricFit
     from .relax import RelaxedRepeat
 
 __all__ = ["IncompatibleMaterial", "MaterialFile", "REQUIRED_KEYS", "fabric_from_inputs"]
@@ -81,8 +80,9 @@ class MaterialFile:
     # -- writing ------------------------------------------------------------------------------
 
     @classmethod
-    def from_fit(cls, fit: "FabricFit") -> "MaterialFile":
-        """The file of a fabric fitted end to end (see the module docstring)."""
+    def from_fit(cls, fit) -> "MaterialFile":
+        """The file of ``fit``, a :class:`~yarnfit.fabric_fit.FabricFit` (a fabric fitted end to
+        end; see the module docstring)."""
         from .patterns import format_pyp
 
         fabric, relaxed, fiber = fit.fabric, fit.relaxed, fit.fabric.fiber
@@ -231,7 +231,7 @@ def fabric_from_inputs(inputs, where: str = "material") -> "Fabric":
     try:
         fiber = inputs["fiber"]
         optional = ("source",) + OPTIONAL_FIBER_FIELDS
-        fiber = FiberMaterial(**{k: fiber[k] for k in ("name", "density_kg_m3", "young_min_pa", "young_max_pa",
+        fiber = Fiber(**{k: fiber[k] for k in ("name", "density_kg_m3", "young_min_pa", "young_max_pa",
                                                         "breaking_strain", "poisson", "friction")},
                               **{k: fiber[k] for k in optional if k in fiber})
         # Files written before the fibre-assembly yarn (no inputs.yarn) were fitted with the paper's

@@ -41,14 +41,14 @@ relaxation with :meth:`RelaxRecording.start`)::
     recording = RelaxRecording(fabric.name, "logs/relax.rrd")
     pattern = fabric.pattern()
     recording.start(pattern)
-    result = relax_pattern(pattern, fabric.fiber, progress=recording)
+    result = relax_pattern(pattern, fabric.fiber, on_iteration=recording)
     recording.finish(result)
 
 Shell fit
 ---------
 
 A :class:`FitRecording` writes one shell fit run (phases 2 and 3, ``yarnfit.homogenize`` and
-``yarnfit.fit``, driven by ``yarnfit.material.fit_fabric``).
+``yarnfit.fit``, driven by ``yarnfit.fabric_fit.fit_fabric``).
 
 Timeline ``sample`` (sequence): sample k (its index in the design order of
 ``yarnfit.samples.sample_design``, 0-based, as in ``FabricFit.samples``) is logged at step k, in
@@ -229,7 +229,7 @@ class RelaxRecording(Recording):
     """Records relaxations of a periodic yarn repeat to a ``.rrd`` file (see the module docstring
     for the entity paths and the timeline).
 
-    Use the instance itself as the ``progress`` callback of ``relax_pattern``; call :meth:`start`
+    Use the instance itself as the ``on_iteration`` callback of ``relax_pattern``; call :meth:`start`
     before each relaxation and :meth:`finish` once with the result.
 
     Args:
@@ -313,7 +313,7 @@ class FitRecording(Recording):
     ``sample`` timeline).
 
     Call :meth:`start` once with the relaxed repeat, :meth:`sample` for each solved sample (in any
-    order) and :meth:`finish` once with the :class:`yarnfit.material.FabricFit`, which closes the
+    order) and :meth:`finish` once with the :class:`yarnfit.fabric_fit.FabricFit`, which closes the
     file.
 
     Args:
@@ -359,7 +359,7 @@ class FitRecording(Recording):
 
     def finish(self, fabric_fit) -> None:
         """Log the fit curves of every sampled family and the summary of ``fabric_fit`` (a
-        :class:`yarnfit.material.FabricFit`), all static; then close the file."""
+        :class:`yarnfit.fabric_fit.FabricFit`), all static; then close the file."""
         material = fabric_fit.material
         for family in FAMILIES:
             results = [r for r in fabric_fit.samples if r.spec.family == family]
@@ -528,7 +528,7 @@ _CONSTANTS = (
 
 
 def fit_summary(fabric_fit) -> str:
-    """Markdown summary of a shell fit (a :class:`yarnfit.material.FabricFit`): engineering
+    """Markdown summary of a shell fit (a :class:`yarnfit.fabric_fit.FabricFit`): engineering
     constants in SI and user units (N/m; gf·cm²/cm for bending), R² and relative RMS per sampled
     family, model, thickness (mm), sample counts and wall time per stage (s)."""
     fit, material = fabric_fit.fit, fabric_fit.material

@@ -40,7 +40,7 @@ from .engine import (
 from .engine.contact import max_penetration
 from .engine.model import quaternion_d1
 from .fabric import SHRINK, Fabric, radius_from_areal_density
-from .materials import FiberMaterial
+from .fibers import Fiber
 from .patterns import YarnPattern
 from .yarn import Yarn, YarnConstruction
 
@@ -147,7 +147,7 @@ class RelaxedRepeat:
     """
 
     name: str
-    fiber: FiberMaterial
+    fiber: Fiber
     yarn: Yarn
     pattern: YarnPattern
     model: RodModel
@@ -210,16 +210,16 @@ class RelaxedRepeat:
 
 def relax_pattern(
     pattern: YarnPattern,
-    fiber: FiberMaterial,
+    fiber: Fiber,
     shrink: float | None = None,
     options: QuasiStaticOptions | None = None,
-    progress: Callable[[Progress], None] | None = None,
+    on_iteration: Callable[[Progress], None] | None = None,
     name: str | None = None,
     yarn: YarnConstruction | None = None,
 ) -> RelaxedRepeat:
     """Relax ``pattern`` made of ``fiber`` yarns (phase 1), the yarns made as ``yarn`` (default:
     the fibre-assembly model) with the pattern's radius as contact radius. ``shrink`` defaults to
-    the pattern family's (0.8 knits, 0.9 wovens); ``progress`` receives the solver's
+    the pattern family's (0.8 knits, 0.9 wovens); ``on_iteration`` receives the solver's
     :class:`Progress` after every iteration (node positions in the order of ``pattern.yarns()``)."""
     shrink = SHRINK[pattern.family] if shrink is None else float(shrink)
     if not 0.0 < shrink <= 1.0:
@@ -229,7 +229,7 @@ def relax_pattern(
     rods = pattern_rods(pattern, built_yarn.section(), shrink)
     phase1 = RodModel.from_rods(rods, lattice=pattern.lattice)
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
-    result = QuasiStaticSolver(phase1, options).solve(RodState.from_model(phase1), callback=progress,
+    result = QuasiStaticSolver(phase1, options).solve(RodState.from_model(phase1), callback=on_iteration,
                                                        constraints=free_motion_constraints(phase1))
     frames = aligned_frames(phase1, result.state.node_position, result.state.edge_quaternion)
     rods = [replace(rod, points=result.state.node_position[phase1.rod_nodes(r)], frames=frames[phase1.rod_edges(r)])
@@ -259,19 +259,19 @@ def relax_pattern(
 def relax(
     fabric: Fabric,
     options: QuasiStaticOptions | None = None,
-    progress: Callable[[Progress], None] | None = None,
+    on_iteration: Callable[[Progress], None] | None = None,
     on_start: Callable[[YarnPattern], None] | None = None,
 ) -> RelaxedRepeat:
     """Relax the repeat of ``fabric``, with the radius that gives its areal density in the relaxed
     state (see the module docstring). ``on_start(pattern)`` is called before each relaxation (the
-    radius changes between them), ``progress`` after every solver iteration."""
+    radius changes between them), ``on_iteration`` after every solver iteration."""
     start = time.perf_counter()
     length = None
     for attempt in range(1, RADIUS_RELAXATIONS + 1):
         pattern = fabric.pattern(length_override=length)
         if on_start is not None:
             on_start(pattern)
-        result = relax_pattern(pattern, fabric.fiber, fabric.shrink, options, progress, name=fabric.name,
+        result = relax_pattern(pattern, fabric.fiber, fabric.shrink, options, on_iteration, name=fabric.name,
                                yarn=fabric.yarn)
         # An unconverged length says nothing about the radius: stop, and report the relaxation.
         if fabric.areal_density is None or not result.converged:

@@ -1,6 +1,6 @@
 """Yarns: from a fibre and the yarn's construction to the rigidities of the rod that models it.
 
-The stage between the fibre (:mod:`yarnfit.materials`) and the relaxed repeat
+The stage between the fibre (:mod:`yarnfit.fibers`) and the relaxed repeat
 (:mod:`yarnfit.relax`). A :class:`YarnConstruction` says how a fabric's yarn is made (spinning
 system, packing fraction φ, surface twist angle α) and which model to use; :meth:`Yarn.build`
 turns it, with the fibre and the yarn's contact radius, into a :class:`Yarn`: linear density,
@@ -58,7 +58,7 @@ specific volume of cotton yarn, 1.1 cm³/g (F. T. Peirce, J. Textile Inst. 28 (1
 per √Ne: ``tan α = π d T = π αe/28``. Continuous filament: producer twist of ≤ 10 turns/m on a
 0.1–0.2 mm yarn is below 0.5°, so α = 0; no measured packing fraction of flat filament yarns was
 found, and the ring yarn's 0.60 is used. Each fibre names its usual spinning system
-(:attr:`yarnfit.materials.FiberMaterial.spinning`).
+(:attr:`yarnfit.fibers.Fiber.spinning`).
 """
 
 from __future__ import annotations
@@ -67,9 +67,9 @@ import math
 import os
 from dataclasses import dataclass, fields
 
-from .jsonfile import read_json
 from .checks import finite_number, positive_or_none
-from .materials import SPINNING_SYSTEMS, FiberMaterial
+from .fibers import SPINNING_SYSTEMS, Fiber
+from .jsonfile import read_json
 
 __all__ = ["SPINNING_DEFAULTS", "YARN_MODELS", "Yarn", "YarnConstruction", "load_yarn_file"]
 
@@ -163,7 +163,7 @@ class YarnConstruction:
                 raise ValueError(f"the solid yarn model takes no construction or measured rigidities "
                                  f"(given: {', '.join(given)}); use the fibre-assembly model")
 
-    def check_fiber(self, fiber: FiberMaterial) -> None:
+    def check_fiber(self, fiber: Fiber) -> None:
         """Raise ``ValueError`` (one line, naming the keys) if the fibre lacks data this model needs:
         the fibre-assembly model needs the fineness, and the specific flexural and torsional
         rigidities unless EI and GJ were measured."""
@@ -180,13 +180,13 @@ class YarnConstruction:
                              f"{'it' if len(missing) == 1 else 'them'} (add {'it' if len(missing) == 1 else 'them'} "
                              f"to the fibre file, or use the solid yarn model)")
 
-    def spinning_for(self, fiber: FiberMaterial) -> str | None:
+    def spinning_for(self, fiber: Fiber) -> str | None:
         """The spinning system: as given, else the fibre's, else ring-spun (``None`` for solid)."""
         if self.model == "solid":
             return None
         return self.spinning or fiber.spinning or "ring-spun"
 
-    def packing_fraction_for(self, fiber: FiberMaterial) -> float:
+    def packing_fraction_for(self, fiber: Fiber) -> float:
         """φ: 1 for the solid model, else as given or the spinning system's default."""
         if self.model == "solid":
             return 1.0
@@ -194,7 +194,7 @@ class YarnConstruction:
             return self.packing_fraction
         return SPINNING_DEFAULTS[self.spinning_for(fiber)].packing_fraction
 
-    def twist_angle_deg_for(self, fiber: FiberMaterial) -> float:
+    def twist_angle_deg_for(self, fiber: Fiber) -> float:
         """α (°): 0 for the solid model, else as given or the spinning system's default."""
         if self.model == "solid":
             return 0.0
@@ -202,7 +202,7 @@ class YarnConstruction:
             return self.twist_angle_deg
         return SPINNING_DEFAULTS[self.spinning_for(fiber)].twist_angle_deg
 
-    def yarn_density(self, fiber: FiberMaterial) -> float:
+    def yarn_density(self, fiber: Fiber) -> float:
         """Mass per yarn volume ``φ ρ_f`` (kg/m³): the density in the areal-density radius formula."""
         return self.packing_fraction_for(fiber) * fiber.density_kg_m3
 
@@ -266,7 +266,7 @@ class Yarn:
             ``π r_s² = A_f``.
     """
 
-    fiber: FiberMaterial
+    fiber: Fiber
     construction: YarnConstruction
     model: str
     spinning: str | None
@@ -288,7 +288,7 @@ class Yarn:
     solid_bending_rigidity_nm2: float
 
     @classmethod
-    def build(cls, fiber: FiberMaterial, construction: YarnConstruction, radius: float) -> "Yarn":
+    def build(cls, fiber: Fiber, construction: YarnConstruction, radius: float) -> "Yarn":
         """The yarn of ``fiber`` made as ``construction`` with contact radius ``radius`` (m).
 
         Raises ``ValueError`` (one line, naming the missing keys) when the fibre-assembly model

@@ -57,7 +57,7 @@ __all__ = [
     "INTEGRATORS",
     "SCENES",
     "BuiltScene",
-    "SceneMaterial",
+    "ClothMaterial",
     "add_cloth_flex",
     "build_scene",
     "export_scene",
@@ -88,7 +88,7 @@ _SPURIOUS_FLEX_WARNING = r"flex '.*' is not rigid and has no equality constraint
 
 
 @dataclass(frozen=True)
-class SceneMaterial:
+class ClothMaterial:
     """What a scene needs from a material file.
 
     Attributes:
@@ -108,7 +108,7 @@ class SceneMaterial:
             raise ValueError(f"areal density must be a positive number of kg/m², got {density!r}")
 
     @classmethod
-    def from_file(cls, path: str | os.PathLike, areal_density_kg_m2: float | None = None) -> SceneMaterial:
+    def from_file(cls, path: str | os.PathLike, areal_density_kg_m2: float | None = None) -> ClothMaterial:
         """Read a material file (``yarnfit fit`` output; at least ``shell`` and an areal density).
 
         The areal density is ``areal_density_kg_m2`` if given, else the file's
@@ -161,7 +161,7 @@ class BuiltScene:
 
 
 def build_scene(
-    material: SceneMaterial,
+    material: ClothMaterial,
     scene: str,
     *,
     resolution: int | None = None,
@@ -243,14 +243,14 @@ def build_scene(
     return BuiltScene(spec, scene, fallback, young, poisson, thickness, notes)
 
 
-def export_scene(material: SceneMaterial | str | os.PathLike, scene: str, output: str | os.PathLike,
+def export_scene(material: ClothMaterial | str | os.PathLike, scene: str, output: str | os.PathLike,
                  **options) -> BuiltScene:
     """Build a scene (``options`` as for :func:`build_scene`), check that it compiles, and write it
-    to ``output`` as MJCF (directories created). ``material`` is a :class:`SceneMaterial` or a
+    to ``output`` as MJCF (directories created). ``material`` is a :class:`ClothMaterial` or a
     material file. The file loads with ``mujoco.MjModel.from_xml_path`` once ``mujoco`` is
     imported (our entry point registers the plugin)."""
-    if not isinstance(material, SceneMaterial):
-        material = SceneMaterial.from_file(material)
+    if not isinstance(material, ClothMaterial):
+        material = ClothMaterial.from_file(material)
     built = build_scene(material, scene, **options)
     compile_quietly(built.spec)  # a scene that does not compile is never written
     path = Path(output)
@@ -444,7 +444,7 @@ def _clamp(spec: mujoco.MjSpec, shell: ShellMaterial, length: float, width: floa
 
 
 def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles: np.ndarray,
-                   material: SceneMaterial, *, damping: float = DEFAULT_DAMPING, friction: float = DEFAULT_FRICTION,
+                   material: ClothMaterial, *, damping: float = DEFAULT_DAMPING, friction: float = DEFAULT_FRICTION,
                    angle: float = 0.0, contype: int = 1, conaffinity: int = 1) -> mujoco.MjsFlex:
     """One free 2D flex ``name`` with rest positions ``points (n, 3)`` (m) and ``triangles (m, 3)``,
     built as :func:`build_scene` builds its cloth (vertex bodies ``<name>_<v>`` with three slide

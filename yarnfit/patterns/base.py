@@ -293,6 +293,18 @@ class YarnPattern:
                 )
 
 
+def int_matrix(values, allowed: tuple[int, ...], what: str, meaning: str) -> np.ndarray:
+    """``values`` as a non-empty 2D int array whose entries are all in ``allowed``, or
+    :class:`PatternError` ``"a <what> must be a 2D matrix of <meaning>"`` / ``"… may only contain
+    <meaning>"``."""
+    m = np.asarray(values)
+    if m.ndim != 2 or m.shape[0] < 1 or m.shape[1] < 1:
+        raise PatternError(f"a {what} must be a 2D matrix of {meaning}, got shape {m.shape}")
+    if not np.all(np.isin(m, allowed)):
+        raise PatternError(f"a {what} may only contain {meaning}")
+    return m.astype(np.int64)
+
+
 def _check_lengths(name: str, lengths: np.ndarray, edges: np.ndarray) -> None:
     if np.any(lengths <= 0.0):
         row = int(np.argmin(lengths))

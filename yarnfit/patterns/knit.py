@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from .base import PatternError, YarnPattern
+from .base import PatternError, YarnPattern, int_matrix
 
 # Stitch charts: rows = courses (bottom to top), columns = wales; +1 knit, −1 purl.
 STITCHES: dict[str, np.ndarray] = {
@@ -44,12 +44,7 @@ SEGMENTS_PER_LOOP = 24
 
 def check_chart(stitches) -> np.ndarray:
     """The stitch chart as an int array of ±1, or :class:`PatternError`."""
-    s = np.asarray(stitches)
-    if s.ndim != 2 or s.shape[0] < 1 or s.shape[1] < 1:
-        raise PatternError(f"a stitch chart must be a 2D matrix of +1 (knit) and -1 (purl), got shape {s.shape}")
-    if not np.all((s == 1) | (s == -1)):
-        raise PatternError("a stitch chart may only contain +1 (knit) and -1 (purl)")
-    return s.astype(np.int64)
+    return int_matrix(stitches, (1, -1), "stitch chart", "+1 (knit) and -1 (purl)")
 
 
 def _loop(t: np.ndarray, head: float, own: float, left: float, right: float) -> np.ndarray:

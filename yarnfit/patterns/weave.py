@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import PatternError, YarnPattern
+from .base import PatternError, YarnPattern, int_matrix
 
 # Named drafts (rows = picks, columns = ends, 1 = end over pick).
 DRAFTS: dict[str, np.ndarray] = {
@@ -54,12 +54,7 @@ SEGMENTS_PER_CROSSING = 8
 
 def check_draft(draft) -> np.ndarray:
     """The draft as an int array, or :class:`PatternError` saying what is wrong with it."""
-    d = np.asarray(draft)
-    if d.ndim != 2 or d.shape[0] < 1 or d.shape[1] < 1:
-        raise PatternError(f"a draft must be a 2D 0/1 matrix (rows = picks, columns = ends), got shape {d.shape}")
-    if not np.all((d == 0) | (d == 1)):
-        raise PatternError("a draft may only contain 0 (pick over end) and 1 (end over pick)")
-    d = d.astype(np.int64)
+    d = int_matrix(draft, (0, 1), "draft (rows = picks, columns = ends)", "0 (pick over end) and 1 (end over pick)")
     for i, row in enumerate(d):
         if row.min() == row.max() and d.shape[1] > 1:
             raise PatternError(f"draft row {i} never interlaces (pick {i} lies on one side of every end)")

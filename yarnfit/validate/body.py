@@ -62,7 +62,7 @@ import trimesh
 
 from ..engine.rotations import quaternion_between, xyzw
 from ..mujoco import DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_TIMESTEP
-from ..mujoco.scenes import FLEX_RADIUS, SceneMaterial, add_cloth_flex, compile_quietly
+from ..mujoco.scenes import FLEX_RADIUS, ClothMaterial, add_cloth_flex, compile_quietly
 from ..record import folded_panels, markdown_table, Recording
 
 __all__ = ["MOTION", "HUMANOID", "build_body_scene", "garment_panel", "motion_targets", "run_body"]
@@ -183,7 +183,7 @@ def garment_panel(kind: str, spacing: float) -> tuple[trimesh.Trimesh, np.ndarra
     return mesh, boundary & ~opening
 
 
-def build_body_scene(material_shirt: SceneMaterial, material_pants: SceneMaterial, *, spacing: float = SPACING,
+def build_body_scene(material_shirt: ClothMaterial, material_pants: ClothMaterial, *, spacing: float = SPACING,
                      timestep: float = DEFAULT_TIMESTEP) -> tuple[mujoco.MjSpec, dict]:
     """The humanoid with both garments (see the module docstring). Returns the spec and, per
     garment, its panel flex names and vertex counts."""
@@ -242,15 +242,15 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
     """Run the full-body scene (module docstring) and return its results (SI, JSON values).
 
     Args:
-        material_shirt: a :class:`~yarnfit.mujoco.scenes.SceneMaterial` or a material file.
+        material_shirt: a :class:`~yarnfit.mujoco.scenes.ClothMaterial` or a material file.
         material_pants: the same for the pants; default the shirt's material.
         quick: coarse panels (:data:`QUICK_SPACING`) and the motion cut at :data:`QUICK_SECONDS`.
         recording_path: the ``.rrd`` file to write (directories created), or None.
         progress: called as ``progress(message)`` once per simulated second.
     """
-    shirt = material_shirt if isinstance(material_shirt, SceneMaterial) else SceneMaterial.from_file(material_shirt)
+    shirt = material_shirt if isinstance(material_shirt, ClothMaterial) else ClothMaterial.from_file(material_shirt)
     pants = shirt if material_pants is None else (
-        material_pants if isinstance(material_pants, SceneMaterial) else SceneMaterial.from_file(material_pants))
+        material_pants if isinstance(material_pants, ClothMaterial) else ClothMaterial.from_file(material_pants))
     spacing = QUICK_SPACING if quick else SPACING
     seconds = QUICK_SECONDS if quick else MOTION[-1][0]
     spec, garments = build_body_scene(shirt, pants, spacing=spacing)

@@ -40,7 +40,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 from scipy.signal import find_peaks
 
-from ..mujoco.scenes import SceneMaterial, build_scene, compile_quietly
+from ..mujoco.scenes import ClothMaterial, build_scene, compile_quietly
 from ..record import markdown_table, Recording
 
 SIZE = 0.3  # m: the swatch's side
@@ -105,7 +105,7 @@ def fold_count(positions: np.ndarray, boundary: np.ndarray, size: float) -> int:
     return int(((peaks >= 360) & (peaks < 720)).sum())
 
 
-def run_drape(material: SceneMaterial | str | Path, scene: str, *, quick: bool = False, recording_path=None,
+def run_drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = False, recording_path=None,
               progress: Callable[[str], None] | None = None) -> dict:
     """Drop (``sphere``) or hang (``wall``) the swatch until at rest; the summary figures. With a
     ``recording_path``, the final mesh is also written beside it as ``<scene>_final.ply`` (m;
@@ -121,7 +121,7 @@ def run_drape(material: SceneMaterial | str | Path, scene: str, *, quick: bool =
     return summary
 
 
-def drape(material: SceneMaterial | str | Path, scene: str, *, quick: bool = False, recording_path=None,
+def drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = False, recording_path=None,
           progress: Callable[[str], None] | None = None) -> tuple[dict, np.ndarray, np.ndarray]:
     """:func:`run_drape`'s simulation: the summary, the final vertex positions ``(n, 3)`` (m) and
     the triangles ``(m, 3)``."""
@@ -129,8 +129,8 @@ def drape(material: SceneMaterial | str | Path, scene: str, *, quick: bool = Fal
 
     if scene not in ("sphere", "wall"):
         raise ValueError(f"unknown drape {scene!r}; drapes: sphere, wall")
-    if not isinstance(material, SceneMaterial):
-        material = SceneMaterial.from_file(material)
+    if not isinstance(material, ClothMaterial):
+        material = ClothMaterial.from_file(material)
     resolution = RESOLUTION[quick]
     built = build_scene(material, "sphere" if scene == "sphere" else "cloth", resolution=resolution, size=SIZE,
                         mesh=MESH)

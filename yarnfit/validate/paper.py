@@ -25,8 +25,8 @@ from typing import Callable
 import numpy as np
 
 from ..fabric import Fabric
-from ..materials import get_fiber
-from ..mujoco.scenes import SceneMaterial
+from ..fibers import get_fiber
+from ..mujoco.scenes import ClothMaterial
 
 THICKNESS_FACTOR = 1.5
 # Two drapes differ measurably when their final meshes lie this far apart (RMS over corresponding
@@ -91,13 +91,13 @@ def with_fibre(fabric: Fabric, fibre: str) -> Fabric:
     return replace(fabric, name=f"{fabric.name}-{fibre}", fiber=get_fiber(fibre))
 
 
-def fit_scene_material(fabric: Fabric, relaxed=None, **options) -> tuple[SceneMaterial, float]:
-    """Fit ``fabric`` (:func:`yarnfit.material.fit_fabric`, its ``relaxed`` repeat if already
+def fit_scene_material(fabric: Fabric, relaxed=None, **options) -> tuple[ClothMaterial, float]:
+    """Fit ``fabric`` (:func:`yarnfit.fabric_fit.fit_fabric`, its ``relaxed`` repeat if already
     relaxed, ``options`` passed on); the scene material and the relaxed yarn radius (m)."""
-    from ..material import fit_fabric
+    from ..fabric_fit import fit_fabric
 
     fitted = fit_fabric(fabric, relaxed=relaxed, **options)
-    return SceneMaterial(fabric.name, fitted.material, fitted.relaxed.areal_density), fitted.relaxed.radius
+    return ClothMaterial(fabric.name, fitted.material, fitted.relaxed.areal_density), fitted.relaxed.radius
 
 
 def compare_thickness(fabric: Fabric, *, factor: float = THICKNESS_FACTOR, max_strain: float = 0.1,

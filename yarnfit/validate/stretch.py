@@ -46,7 +46,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ..mujoco.scenes import SceneMaterial, build_scene, compile_quietly
+from ..mujoco.scenes import ClothMaterial, build_scene, compile_quietly
 from ..record import Recording, markdown_table
 from . import DIRECTIONS
 
@@ -113,7 +113,7 @@ class StripResult:
         }
 
 
-def pull_strip(material: SceneMaterial, strip: str, direction: str, *, quick: bool = False,
+def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bool = False,
                max_strain: float = STRAIN_LEVELS[-1], on_level: Callable | None = None,
                dimensions: tuple[float, float] | None = None, resolution: int | None = None) -> StripResult:
     """Pull one strip through the strain levels up to ``max_strain``. ``strip`` names one of
@@ -259,12 +259,12 @@ def clamped_strip_stiffness(shell, points: np.ndarray, triangles: np.ndarray, an
     return pull / width / 1e-6
 
 
-def run_stretch(material: SceneMaterial | str | Path, *, quick: bool = False, recording_path=None,
+def run_stretch(material: ClothMaterial | str | Path, *, quick: bool = False, recording_path=None,
                 progress: Callable[[str], None] | None = None, reference=None,
                 max_strain: float = STRAIN_LEVELS[-1]) -> dict:
     """Every strip in every direction; returns the summary figures (keys carry units)."""
-    if not isinstance(material, SceneMaterial):
-        material = SceneMaterial.from_file(material)
+    if not isinstance(material, ClothMaterial):
+        material = ClothMaterial.from_file(material)
     recording = _StretchRecording(material.name, recording_path) if recording_path else None
     results = []
     strips = ["8x5"] if quick else list(STRIPS)

@@ -63,9 +63,9 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
               reference=None, progress: Callable[[str], None] | None = None) -> tuple[dict, Path]:
     """Run ``scenes`` on the material file; returns the summary and the path of ``summary.json``."""
     check_material_file(material_path)
-    from ..mujoco.scenes import SceneMaterial
+    from ..mujoco.scenes import ClothMaterial
 
-    material = SceneMaterial.from_file(material_path)
+    material = ClothMaterial.from_file(material_path)
     folder = Path(logs) / material.name
     folder.mkdir(parents=True, exist_ok=True)
     summary = {"yarnfit_version": __version__, "material": {"file": str(material_path), "name": material.name},

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from yarnfit.materials import FIBERS, FiberMaterial, UnknownFiberError, get_fiber, load_fiber_file
+from yarnfit.fibers import FIBERS, Fiber, UnknownFiberError, get_fiber, load_fiber_file
 
 # k = (E_max − E_min)/ε_max is one subtraction and one division: a few ulps of E_max.
 ROUND_OFF_REL = 1e-14
@@ -91,7 +91,7 @@ def test_builtin_fibre_has_the_papers_hardening(name):
 
 
 def test_linear_fibre_has_no_hardening():
-    fiber = FiberMaterial(**{**VALID, "young_max_pa": VALID["young_min_pa"]})
+    fiber = Fiber(**{**VALID, "young_max_pa": VALID["young_min_pa"]})
     assert fiber.hardening_pa == 0.0
     assert FIBERS["linen"].hardening_pa == 0.0
 
@@ -128,7 +128,7 @@ def test_describe_is_one_line_with_units():
 )
 def test_invalid_fields_are_rejected_with_name_and_value(field, value, phrase):
     with pytest.raises(ValueError, match=phrase) as info:
-        FiberMaterial(**{**VALID, field: value})
+        Fiber(**{**VALID, field: value})
     assert repr(value) in str(info.value)
 
 

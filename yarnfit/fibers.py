@@ -1,10 +1,10 @@
-"""Fibre materials: the first stage of yarnfit, from a fibre name on a label to rod parameters.
+"""Fibres: the first stage of yarnfit, from a fibre name on a label to the data the yarn model needs.
 
-A :class:`FiberMaterial` holds what the yarn model needs from a fibre, in SI units: density
+A :class:`Fiber` holds what the yarn model needs from a fibre, in SI units: density
 (kg/m³), the modulus at zero strain ``E_min`` and the tangent modulus at the breaking strain
 ``E_max`` (Pa), the breaking strain ``ε_max`` (dimensionless), Poisson's ratio and the
-fibre-on-fibre friction coefficient. :func:`yarnfit.relax.rod_material` turns it into the
-engine's :class:`~yarnfit.engine.RodMaterial` in a later stage.
+fibre-on-fibre friction coefficient (and, for the fibre-assembly yarn, fineness and specific
+rigidities). :class:`yarnfit.yarn.Yarn` builds the rod's section from it in the next stage.
 
 Nonlinear stretch (paper §4.1, ``docs/design.md`` §4): the tangent modulus grows linearly with
 strain, ``E(ε) = E_min + k |ε|``, with the slope chosen so that it reaches ``E_max`` at
@@ -53,7 +53,7 @@ from dataclasses import dataclass
 from .checks import check_keys, finite_number, positive_or_none
 from .jsonfile import read_json
 
-__all__ = ["FIBERS", "FiberMaterial", "UnknownFiberError", "get_fiber", "load_fiber_file"]
+__all__ = ["FIBERS", "Fiber", "UnknownFiberError", "get_fiber", "load_fiber_file"]
 
 # Largest accepted breaking strain: textile fibres break below ~0.7 (wool, nylon 6 staple); 1.5
 # leaves room for textured or partly elastomeric user fibres but rejects percentages typed as
@@ -74,7 +74,7 @@ MN_MM2_PER_TEX2 = 1e-9
 
 
 @dataclass(frozen=True)
-class FiberMaterial:
+class Fiber:
     """Mechanical data of one textile fibre (SI units).
 
     Attributes:
@@ -207,10 +207,10 @@ _SILK_DENSITY = 1340.0
 _VISCOSE_DENSITY = 1490.0
 _ACRYLIC_DENSITY = 1190.0
 
-FIBERS: dict[str, FiberMaterial] = {
+FIBERS: dict[str, Fiber] = {
     fiber.name: fiber
     for fiber in (
-        FiberMaterial(
+        Fiber(
             name="wool",
             density_kg_m3=1310.0,
             young_min_pa=2.3e9,
@@ -229,7 +229,7 @@ FIBERS: dict[str, FiberMaterial] = {
             torsional_rigidity_nm2_per_tex2=0.12 * MN_MM2_PER_TEX2,
             spinning="ring-spun",
         ),
-        FiberMaterial(
+        Fiber(
             name="cotton",
             density_kg_m3=1520.0,
             young_min_pa=5.3e9,
@@ -247,7 +247,7 @@ FIBERS: dict[str, FiberMaterial] = {
             torsional_rigidity_nm2_per_tex2=0.16 * MN_MM2_PER_TEX2,
             spinning="ring-spun",
         ),
-        FiberMaterial(
+        Fiber(
             name="polyester",
             density_kg_m3=1380.0,
             young_min_pa=1.5e9,
@@ -264,7 +264,7 @@ FIBERS: dict[str, FiberMaterial] = {
             torsional_rigidity_nm2_per_tex2=0.067 * MN_MM2_PER_TEX2,
             spinning="filament",
         ),
-        FiberMaterial(
+        Fiber(
             name="nylon",
             density_kg_m3=_NYLON_DENSITY,
             young_min_pa=_modulus_from_specific(3.0, _NYLON_DENSITY),
@@ -282,7 +282,7 @@ FIBERS: dict[str, FiberMaterial] = {
             torsional_rigidity_nm2_per_tex2=0.0505 * MN_MM2_PER_TEX2,
             spinning="filament",
         ),
-        FiberMaterial(
+        Fiber(
             name="silk",
             density_kg_m3=_SILK_DENSITY,
             young_min_pa=_modulus_from_specific(7.3, _SILK_DENSITY),
@@ -299,7 +299,7 @@ FIBERS: dict[str, FiberMaterial] = {
             torsional_rigidity_nm2_per_tex2=0.16 * MN_MM2_PER_TEX2,
             spinning="filament",
         ),
-        FiberMaterial(
+        Fiber(
             name="viscose",
             density_kg_m3=_VISCOSE_DENSITY,
             # Handbook spread over variants (regular filament 4.8 N/tex to high-tenacity
@@ -320,7 +320,7 @@ FIBERS: dict[str, FiberMaterial] = {
             torsional_rigidity_nm2_per_tex2=0.0705 * MN_MM2_PER_TEX2,
             spinning="ring-spun",
         ),
-        FiberMaterial(
+        Fiber(
             name="linen",
             density_kg_m3=_LINEN_DENSITY,
             young_min_pa=_modulus_from_specific(18.0, _LINEN_DENSITY),
@@ -341,7 +341,7 @@ FIBERS: dict[str, FiberMaterial] = {
             / (2.0 * math.pi * _LINEN_DENSITY**2) * 1e-12,
             spinning="ring-spun",
         ),
-        FiberMaterial(
+        Fiber(
             name="acrylic",
             density_kg_m3=_ACRYLIC_DENSITY,
             young_min_pa=_modulus_from_specific(6.2, _ACRYLIC_DENSITY),
@@ -367,7 +367,7 @@ class UnknownFiberError(ValueError):
     """A fibre name that is not in :data:`FIBERS`; the message lists the known names."""
 
 
-def get_fiber(name: str) -> FiberMaterial:
+def get_fiber(name: str) -> Fiber:
     """The built-in fibre called ``name`` (case-insensitive, surrounding blanks ignored).
 
     Raises:
@@ -387,12 +387,12 @@ _OPTIONAL_NUMERIC_KEYS = ASSEMBLY_KEYS + ("diameter_m",)
 _ALLOWED_KEYS = _REQUIRED_KEYS + ("source", "spinning") + _OPTIONAL_NUMERIC_KEYS
 
 
-def load_fiber_file(path: str | os.PathLike) -> FiberMaterial:
+def load_fiber_file(path: str | os.PathLike) -> Fiber:
     """A user fibre from a JSON file.
 
     The file holds one object with the keys ``name``, ``density_kg_m3``, ``young_min_pa``,
     ``young_max_pa``, ``breaking_strain``, ``poisson``, ``friction`` (SI units, as in
-    :class:`FiberMaterial`), optionally ``source``, and, for the fibre-assembly yarn model (the
+    :class:`Fiber`), optionally ``source``, and, for the fibre-assembly yarn model (the
     default), ``fineness_dtex`` (or ``diameter_m`` of a round fibre),
     ``flexural_rigidity_nm2_per_tex2`` and ``torsional_rigidity_nm2_per_tex2`` (N·m²/tex²: the
     handbook's mN·mm²/tex² times 10⁻⁹) and optionally ``spinning`` (``ring-spun`` or
@@ -406,7 +406,7 @@ def load_fiber_file(path: str | os.PathLike) -> FiberMaterial:
     Raises:
         ValueError: a one-line message starting with the file name: the file is missing or
             unreadable, is not valid JSON (with line and column), lacks keys or has unknown ones
-            (all listed), has a non-numeric value, or fails :class:`FiberMaterial` validation.
+            (all listed), has a non-numeric value, or fails :class:`Fiber` validation.
     """
     where, data = read_json(path, "fibre file")
     if not isinstance(data, dict):
@@ -436,6 +436,6 @@ def load_fiber_file(path: str | os.PathLike) -> FiberMaterial:
         fields["fineness_dtex"] = fineness_from_diameter(diameter, float(data["density_kg_m3"]))
     fields.setdefault("source", f"user fibre file {where}")
     try:
-        return FiberMaterial(**fields)
+        return Fiber(**fields)
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None

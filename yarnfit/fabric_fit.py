@@ -83,16 +83,16 @@ def fit_fabric(
     workers: int | None = None,
     relaxed: RelaxedRepeat | None = None,
     on_relaxed: Callable[[RelaxedRepeat], None] | None = None,
-    progress: Callable[[int, int, SampleResult], None] | None = None,
-    relax_progress: Callable | None = None,
+    on_sample: Callable[[int, int, SampleResult], None] | None = None,
+    on_relax_iteration: Callable | None = None,
     on_relax_start: Callable | None = None,
     coupling_limit: float | None = COUPLING_LIMIT,
 ) -> FabricFit:
     """Relax ``fabric`` (unless ``relaxed`` is given), solve about ``samples`` samples over
     ``ranges`` (default :func:`yarnfit.homogenize.default_ranges`) on ``workers`` processes, and fit
-    the shell (``model`` "full" or "paper"). ``relax_progress`` and ``on_relax_start`` go to
+    the shell (``model`` "full" or "paper"). ``on_relax_iteration`` and ``on_relax_start`` go to
     :func:`yarnfit.relax.relax`; ``on_relaxed(relaxed)`` is called once the repeat is relaxed,
-    ``progress(done, total, result)`` after each sample. ``coupling_limit`` bounds the couplings
+    ``on_sample(done, total, result)`` after each sample. ``coupling_limit`` bounds the couplings
     (see :func:`yarnfit.fit.fit_shell`; ``None``: unbounded, an indefinite fit raises).
 
     Raises ``ValueError`` for bad options, :class:`UnusableRelaxation` for a relaxation that did
@@ -106,7 +106,7 @@ def fit_fabric(
     seconds = {}
     start = time.perf_counter()
     if relaxed is None:
-        relaxed = relax(fabric, progress=relax_progress, on_start=on_relax_start)
+        relaxed = relax(fabric, on_iteration=on_relax_iteration, on_start=on_relax_start)
     seconds["relax"] = time.perf_counter() - start
     if not relaxed.valid:
         raise UnusableRelaxation(f"the relaxation of {fabric.name!r} is not usable: converged {relaxed.converged}, "
@@ -116,7 +116,7 @@ def fit_fabric(
     ranges = ranges or default_ranges(relaxed)
     specs = sample_design(ranges, levels)
     start = time.perf_counter()
-    results = solve_samples(relaxed, specs, workers=workers, progress=progress)
+    results = solve_samples(relaxed, specs, workers=workers, on_sample=on_sample)
     seconds["homogenize"] = time.perf_counter() - start
     start = time.perf_counter()
     shell = fit_shell(results, shell_thickness(relaxed), model=model,
