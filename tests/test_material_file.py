@@ -65,7 +65,7 @@ def test_a_file_without_a_relaxed_repeat_relaxes_again_with_a_note(tmp_path):
     out = run_yarn(data, quick=True, recording_path=False, directions=("weft",),
                    size={"gauge": 1.0, "width": 1.0, "clamp": 0.5}, progress=notes.append)
     assert "keeps no relaxed repeat" in notes[0] and "relaxing plain again" in notes[0]
-    assert out["relaxation"]["converged"]
+    assert out.relaxation["converged"]
 
 
 def test_files_this_version_cannot_use_are_refused(tmp_path):

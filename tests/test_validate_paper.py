@@ -29,7 +29,7 @@ def test_bias_softness_reads_every_level_of_each_strip_size():
 
 def test_woven_bias_strips_are_softer_in_the_stretch_summary():
     """Check (a) on the test woven through the suite's own stretch runner."""
-    summary = run_stretch(ClothMaterial("woven", FABRIC, 0.2), quick=True, max_strain=0.05)
+    summary = run_stretch(ClothMaterial("woven", FABRIC, 0.2), quick=True, max_strain=0.05).summary()
     assert bias_softness(summary)["8x5"]["bias_softer"]
 
 

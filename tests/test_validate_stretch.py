@@ -109,7 +109,7 @@ def test_run_writes_the_documented_recording_and_compares_a_reference(tmp_path):
                              + "\n".join(rows) + "\n")
     reference = read_reference(reference_csv)
     path = tmp_path / "logs" / "woven" / "stretch.rrd"
-    summary = run_stretch(WOVEN, quick=True, recording_path=path, reference=reference, max_strain=0.05)
+    summary = run_stretch(WOVEN, quick=True, recording_path=path, reference=reference, max_strain=0.05).summary()
     assert set(summary["strips"]) == {f"8x5_{d}" for d in DIRECTIONS}
     comparison = summary["reference"]["weft"]
     assert comparison["points"] == len(ours.strain)

@@ -58,7 +58,7 @@ def entity_paths(path):
 @pytest.mark.parametrize("scene", ["sphere", "wall"])
 def test_drape_settles_and_records(scene, tmp_path):
     path = tmp_path / f"{scene}.rrd"
-    summary = run_drape(WOVEN, scene, quick=True, recording_path=path)
+    summary = run_drape(WOVEN, scene, quick=True, recording_path=path).summary()
     assert summary["settled"] and summary["bad_qacc"] == 0
     assert 0 < summary["drape_coefficient"] < 1
     assert summary["lowest_point_m"] > -0.005  # the floor (less the flex radius)
@@ -80,8 +80,8 @@ def test_stiffer_fabrics_drape_differently_on_the_sphere():
     stands out further (a larger drape coefficient)."""
     stiff = dataclasses.replace(FABRIC, b00=5 * FABRIC.b00, b01=5 * FABRIC.b01, b11=5 * FABRIC.b11,
                                 b22=5 * FABRIC.b22)
-    soft = run_drape(WOVEN, "sphere", quick=True)["drape_coefficient"]
-    hard = run_drape(ClothMaterial("stiff", stiff, DENSITY), "sphere", quick=True)["drape_coefficient"]
+    soft = run_drape(WOVEN, "sphere", quick=True).drape_coefficient
+    hard = run_drape(ClothMaterial("stiff", stiff, DENSITY), "sphere", quick=True).drape_coefficient
     assert hard > soft + 0.02
 
 

@@ -46,7 +46,7 @@ def main() -> int:
 
     print("(a) bias force over the weaker of weft and warp, 8 x 5 strips (quick mesh)")
     for preset in PRESETS:
-        soft = bias_softness(run_stretch(preset_material(folder, preset), quick=True))["8x5"]
+        soft = bias_softness(run_stretch(preset_material(folder, preset), quick=True).summary())["8x5"]
         out["bias_softness"][preset] = soft
         ratios = ", ".join(f"{e:.3g}: {r:.3f}" for e, r in zip(soft["strain"], soft["bias_over_weakest_axis"]))
         print(f"  {preset:17s} softer on the bias: {str(soft['bias_softer']):5s}  (strain: ratio) {ratios}")

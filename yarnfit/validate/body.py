@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import mujoco
@@ -63,9 +64,10 @@ import trimesh
 from ..engine.rotations import quaternion_between, xyzw
 from ..mujoco import DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_TIMESTEP
 from ..mujoco.scenes import FLEX_RADIUS, ClothMaterial, add_cloth_flex, compile_quietly
-from ..record import folded_panels, markdown_table, Recording
+from ..record import Recording, folded_panels, markdown_table
+from . import OPTIONAL, SceneResult
 
-__all__ = ["MOTION", "HUMANOID", "build_body_scene", "garment_panel", "motion_targets", "run_body"]
+__all__ = ["BodyResult", "HUMANOID", "MOTION", "build_body_scene", "garment_panel", "motion_targets", "run_body"]
 
 HUMANOID = Path(__file__).resolve().parents[2] / "mjcf" / "humanoid.xml"
 # m, pattern grid spacing (full run): 3.5 cm cells, 1730 garment vertices, ~40 ms per step
@@ -237,9 +239,41 @@ def surface_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray, radius: n
     return (np.linalg.norm(points[:, None, :] - nearest, axis=2) - radius[None]).min(axis=1)
 
 
+@dataclass(frozen=True)
+class BodyResult(SceneResult):
+    """The full-body run: the materials, the panel spacing (m), time step, simulated time (s) and
+    steps taken, the garments' panels and seams, MuJoCo's bad-QACC warnings, whether a position
+    went non-finite, ``stable`` (neither, and every step taken), the largest penetration into and
+    distance from the body (m) after :data:`SETTLE_S` and where the farthest vertex was, the
+    targets, ``passed`` (stable and both within target), wall time (s), ms per step, and the
+    recording's path if one was written."""
+
+    material_shirt: str
+    material_pants: str
+    quick: bool
+    spacing_m: float
+    timestep_s: float
+    simulated_s: float
+    steps: int
+    garments: dict
+    bad_qacc: int
+    nonfinite: bool
+    stable: bool
+    max_penetration_m: float
+    max_distance_m: float
+    farthest_vertex: dict | None
+    penetration_target_m: float
+    distance_target_m: float
+    passed: bool
+    wall_time_s: float
+    ms_per_step: float
+    checks_from_s: float
+    recording: str | None = field(default=None, metadata=OPTIONAL)
+
+
 def run_body(material_shirt, material_pants=None, *, quick: bool = False, recording_path=None,
-             progress=None) -> dict:
-    """Run the full-body scene (module docstring) and return its results (SI, JSON values).
+             progress=None) -> BodyResult:
+    """Run the full-body scene (module docstring) and return its :class:`BodyResult`.
 
     Args:
         material_shirt: a :class:`~yarnfit.mujoco.scenes.ClothMaterial` or a material file.
@@ -310,31 +344,31 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
             break
     bad_qacc = int(data.warning[warning].number)
     stable = bad_qacc == 0 and not nonfinite and taken == steps
-    result = {
-        "material_shirt": shirt.name,
-        "material_pants": pants.name,
-        "quick": bool(quick),
-        "spacing_m": spacing,
-        "timestep_s": float(model.opt.timestep),
-        "simulated_s": taken * float(model.opt.timestep),
-        "steps": taken,
-        "garments": garments,
-        "bad_qacc": bad_qacc,
-        "nonfinite": bool(nonfinite),
-        "stable": bool(stable),
-        "max_penetration_m": max_pen,
-        "max_distance_m": max_dist,
-        "farthest_vertex": farthest,
-        "penetration_target_m": PENETRATION_TARGET,
-        "distance_target_m": DISTANCE_TARGET,
-        "passed": bool(stable and max_pen < PENETRATION_TARGET and max_dist < DISTANCE_TARGET),
-        "wall_time_s": elapsed,
-        "ms_per_step": 1e3 * elapsed / max(taken, 1),
-        "checks_from_s": SETTLE_S,
-    }
+    result = BodyResult(
+        material_shirt=shirt.name,
+        material_pants=pants.name,
+        quick=bool(quick),
+        spacing_m=spacing,
+        timestep_s=float(model.opt.timestep),
+        simulated_s=taken * float(model.opt.timestep),
+        steps=taken,
+        garments=garments,
+        bad_qacc=bad_qacc,
+        nonfinite=bool(nonfinite),
+        stable=bool(stable),
+        max_penetration_m=max_pen,
+        max_distance_m=max_dist,
+        farthest_vertex=farthest,
+        penetration_target_m=PENETRATION_TARGET,
+        distance_target_m=DISTANCE_TARGET,
+        passed=bool(stable and max_pen < PENETRATION_TARGET and max_dist < DISTANCE_TARGET),
+        wall_time_s=elapsed,
+        ms_per_step=1e3 * elapsed / max(taken, 1),
+        checks_from_s=SETTLE_S,
+    )
     if recording:
         recording.finish(result)
-        result["recording"] = str(recording_path)
+        result = replace(result, recording=str(recording_path))
     return result
 
 
@@ -379,13 +413,13 @@ class _BodyRecording(Recording):
         self.stream.log("body/plots/penetration", rr.Scalars(pen))
         self.stream.log("body/plots/distance", rr.Scalars(dist))
 
-    def finish(self, result: dict) -> None:
-        rows = [("stable", result["stable"]), ("bad QACC warnings", result["bad_qacc"]),
-                ("max penetration (m)", f"{result['max_penetration_m']:.4g} (target < {PENETRATION_TARGET:g})"),
-                ("max distance (m)", f"{result['max_distance_m']:.4g} (target < {DISTANCE_TARGET:g})"),
-                ("simulated (s)", f"{result['simulated_s']:.3g}"), ("ms/step", f"{result['ms_per_step']:.3g}"),
-                ("wall time (s)", f"{result['wall_time_s']:.3g}"), ("shirt", result["material_shirt"]),
-                ("pants", result["material_pants"]), ("panel grid spacing (m)", result["spacing_m"])]
+    def finish(self, result: BodyResult) -> None:
+        rows = [("stable", result.stable), ("bad QACC warnings", result.bad_qacc),
+                ("max penetration (m)", f"{result.max_penetration_m:.4g} (target < {PENETRATION_TARGET:g})"),
+                ("max distance (m)", f"{result.max_distance_m:.4g} (target < {DISTANCE_TARGET:g})"),
+                ("simulated (s)", f"{result.simulated_s:.3g}"), ("ms/step", f"{result.ms_per_step:.3g}"),
+                ("wall time (s)", f"{result.wall_time_s:.3g}"), ("shirt", result.material_shirt),
+                ("pants", result.material_pants), ("panel grid spacing (m)", result.spacing_m)]
         self.log_markdown("body/summary", "# full body\n\n" + markdown_table(rows), static=True)
         self.close()
 

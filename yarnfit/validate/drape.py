@@ -30,8 +30,8 @@ The final mesh is also written as ``<scene>_final.ply`` beside the recording.
 
 from __future__ import annotations
 
-import math
 import time
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -41,7 +41,8 @@ import rerun.blueprint as rrb
 from scipy.signal import find_peaks
 
 from ..mujoco.scenes import ClothMaterial, build_scene, compile_quietly
-from ..record import markdown_table, Recording
+from ..record import Recording, markdown_table
+from . import NOT_SUMMARISED, OPTIONAL, SceneResult
 
 SIZE = 0.3  # m: the swatch's side
 # Vertices per side: 1.5 cm and 2.5 cm cells. Finer is not stable at the export's 1 ms step: the
@@ -105,26 +106,47 @@ def fold_count(positions: np.ndarray, boundary: np.ndarray, size: float) -> int:
     return int(((peaks >= 360) & (peaks < 720)).sum())
 
 
+@dataclass(frozen=True)
+class DrapeResult(SceneResult):
+    """A drape at rest (or at the time limit): the drape coefficient (projected area over the
+    swatch's, dimensionless), the lowest point (m), whether it ``settled``, simulated and wall time
+    (s), ms per step, MuJoCo's bad-QACC warnings, the mesh resolution; on the sphere the fold count
+    and the weft/warp extent asymmetry, on the wall the largest distance from it (m); the final
+    mesh file if one was written, and the final vertex positions ``(n, 3)`` (m) and triangles."""
+
+    drape_coefficient: float
+    lowest_point_m: float
+    settled: bool
+    simulated_s: float
+    wall_seconds: float
+    ms_per_step: float
+    bad_qacc: int
+    resolution: int
+    fold_count: int | None = field(default=None, metadata=OPTIONAL)
+    weft_warp_asymmetry: float | None = field(default=None, metadata=OPTIONAL)
+    max_distance_from_wall_m: float | None = field(default=None, metadata=OPTIONAL)
+    final_mesh: str | None = field(default=None, metadata=OPTIONAL)
+    positions: np.ndarray | None = field(default=None, repr=False, metadata=NOT_SUMMARISED)
+    triangles: np.ndarray | None = field(default=None, repr=False, metadata=NOT_SUMMARISED)
+
+
 def run_drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = False, recording_path=None,
-              progress: Callable[[str], None] | None = None) -> dict:
-    """Drop (``sphere``) or hang (``wall``) the swatch until at rest; the summary figures. With a
-    ``recording_path``, the final mesh is also written beside it as ``<scene>_final.ply`` (m;
-    ``final_mesh`` in the summary)."""
-    summary, positions, triangles = drape(material, scene, quick=quick, recording_path=recording_path,
-                                          progress=progress)
+              progress: Callable[[str], None] | None = None) -> DrapeResult:
+    """Drop (``sphere``) or hang (``wall``) the swatch until at rest. With a ``recording_path``, the
+    final mesh is also written beside it as ``<scene>_final.ply`` (m; ``final_mesh``)."""
+    result = drape(material, scene, quick=quick, recording_path=recording_path, progress=progress)
     if recording_path:
         import trimesh
 
         final = Path(recording_path).with_name(f"{scene}_final.ply")
-        trimesh.Trimesh(positions, triangles, process=False).export(final)
-        summary["final_mesh"] = str(final)
-    return summary
+        trimesh.Trimesh(result.positions, result.triangles, process=False).export(final)
+        result = replace(result, final_mesh=str(final))
+    return result
 
 
 def drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = False, recording_path=None,
-          progress: Callable[[str], None] | None = None) -> tuple[dict, np.ndarray, np.ndarray]:
-    """:func:`run_drape`'s simulation: the summary, the final vertex positions ``(n, 3)`` (m) and
-    the triangles ``(m, 3)``."""
+          progress: Callable[[str], None] | None = None) -> DrapeResult:
+    """:func:`run_drape`'s simulation (no mesh file written)."""
     import mujoco
 
     if scene not in ("sphere", "wall"):
@@ -167,29 +189,33 @@ def drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = Fal
     wall_seconds = time.perf_counter() - start
     mujoco.mj_forward(model, data)
     x = data.flexvert_xpos.copy()
-    summary = {
-        "drape_coefficient": projected_area(x, triangles) / SIZE**2,
-        "lowest_point_m": float(x[:, 2].min()),
-        "settled": settled,
-        "simulated_s": step * dt,
-        "wall_seconds": wall_seconds,
-        "ms_per_step": 1e3 * wall_seconds / max(step, 1),
-        "bad_qacc": int(data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number),
-        "resolution": resolution,
-    }
+    figures = {}
     if scene == "sphere":
         edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), 1)
         unique, count = np.unique(edges, axis=0, return_counts=True)
         boundary = np.unique(unique[count == 1])
         extent = np.ptp(x[:, :2], axis=0)
-        summary["fold_count"] = fold_count(x, boundary, SIZE)
-        summary["weft_warp_asymmetry"] = float((extent[0] - extent[1]) / extent.mean())
+        figures = {"fold_count": fold_count(x, boundary, SIZE),
+                   "weft_warp_asymmetry": float((extent[0] - extent[1]) / extent.mean())}
     else:
         wall_face = -0.5 * SIZE - WALL_GAP
-        summary["max_distance_from_wall_m"] = float((x[:, 0] - wall_face).max())
+        figures = {"max_distance_from_wall_m": float((x[:, 0] - wall_face).max())}
+    result = DrapeResult(
+        drape_coefficient=projected_area(x, triangles) / SIZE**2,
+        lowest_point_m=float(x[:, 2].min()),
+        settled=settled,
+        simulated_s=step * dt,
+        wall_seconds=wall_seconds,
+        ms_per_step=1e3 * wall_seconds / max(step, 1),
+        bad_qacc=int(data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number),
+        resolution=resolution,
+        positions=x,
+        triangles=triangles,
+        **figures,
+    )
     if recording:
-        recording.finish(summary)
-    return summary, x, triangles
+        recording.finish(result.summary())
+    return result
 
 
 def _kinetic(model, data) -> float:

@@ -150,8 +150,9 @@ def compare_fibre_drapes(fabric: Fabric, fibres=FIBRES, *, progress: Callable[[s
         if progress:
             progress(f"fibre check: fitting and draping {variant.name}")
         material, _ = fit_scene_material(variant, **fit_options)
-        summary, positions, _ = drape(material, "sphere", quick=True)
-        finals[fibre] = positions
+        result = drape(material, "sphere", quick=True)
+        finals[fibre] = result.positions
+        summary = result.summary()
         figures[fibre] = {key: summary[key] for key in ("drape_coefficient", "lowest_point_m", "fold_count",
                                                        "weft_warp_asymmetry", "settled")}
         engineering = material.shell.engineering()

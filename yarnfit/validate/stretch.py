@@ -48,7 +48,7 @@ import rerun.blueprint as rrb
 
 from ..mujoco.scenes import ClothMaterial, build_scene, compile_quietly
 from ..record import Recording, markdown_table
-from . import DIRECTIONS
+from . import DIRECTIONS, SceneResult
 
 # FAB strips (m): length between the clamps × width.
 STRIPS = {"8x5": (0.08, 0.05), "2x5": (0.02, 0.05)}
@@ -259,10 +259,26 @@ def clamped_strip_stiffness(shell, points: np.ndarray, triangles: np.ndarray, an
     return pull / width / 1e-6
 
 
+@dataclass(frozen=True)
+class StretchResult(SceneResult):
+    """Every strip's pull (:class:`StripResult`, each summarised beside the laws of ``shell``) and,
+    given measured curves, their comparison (see :func:`yarnfit.validate.reference.compare`)."""
+
+    strips: list[StripResult]
+    shell: object  # the material's ShellMaterial, for the laws the strips are set beside
+    reference: dict | None = None
+
+    def summary(self) -> dict:
+        out = {"strips": {strip.name: strip.summary(self.shell) for strip in self.strips}}
+        if self.reference is not None:
+            out["reference"] = self.reference
+        return out
+
+
 def run_stretch(material: ClothMaterial | str | Path, *, quick: bool = False, recording_path=None,
                 progress: Callable[[str], None] | None = None, reference=None,
-                max_strain: float = STRAIN_LEVELS[-1]) -> dict:
-    """Every strip in every direction; returns the summary figures (keys carry units)."""
+                max_strain: float = STRAIN_LEVELS[-1]) -> StretchResult:
+    """Every strip in every direction, compared with ``reference`` curves if given."""
     if not isinstance(material, ClothMaterial):
         material = ClothMaterial.from_file(material)
     recording = _StretchRecording(material.name, recording_path) if recording_path else None
@@ -276,16 +292,17 @@ def run_stretch(material: ClothMaterial | str | Path, *, quick: bool = False, re
             callback = recording.level_logger(name) if recording else None
             results.append(pull_strip(material, strip, direction, quick=quick, max_strain=max_strain,
                                       on_level=callback))
-    summary = {"strips": {result.name: result.summary(material.shell) for result in results}}
+    result = StretchResult(results, material.shell)
     if reference is not None:
         from .reference import compare
 
-        summary["reference"] = compare(reference, summary["strips"])
+        strips = result.summary()["strips"]
+        result = StretchResult(results, material.shell, compare(reference, strips))
         if recording:
-            recording.log_reference(reference, summary["strips"])
+            recording.log_reference(reference, strips)
     if recording:
-        recording.finish(summary)
-    return summary
+        recording.finish(result.summary())
+    return result
 
 
 class _StretchRecording(Recording):

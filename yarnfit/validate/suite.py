@@ -80,7 +80,7 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
         start = time.perf_counter()
         # The yarn swatch rebuilds the fabric from the file's inputs (and names the file in its errors).
         source = material_path if scene == "yarn" else material
-        summary["scenes"][scene] = runner(source, **options)
+        summary["scenes"][scene] = runner(source, **options).summary()
         summary["wall_seconds"][scene] = time.perf_counter() - start
         if progress:
             progress(f"{scene}: done in {summary['wall_seconds'][scene]:.1f} s")

@@ -80,7 +80,7 @@ from ..engine import (
 from ..engine.rotations import rotate_frames
 from ..material_file import MaterialFile
 from ..record import Recording, folded_panels, markdown_table
-from . import DIRECTIONS
+from . import DIRECTIONS, SceneResult
 
 # The strains the FAB-style test reports (nominal engineering strain of the gauge).
 STRAINS = (0.02, 0.05, 0.10)
@@ -398,15 +398,31 @@ def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection |
     return out
 
 
+@dataclass(frozen=True)
+class YarnResult(SceneResult):
+    """The yarn-level stretch test of a material: the swatch's ``name`` and the ``strains`` pulled
+    to, the curve per direction (:func:`stretch_swatch`'s dict), wall ``seconds`` of the pulls, the
+    material's name, ``quick``, the relaxation it was cut from (converged, iterations, seconds,
+    radius_m, repeat_size_m) and the recording's path (or None)."""
+
+    name: str
+    strains: list[float]
+    directions: dict
+    seconds: float
+    material: str
+    quick: bool
+    relaxation: dict
+    recording: str | None
+
+
 def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Callable[[str], None] | None = None,
-             directions: Sequence[str] | None = None, size: dict | None = None) -> dict:
+             directions: Sequence[str] | None = None, size: dict | None = None) -> YarnResult:
     """The yarn-level stretch test of a material file (path or its decoded dict): take the relaxed
     repeat the file keeps (a file without one has the fabric of its ``inputs`` relaxed again, with a
     note through ``progress``), cut strips along weft and warp (and bias unless ``quick``) and pull
     each to 2, 5 and 10 %. ``recording_path`` defaults to
-    ``logs/<material>/yarn.rrd`` (``False``: no recording). Returns a JSON-able dict with the
-    curves per direction (see :func:`stretch_swatch`) and the relaxation. ``size`` overrides the
-    strip size (see :func:`stretch_repeat`)."""
+    ``logs/<material>/yarn.rrd`` (``False``: no recording). ``size`` overrides the strip size
+    (see :func:`stretch_repeat`)."""
     from ..relax import relax
 
     file = MaterialFile.read(material)
@@ -428,13 +444,11 @@ def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Ca
     out = stretch_repeat(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), name=fabric.name,
                          directions=directions, size=size, quick=quick, recording_path=recording_path,
                          progress=progress)
-    out["material"] = fabric.name
-    out["quick"] = bool(quick)
-    out["relaxation"] = {"converged": relaxed.converged, "iterations": relaxed.iterations,
-                         "seconds": relax_seconds, "radius_m": relaxed.radius,
-                         "repeat_size_m": [float(v) for v in relaxed.repeat_size]}
-    out["recording"] = None if recording_path is None else str(recording_path)
-    return out
+    relaxation = {"converged": relaxed.converged, "iterations": relaxed.iterations, "seconds": relax_seconds,
+                  "radius_m": relaxed.radius, "repeat_size_m": [float(v) for v in relaxed.repeat_size]}
+    return YarnResult(name=out["name"], strains=out["strains"], directions=out["directions"], seconds=out["seconds"],
+                      material=fabric.name, quick=bool(quick), relaxation=relaxation,
+                      recording=None if recording_path is None else str(recording_path))
 
 
 # -- recording ---------------------------------------------------------------------------------
