@@ -104,7 +104,7 @@ class IndefiniteFitError(ValueError):
 
     Attributes:
         family: the sample family whose energies determine the offending coupling
-            (``"biaxial_stretch"`` for s01, ``"saddle_bend"`` for b01).
+            (``Family.BIAXIAL_STRETCH`` for s01, ``Family.SADDLE_BEND`` for b01).
         parameters: the fitted parameters (Pa) by name.
     """
 
@@ -313,7 +313,7 @@ def fit_shell(
     Args:
         samples: homogenized samples; non-converged ones are excluded and listed in the result.
         thickness: shell thickness h (m).
-        model: ``"full"`` (fits b01, needs ``saddle_bend`` samples) or ``"paper"`` (b01 = 0).
+        model: ``"full"`` (fits b01, needs ``Family.SADDLE_BEND`` samples) or ``"paper"`` (b01 = 0).
         weight_width: σ of the Gaussian weights (dimensionless strain), or ``None``; see
             :func:`sample_weights`.
         coupling_limit: ρ_max in (0, 1), or ``None`` to fit the couplings unbounded and raise
@@ -330,7 +330,7 @@ def fit_shell(
         ValueError: bad thickness, model or weight width; a required family without converged
             samples (named); a parameter the samples do not determine (named).
         IndefiniteFitError: only with ``coupling_limit=None``: ``s01² ≥ s00 s11`` (family
-            ``biaxial_stretch``) or ``b01² ≥ b00 b11`` (family ``saddle_bend``) at the optimum.
+            ``Family.BIAXIAL_STRETCH``) or ``b01² ≥ b00 b11`` (``Family.SADDLE_BEND``) at the optimum.
     """
     h = _thickness(thickness)
     if model not in MODELS:

@@ -247,7 +247,7 @@ def _rve_constraints(model: RodModel, frame: np.ndarray) -> LinearConstraints:
 def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions | None = None) -> SampleResult:
     """Tile ``relaxed`` on the sample's surface and minimise the yarn energy under ``C_RVE``.
 
-    A uniaxial-tension sample (``weft_uniaxial``, ``warp_uniaxial``) also minimises over the free
+    A uniaxial-tension sample (a family with a ``uniaxial_axis``) also minimises over the free
     transverse stretch μ (see :func:`_solve_uniaxial`); its result's spec carries the μ found."""
     start = time.perf_counter()
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
