@@ -272,6 +272,16 @@ def test_a_heavier_fabric_at_the_same_counts_is_stiffer():
         assert heavy[key] > light[key], key
 
 
+def test_a_uniaxial_sample_that_does_not_converge_warns_once_with_its_reason():
+    relaxed = fitted().relaxed
+    spec = [s for s in fitted().samples if s.family == "weft_uniaxial"][0].spec
+    with pytest.warns(ConvergenceWarning) as caught:
+        stuck = solve_sample(relaxed, SampleSpec.at(spec.family, spec.parameter), QuasiStaticOptions(max_iterations=1))
+    assert not stuck.converged
+    messages = [str(w.message) for w in caught if issubclass(w.category, ConvergenceWarning)]
+    assert len(messages) == 1 and messages[0].startswith("uniaxial sample weft_uniaxial")
+
+
 def test_samples_that_do_not_converge_are_listed_and_excluded(tmp_path):
     base = fitted()
     relaxed = base.relaxed

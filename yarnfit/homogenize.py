@@ -433,7 +433,11 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
             state.node_position[:, 1 - axis] *= math.sqrt((1.0 + 2.0 * free) / (1.0 + 2.0 * nearest))
             state.edge_quaternion[:] = aligned_frames(tiled.model, state.node_position, previous.edge_quaternion)
         try:
-            result = QuasiStaticSolver(tiled.model, options).solve(state, constraints=tiled.constraints)
+            with warnings.catch_warnings():
+                # A trial E⊥ that does not converge is a point the search does without (or
+                # approaches by halves); the warning below gives the sample's verdict.
+                warnings.simplefilter("ignore", ConvergenceWarning)
+                result = QuasiStaticSolver(tiled.model, options).solve(state, constraints=tiled.constraints)
             iterations += result.iterations
         except TilingReachError:
             # The solver's steps ran beyond the tiles mapped (a strongly squeezed width): this
@@ -474,7 +478,7 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
             if xs[0] <= low:
                 # At the interval's end: a plateau (the transverse direction has gone slack, as a
                 # jersey's wales do) is a minimum; still falling, the fabric would contract further.
-                found = plateau = bool(ys[1] - ys[0] <= PLATEAU_RTOL * abs(ys[0]))
+                found = plateau = bool(np.isfinite(ys[:2]).all() and ys[1] - ys[0] <= PLATEAU_RTOL * abs(ys[0]))
                 break
             trial = max(low, xs[0] - 2.0 * (xs[1] - xs[0]))  # not yet bracketed: step on down
         else:
@@ -498,6 +502,12 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
     free = min(solved, key=lambda e: energy(e))
     result, area = solved[free]
     converged = bool(found and usable(free) and (free - low > FREE_STRAIN_TOLERANCE or plateau))
+    if not converged:
+        why = ("the solve at the best free strain did not converge" if not usable(free) else
+               "the free strain reached the search interval's end" if found else "the search ran out of solves")
+        warnings.warn(f"uniaxial sample {spec.family} {spec.parameter:+.3g} did not converge: {why} "
+                      f"(E⊥ = {free:.4g}, {iterations} iterations)"
+                      + ("" if result is None else f": {result.residual}"), ConvergenceWarning, stacklevel=3)
     return SampleResult(
         spec=SampleSpec(spec.family, form(free), spec.II, spec.parameter),
         energy_density=result.energy.internal / area,
