@@ -12,6 +12,7 @@ import rerun as rr
 
 import yarnfit.validate.swatch as swatch_module
 from yarnfit.engine import Rod, RodMaterial, RodModel
+from yarnfit.engine.tiling import cut_rectangle
 from yarnfit.validate.swatch import STRAIN_TIMELINE, cut_swatch, stretch_repeat, stretch_swatch
 
 E = 1e9  # Pa
@@ -42,6 +43,27 @@ def axial_force(strain: float, hardening: float = 0.0) -> float:
     """Yarn tension at axial strain ε: N = A (E ε + ½ k ε²) (docs/design.md §4), N."""
     area = math.pi * RADIUS**2
     return area * (E * strain + 0.5 * hardening * strain**2)
+
+
+def test_cut_rectangle_keeps_the_yarn_runs_inside():
+    # Straight wefts at y = ±PY/4, ±3PY/4 about the repeat's centre: a 3 PX × 2 PY cut holds the
+    # four, each one run spanning the cut's length (nodes PX/8 apart) at its own height; turned by
+    # 90° about z the same yarns run along y; runs shorter than the minimum length are dropped, and
+    # a cut narrower than the gap between the yarns holds none.
+    model, _ = straight_weft_repeat()
+    identity = np.eye(3)
+    pieces = cut_rectangle(model, model.node_rest_position, identity, 3 * PX, 2 * PY, min_length=PX)
+    assert sorted(round(float(p.points[0, 1]) / PY, 6) for p in pieces) == [-0.75, -0.25, 0.25, 0.75]
+    for piece in pieces:
+        assert np.all(np.abs(piece.points[:, 0]) <= 1.5 * PX) and np.ptp(piece.points[:, 0]) == pytest.approx(3 * PX)
+        np.testing.assert_allclose(piece.rest_lengths, PX / NODES, rtol=1e-12)
+        assert piece.frames.shape == (len(piece.points) - 1, 4) and piece.radius == RADIUS
+    quarter = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    turned = cut_rectangle(model, model.node_rest_position, quarter, 2 * PY, 3 * PX, min_length=PX)
+    assert len(turned) == 4
+    assert all(np.ptp(p.points[:, 0]) < 1e-12 and np.ptp(p.points[:, 1]) == pytest.approx(3 * PX) for p in turned)
+    assert cut_rectangle(model, model.node_rest_position, identity, 3 * PX, 2 * PY, min_length=4 * PX) == []
+    assert cut_rectangle(model, model.node_rest_position, quarter, PY / 4, 3 * PX, min_length=PX) == []
 
 
 @pytest.mark.parametrize("hardening", [0.0, 5e9])

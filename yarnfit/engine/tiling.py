@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .model import RodModel
+from .rotations import rotate_frames
 
 # A map's rotation must be orthonormal to this (they come from polar decompositions).
 ORTHONORMAL_TOLERANCE = 1e-9
@@ -135,3 +136,84 @@ def yarn_strips(model: RodModel, position: np.ndarray, tile=(0, 0)) -> list[np.n
         rotation, translation = node_maps(model, nodes, tiles)
         strips.append(np.einsum("nij,nj->ni", rotation, position[nodes]) + translation)
     return strips
+
+
+# -- cutting a piece of fabric out of a flat repeat ----------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class YarnPiece:
+    """A run of one yarn inside a cut: ``points (n, 3)`` (m), ``rest_lengths (n − 1,)`` (m),
+    ``frames (n − 1, 4)`` (the rest frames, turned as the points) and the yarn's ``radius`` (m)."""
+
+    points: np.ndarray
+    rest_lengths: np.ndarray
+    frames: np.ndarray
+    radius: float
+
+
+def cut_rectangle(model: RodModel, position: np.ndarray, rotation: np.ndarray, length: float, width: float,
+                  min_length: float) -> list[YarnPiece]:
+    """The yarns of a flat periodic ``model`` at ``position`` (its rest frames taken as the
+    frames) inside a ``length`` × ``width`` rectangle (m) about the repeat's centre at its mean
+    height: every copy of every yarn unrolled over the periods the rectangle spans, turned by
+    ``rotation`` (3 × 3, world from material coordinates: the rectangle's sides lie along the
+    world x and y), and cut into runs of consecutive nodes inside it. Runs of fewer than 3 nodes or
+    under ``min_length`` (m) of rest length are dropped."""
+    lattice = model.lattice
+    centre = 0.5 * (lattice[0] + lattice[1])
+    centre[2] = float(np.mean(position[:, 2]))
+    corners = np.array([[su * length / 2, sv * width / 2, 0.0] for su in (-1, 1) for sv in (-1, 1)]) @ rotation
+    half_extent = np.abs(corners[:, :2]).max(axis=0)
+    pieces = []
+    for points, rest, frames, radius, _ in _unrolled_yarns(model, position - centre, half_extent):
+        world = points @ rotation.T
+        inside = (np.abs(world[:, 0]) <= length / 2) & (np.abs(world[:, 1]) <= width / 2)
+        if not inside.any():
+            continue
+        # Runs of consecutive inside nodes.
+        flags = np.concatenate([[False], inside, [False]]).astype(np.int8)
+        starts = np.flatnonzero(np.diff(flags) == 1)
+        stops = np.flatnonzero(np.diff(flags) == -1)
+        for a, b in zip(starts, stops):
+            if b - a < 3 or rest[a:b - 1].sum() < min_length:
+                continue
+            pieces.append(YarnPiece(world[a:b], rest[a:b - 1], rotate_frames(rotation, frames[a:b - 1]), radius))
+    return pieces
+
+
+def _unrolled_yarns(model: RodModel, position: np.ndarray, half_extent: np.ndarray):
+    """Yield ``(points (n, 3), rest_lengths (n−1,), frames (n−1, 4), radius, material)`` of every copy
+    of every yarn of a flat periodic ``model`` that passes within ``half_extent`` (x, y half sizes,
+    m) of the origin, unrolled over as many periods as that takes (open polylines)."""
+    lattice = model.lattice
+    px, py = np.linalg.norm(lattice[0]), np.linalg.norm(lattice[1])
+    reach = np.ceil(half_extent / np.array([px, py])).astype(int) + 2
+    for r in range(model.n_rods):
+        nodes = np.arange(model.rod_node_start[r], model.rod_node_start[r + 1])
+        edges = np.arange(model.rod_edge_start[r], model.rod_edge_start[r + 1])
+        period = model.rod_period[r]
+        if not model.rod_closed[r] or not np.any(period):
+            raise ValueError(f"rod {r}: only closed yarns that run through the tiles can be unrolled")
+        if period[0] != 0 and period[1] != 0:
+            raise ValueError(f"rod {r}: a yarn must run along a tile vector, its period is {period.tolist()}")
+        axis = 0 if period[0] != 0 else 1
+        step = int(abs(period[axis]))
+        chain = model.edge_chain_tile[edges]
+        n = len(nodes)
+        # Copies: along the yarn's axis, `step` distinct phases; across it, every tile in reach.
+        across = 1 - axis
+        periods = int(np.ceil((reach[axis] + 1) / step)) + 1
+        m = np.arange(-periods, periods + 1)
+        for phase in range(step):
+            for t in range(-reach[across], reach[across] + 1):
+                tile = np.zeros(2, dtype=np.int64)
+                tile[axis] = phase
+                tile[across] = t
+                cells = (chain[None, :, :] + m[:, None, None] * period[None, None, :] + tile).reshape(-1, 2)
+                points = np.tile(position[nodes], (len(m), 1)) + cells @ lattice
+                if np.all(np.abs(points[:, across]) > half_extent[across] + 2 * max(px, py)):
+                    continue
+                rest = np.tile(model.edge_rest_length[edges], len(m))[:-1]
+                frames = np.tile(model.edge_rest_quaternion[edges], (len(m), 1))[:-1]
+                yield points, rest, frames, float(model.edge_radius[edges[0]]), n

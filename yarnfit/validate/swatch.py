@@ -77,7 +77,7 @@ from ..engine import (
     RodState,
     energy_gradient,
 )
-from ..engine.rotations import rotate_frames
+from ..engine.tiling import cut_rectangle
 from ..material_file import MaterialFile
 from ..record import Recording, folded_panels, markdown_table
 from . import DIRECTIONS, SceneResult
@@ -139,43 +139,6 @@ class Swatch:
     angle_deg: float
 
 
-def _unrolled_yarns(model: RodModel, position: np.ndarray, half_extent: np.ndarray):
-    """Yield ``(points (n, 3), rest_lengths (n−1,), frames (n−1, 4), radius, material)`` of every copy
-    of every yarn of a flat periodic ``model`` that passes within ``half_extent`` (x, y half sizes,
-    m) of the origin, unrolled over as many periods as that takes (open polylines)."""
-    lattice = model.lattice
-    px, py = np.linalg.norm(lattice[0]), np.linalg.norm(lattice[1])
-    reach = np.ceil(half_extent / np.array([px, py])).astype(int) + 2
-    for r in range(model.n_rods):
-        nodes = np.arange(model.rod_node_start[r], model.rod_node_start[r + 1])
-        edges = np.arange(model.rod_edge_start[r], model.rod_edge_start[r + 1])
-        period = model.rod_period[r]
-        if not model.rod_closed[r] or not np.any(period):
-            raise ValueError(f"rod {r}: only closed yarns that run through the tiles can be unrolled")
-        if period[0] != 0 and period[1] != 0:
-            raise ValueError(f"rod {r}: a yarn must run along a tile vector, its period is {period.tolist()}")
-        axis = 0 if period[0] != 0 else 1
-        step = int(abs(period[axis]))
-        chain = model.edge_chain_tile[edges]
-        n = len(nodes)
-        # Copies: along the yarn's axis, `step` distinct phases; across it, every tile in reach.
-        across = 1 - axis
-        periods = int(np.ceil((reach[axis] + 1) / step)) + 1
-        m = np.arange(-periods, periods + 1)
-        for phase in range(step):
-            for t in range(-reach[across], reach[across] + 1):
-                tile = np.zeros(2, dtype=np.int64)
-                tile[axis] = phase
-                tile[across] = t
-                cells = (chain[None, :, :] + m[:, None, None] * period[None, None, :] + tile).reshape(-1, 2)
-                points = np.tile(position[nodes], (len(m), 1)) + cells @ lattice
-                if np.all(np.abs(points[:, across]) > half_extent[across] + 2 * max(px, py)):
-                    continue
-                rest = np.tile(model.edge_rest_length[edges], len(m))[:-1]
-                frames = np.tile(model.edge_rest_quaternion[edges], (len(m), 1))[:-1]
-                yield points, rest, frames, float(model.edge_radius[edges[0]]), n
-
-
 def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | RodMaterial, *, direction: str = "weft",
                gauge: float, width: float, clamp: float) -> Swatch:
     """Cut a strip from the flat periodic ``model`` at ``position`` (its relaxed rest state, frames
@@ -190,35 +153,19 @@ def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | Rod
     c, s = math.cos(angle), math.sin(angle)
     # World (x along the pull u, y across v) from material coordinates, about the repeat's centre.
     rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    lattice = model.lattice
-    centre = 0.5 * (lattice[0] + lattice[1])
-    centre[2] = float(np.mean(position[:, 2]))
     length = gauge + 2.0 * clamp
-    corners = np.array([[su * length / 2, sv * width / 2, 0.0] for su in (-1, 1) for sv in (-1, 1)]) @ rotation
-    half_extent = np.abs(corners[:, :2]).max(axis=0)
+    lattice = model.lattice
     min_piece = MIN_PIECE_FRACTION * min(np.linalg.norm(lattice[0]), np.linalg.norm(lattice[1]))
     rods = []
-    for points, rest, frames, radius, _ in _unrolled_yarns(model, position - centre, half_extent):
-        world = points @ rotation.T
-        inside = (np.abs(world[:, 0]) <= length / 2) & (np.abs(world[:, 1]) <= width / 2)
-        if not inside.any():
-            continue
-        # Runs of consecutive inside nodes.
-        flags = np.concatenate([[False], inside, [False]]).astype(np.int8)
-        starts = np.flatnonzero(np.diff(flags) == 1)
-        stops = np.flatnonzero(np.diff(flags) == -1)
-        for a, b in zip(starts, stops):
-            if b - a < 3 or rest[a:b - 1].sum() < min_piece:
-                continue
-            pts = world[a:b]
-            frames_world = rotate_frames(rotation, frames[a:b - 1])
-            x = pts[:, 0]
-            slack = CLAMP_SLACK * length
-            pinned = np.flatnonzero((x <= -gauge / 2 + slack) | (x >= gauge / 2 - slack))
-            both = np.flatnonzero(np.isin(np.arange(b - a - 1), pinned) & np.isin(np.arange(1, b - a), pinned))
-            rods.append(Rod(points=pts, radius=radius, material=material, frames=frames_world,
-                            rest_lengths=rest[a:b - 1], pinned_nodes=pinned.tolist(), pinned_frames=both.tolist(),
-                            name=f"piece {len(rods)}"))
+    for piece in cut_rectangle(model, position, rotation, length, width, min_piece):
+        x = piece.points[:, 0]
+        slack = CLAMP_SLACK * length
+        pinned = np.flatnonzero((x <= -gauge / 2 + slack) | (x >= gauge / 2 - slack))
+        n = len(x)
+        both = np.flatnonzero(np.isin(np.arange(n - 1), pinned) & np.isin(np.arange(1, n), pinned))
+        rods.append(Rod(points=piece.points, radius=piece.radius, material=material, frames=piece.frames,
+                        rest_lengths=piece.rest_lengths, pinned_nodes=pinned.tolist(), pinned_frames=both.tolist(),
+                        name=f"piece {len(rods)}"))
     if not rods:
         raise ValueError("the strip contains no yarn")
     built = RodModel.from_rods(rods)
