@@ -103,6 +103,9 @@ def test_cli_validate_writes_recordings_and_a_summary(tmp_path):
         assert summary["wall_seconds"][scene] > 0
     assert summary["bias_softness"]["8x5"]["bias_softer"]  # the paper's check (a) on the test woven
     assert "stretch: done" in done.stderr  # progress
+    checks = {v["check"]: v for v in summary["verdicts"]}  # one line each, printed and kept
+    assert checks["sphere drape settled"]["passed"] and checks["wall drape settled"]["passed"]
+    assert "pass  sphere drape settled" in done.stdout
 
 
 @pytest.mark.parametrize("case", ["missing keys", "old version", "reference without units", "unknown scene"])

@@ -153,6 +153,8 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--reference", metavar="CURVES.csv",
                           help="measured stretch curves to compare with (CSV with units in the header; see README)")
     validate.add_argument("--logs", default="logs", metavar="DIR", help="where recordings and summary.json go")
+    validate.add_argument("--strict", action="store_true",
+                          help="exit 1 when a check misses its criterion (each is printed as pass, FAIL or n/a)")
     return parser
 
 
@@ -531,6 +533,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from .validate import SCENES as VALIDATION_SCENES
     from .validate.reference import read_reference
     from .validate.suite import run_suite
+    from .validate.verdicts import Verdict
 
     scenes = [scene.strip() for scene in args.scenes.split(",") if scene.strip()]
     unknown = [scene for scene in scenes if scene not in VALIDATION_SCENES]
@@ -547,6 +550,13 @@ def cmd_validate(args: argparse.Namespace) -> int:
     print(f"validated {summary['material']['name']}: {path}")
     for scene, seconds in summary["wall_seconds"].items():
         print(f"  {scene:<8} {seconds:7.1f} s  {path.parent / (scene + '.rrd')}")
+    results = [Verdict(**v) for v in summary["verdicts"]]
+    for verdict in results:
+        print(f"  {verdict.line()}")
+    failed = [v.check for v in results if v.passed is False]
+    if failed and args.strict:
+        print(f"yarnfit validate: failed: {', '.join(failed)}", file=sys.stderr)
+        return EXIT_FAILED
     return 0
 
 

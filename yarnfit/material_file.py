@@ -186,6 +186,13 @@ class MaterialFile:
         name = inputs.get("fabric")
         return name if isinstance(name, str) and name.strip() else Path(self.where).stem
 
+    @property
+    def family(self) -> str | None:
+        """The pattern family the fabric was fitted with (``inputs.family``: woven, knit, other),
+        or None when the file does not say."""
+        family = self._block("inputs").get("family")
+        return family if isinstance(family, str) else None
+
     def areal_density(self) -> tuple[float, str] | None:
         """``(kg/m², key)`` of the fabric: ``inputs.areal_density_kg_m2`` if the fabric was given
         one, else the relaxed repeat's ``yarn.areal_density_kg_m2``; ``None`` if neither is there."""

@@ -20,6 +20,7 @@ from typing import Callable
 from .. import __version__
 from ..material_file import MaterialFile
 from . import SCENES
+from .verdicts import verdicts
 
 
 # How far past the shell's last measured strain a yarn point may lie and still be compared
@@ -33,14 +34,6 @@ SHELL_RANGE_SLACK = 0.06
 LIKE_SWATCH_LENGTH = 0.08
 LIKE_SWATCH_RESOLUTION = {False: 25, True: 9}
 FINE_MESH_RESOLUTION = 97
-
-
-def check_material_file(path: str | Path) -> dict:
-    """Read a material file and check it is one this version can validate; returns its data.
-    Raises :class:`~yarnfit.material_file.IncompatibleMaterial` (one line, naming the problem)."""
-    file = MaterialFile.read(path)
-    file.check_version()
-    return file.data
 
 
 def _runner(scene: str) -> Callable:
@@ -62,7 +55,8 @@ def _runner(scene: str) -> Callable:
 def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, logs: str | Path = "logs",
               reference=None, progress: Callable[[str], None] | None = None) -> tuple[dict, Path]:
     """Run ``scenes`` on the material file; returns the summary and the path of ``summary.json``."""
-    check_material_file(material_path)
+    file = MaterialFile.read(material_path)
+    file.check_version()
     from ..mujoco.scenes import ClothMaterial
 
     material = ClothMaterial.from_file(material_path)
@@ -97,6 +91,7 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
             "fab_8x5": compare_shell_yarn(summary["scenes"]["stretch"], summary["scenes"]["yarn"]),
             "shell_strips": like["strips"],
         }
+    summary["verdicts"] = [verdict.to_dict() for verdict in verdicts(summary, file.family)]
     path = folder / "summary.json"
     path.write_text(json.dumps(summary, indent=2, default=_jsonable) + "\n")
     return summary, path

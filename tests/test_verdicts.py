@@ -1,0 +1,72 @@
+"""The suite's verdicts (yarnfit.validate.verdicts) on hand-made summaries, and `--strict`."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+
+import yarnfit.validate.suite as suite_module
+from yarnfit.cli import main
+from yarnfit.validate.verdicts import SHELL_YARN_TOLERANCE, verdicts
+
+SUMMARY = {
+    "scenes": {
+        "stretch": {"strips": {"8x5_weft": {"settled": [True, True]}, "8x5_bias": {"settled": [True, False]}}},
+        "sphere": {"settled": True, "bad_qacc": 0, "simulated_s": 1.2},
+        "wall": {"settled": False, "bad_qacc": 0, "simulated_s": 3.0},
+        "body": {"passed": True, "stable": True, "max_penetration_m": 0.004, "max_distance_m": 0.1,
+                 "penetration_target_m": 0.01, "distance_target_m": 0.15},
+    },
+    "bias_softness": {"8x5": {"bias_over_weakest_axis": [0.4, 0.6], "bias_softer": True}},
+    "shell_vs_yarn": {"same_proportions": {
+        "weft": {"strain": [0.02, 0.05], "force_relative_difference": [0.05, -0.12]},
+        "warp": {"strain": [0.02, 0.05], "force_relative_difference": [0.19, 0.1]},
+    }},
+}
+
+
+def by_check(summary, family="woven"):
+    return {v.check: v for v in verdicts(summary, family)}
+
+
+def test_each_check_against_its_criterion():
+    v = by_check(SUMMARY)
+    assert v["stretch strips settled"].passed is False and "8x5_bias" in v["stretch strips settled"].figure
+    assert v["bias softer (8x5 strips)"].passed is True
+    assert v["shell vs yarn swatch"].passed is True  # worst 19 %, warp at 2 %
+    assert "19.0 %" in v["shell vs yarn swatch"].figure and "warp at 2 %" in v["shell vs yarn swatch"].figure
+    assert v["sphere drape settled"].passed is True and v["wall drape settled"].passed is False
+    assert v["garments stayed on"].passed is True
+    assert all(line.startswith(("pass", "FAIL", "n/a")) for line in (x.line() for x in v.values()))
+
+
+def test_the_shell_yarn_criterion_is_its_tolerance():
+    summary = copy.deepcopy(SUMMARY)
+    summary["shell_vs_yarn"]["same_proportions"]["weft"]["force_relative_difference"][1] = -1.001 * SHELL_YARN_TOLERANCE
+    assert by_check(summary)["shell vs yarn swatch"].passed is False
+
+
+def test_the_bias_criterion_applies_to_wovens_only():
+    summary = copy.deepcopy(SUMMARY)
+    summary["bias_softness"]["8x5"]["bias_softer"] = False
+    assert by_check(summary, "woven")["bias softer (8x5 strips)"].passed is False
+    knit = by_check(summary, "knit")["bias softer (8x5 strips)"]
+    assert knit.passed is None and knit.line().startswith("n/a")
+
+
+def test_checks_of_scenes_not_run_are_not_listed():
+    assert verdicts({"scenes": {"sphere": SUMMARY["scenes"]["sphere"]}}, "woven")[0].check == "sphere drape settled"
+    assert len(verdicts({"scenes": {}}, "woven")) == 0
+
+
+@pytest.mark.parametrize("strict, code", [(False, 0), (True, 1)])
+def test_strict_exits_1_when_a_check_fails(strict, code, monkeypatch, tmp_path, capsys):
+    summary = {"material": {"name": "woven"}, "wall_seconds": {"wall": 1.0},
+               "verdicts": [v.to_dict() for v in verdicts(SUMMARY, "woven")]}
+    monkeypatch.setattr(suite_module, "run_suite", lambda *a, **k: (summary, tmp_path / "summary.json"))
+    argv = ["validate", str(tmp_path / "m.json"), "--scenes", "wall"] + (["--strict"] if strict else [])
+    assert main(argv) == code
+    out, err = capsys.readouterr()
+    assert "FAIL  wall drape settled" in out and "pass  garments stayed on" in out
+    assert ("failed: stretch strips settled, wall drape settled" in err) == strict

@@ -1,0 +1,80 @@
+"""Verdicts: each of the suite's checks against its criterion, in one line.
+
+``yarnfit validate`` prints them after the run, ``summary.json`` carries them under ``verdicts``, and
+``--strict`` exits 1 when one fails. A check whose scenes did not run is not listed; one that does
+not apply to the fabric (the bias criterion for a knit) is listed as not applicable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+# The shell's force per width against the explicit yarn swatch's, at the swatch's strains (up to
+# 10 %), strips of the swatch's proportions: the product's target (issue 6, kept by issue 14).
+SHELL_YARN_TOLERANCE = 0.20
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One check: its name, whether it ``passed`` (``None``: does not apply to this fabric), the
+    measured figure and the criterion, both as text."""
+
+    check: str
+    passed: bool | None
+    figure: str
+    criterion: str
+
+    def line(self) -> str:
+        mark = {True: "pass", False: "FAIL", None: "n/a "}[self.passed]
+        return f"{mark}  {self.check}: {self.figure} ({self.criterion})"
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def verdicts(summary: dict, family: str | None) -> list[Verdict]:
+    """The verdicts of a suite ``summary`` (:func:`yarnfit.validate.suite.run_suite`) for a fabric
+    of pattern ``family`` (``"woven"``, ``"knit"``, ``"other"`` or None when unknown)."""
+    scenes = summary.get("scenes", {})
+    out = []
+    if "stretch" in scenes:
+        strips = scenes["stretch"]["strips"]
+        unsettled = sorted(name for name, strip in strips.items() if not all(strip["settled"]))
+        out.append(Verdict("stretch strips settled", not unsettled,
+                           f"{len(strips) - len(unsettled)}/{len(strips)} strips at rest at every level"
+                           + (f" (not: {', '.join(unsettled)})" if unsettled else ""),
+                           "every level held until at rest"))
+    for size, bias in summary.get("bias_softness", {}).items():
+        worst = max(bias["bias_over_weakest_axis"]) if bias["bias_over_weakest_axis"] else float("nan")
+        applies = family == "woven"
+        out.append(Verdict(f"bias softer ({size} strips)", bool(bias["bias_softer"]) if applies else None,
+                           f"bias / weaker axis up to {worst:.3g}",
+                           "a woven's bias is softer than weft and warp" if applies
+                           else f"a criterion for wovens; this fabric is {family or 'of unknown family'}"))
+    comparison = summary.get("shell_vs_yarn", {}).get("same_proportions")
+    if comparison is not None:
+        differences = [(abs(d), direction, strain) for direction, c in comparison.items()
+                       for d, strain in zip(c["force_relative_difference"], c["strain"])]
+        if differences:
+            worst, direction, strain = max(differences)
+            out.append(Verdict("shell vs yarn swatch", worst <= SHELL_YARN_TOLERANCE,
+                               f"force per width off by up to {100 * worst:.1f} % ({direction} at "
+                               f"{100 * strain:g} %)", f"within {100 * SHELL_YARN_TOLERANCE:g} %"))
+        else:
+            out.append(Verdict("shell vs yarn swatch", False, "no strain of the swatch within the shell's pull",
+                               f"within {100 * SHELL_YARN_TOLERANCE:g} %"))
+    for scene in ("sphere", "wall"):
+        if scene in scenes:
+            drape = scenes[scene]
+            settled = bool(drape["settled"]) and drape["bad_qacc"] == 0
+            out.append(Verdict(f"{scene} drape settled", settled,
+                               f"{'at rest' if drape['settled'] else 'still moving'} after {drape['simulated_s']:.2f} s, "
+                               f"{drape['bad_qacc']} bad-QACC warnings", "at rest, no solver warning"))
+    if "body" in scenes:
+        body = scenes["body"]
+        out.append(Verdict("garments stayed on", bool(body["passed"]),
+                           f"stable {body['stable']}, penetration {body['max_penetration_m']:.3g} m, "
+                           f"distance {body['max_distance_m']:.3g} m",
+                           f"stable, penetration < {body['penetration_target_m']:g} m, "
+                           f"distance < {body['distance_target_m']:g} m"))
+    return out
