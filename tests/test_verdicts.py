@@ -41,6 +41,13 @@ def test_each_check_against_its_criterion():
     assert all(line.startswith(("pass", "FAIL", "n/a")) for line in (x.line() for x in v.values()))
 
 
+def test_a_yarn_point_that_did_not_converge_is_named():
+    summary = copy.deepcopy(SUMMARY)
+    summary["scenes"]["yarn"] = {"directions": {"warp": {"points": [
+        {"strain": 0.0, "converged": True}, {"strain": 0.05, "converged": False}]}}}
+    assert "yarn solve not converged: warp at 5 %" in by_check(summary)["shell vs yarn swatch"].figure
+
+
 def test_the_shell_yarn_criterion_is_its_tolerance():
     summary = copy.deepcopy(SUMMARY)
     summary["shell_vs_yarn"]["same_proportions"]["weft"]["force_relative_difference"][1] = -1.001 * SHELL_YARN_TOLERANCE
