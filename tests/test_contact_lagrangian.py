@@ -30,6 +30,15 @@ def crossing(overlap: float) -> tuple[RodModel, np.ndarray]:
     return model, np.array(model.node_rest_position)
 
 
+def queried():
+    """The 10 %-overlap crossing, default options, its policy and a first query at rest:
+    ``(model, position, options, lagrangian, contacts)``."""
+    model, position = crossing(0.1)
+    options = QuasiStaticOptions()
+    lagrangian = ContactLagrangian(model, options)
+    return model, position, options, lagrangian, lagrangian.query(position)
+
+
 def balanced(penetration: float, separation: float = 0.0, force: float = 0.0) -> Residual:
     return Residual(force=force, torque=0.0, energy_change=0.0, penetration=penetration, separation=separation)
 
@@ -84,10 +93,7 @@ def test_multipliers_are_remembered_per_pair_across_queries():
 
 
 def test_updates_wait_for_balance_and_tighten_tenfold():
-    model, position = crossing(0.1)
-    options = QuasiStaticOptions()
-    lagrangian = ContactLagrangian(model, options)
-    contacts = lagrangian.query(position)
+    model, position, options, lagrangian, contacts = queried()
     n = contacts.start[-1]
     deep = 10 * options.penetration_tolerance
     assert not lagrangian.due(balanced(deep, force=2 * MULTIPLIER_UPDATE_RESIDUAL))  # not balanced yet
@@ -101,10 +107,7 @@ def test_updates_wait_for_balance_and_tighten_tenfold():
 
 
 def test_penalties_stiffen_only_where_updates_stall():
-    model, position = crossing(0.1)
-    options = QuasiStaticOptions()
-    lagrangian = ContactLagrangian(model, options)
-    contacts = lagrangian.query(position)
+    model, position, options, lagrangian, contacts = queried()
     n = contacts.start[-1]
     rsum = 2 * RADIUS
     gap = np.full(n, 0.5 * rsum)  # every pair apart and unloaded ...

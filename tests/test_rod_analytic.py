@@ -148,12 +148,9 @@ def test_cantilever_large_deflection():
     assert coarse < fine < 0.4935 * LENGTH  # first-order convergence from below, as in §5
 
 
-def test_pure_twist():
-    # Reference: turning the last frame by Φ about the axis stores U = G J Φ² / (2 L_t), with
-    # L_t = (N − 1) l0 the distance between the centres of the first and last edge (the twisted
-    # length of the discrete rod). Discretely each of the N − 1 joints turns by ψ = Φ / (N − 1) and
-    # stores (2 / l0) G J sin²(ψ / 2), which equals the continuum to O(ψ²/12). No bending may leak.
-    n_edges, phi = 20, 0.5 * math.pi
+def twisted_rod(n_edges: int, phi: float):
+    """A straight rod along x, its first and last frames held and the last turned by ``phi`` (rad)
+    about the axis, solved: ``(model, result)``."""
     rod = Rod(straight_points(LENGTH, n_edges), RADIUS, MATERIAL, pinned_nodes=[0], pinned_frames=[0, n_edges - 1])
     model = RodModel.from_rods([rod])
     start = RodState.from_model(model)
@@ -162,6 +159,16 @@ def test_pure_twist():
     start.edge_quaternion = _rotate_frames(start.edge_quaternion, turn)
     result = QuasiStaticSolver(model, QuasiStaticOptions(contact=False)).solve(start, Loads.zeros(model))
     assert result.converged
+    return model, result
+
+
+def test_pure_twist():
+    # Reference: turning the last frame by Φ about the axis stores U = G J Φ² / (2 L_t), with
+    # L_t = (N − 1) l0 the distance between the centres of the first and last edge (the twisted
+    # length of the discrete rod). Discretely each of the N − 1 joints turns by ψ = Φ / (N − 1) and
+    # stores (2 / l0) G J sin²(ψ / 2), which equals the continuum to O(ψ²/12). No bending may leak.
+    n_edges, phi = 20, 0.5 * math.pi
+    model, result = twisted_rod(n_edges, phi)
     terms = energy(model, result.state)
     l0 = LENGTH / n_edges
     psi = phi / (n_edges - 1)
@@ -227,14 +234,7 @@ def test_reactions_of_a_pure_twist():
     # (the derivative of its energy (2 / l0) G J sin²(ψ / 2)): the held end frames feel it with
     # opposite signs, about the rod's axis.
     n_edges, phi = 20, 0.5 * math.pi
-    rod = Rod(straight_points(LENGTH, n_edges), RADIUS, MATERIAL, pinned_nodes=[0], pinned_frames=[0, n_edges - 1])
-    model = RodModel.from_rods([rod])
-    start = RodState.from_model(model)
-    turn = np.zeros((model.n_edges, 3))
-    turn[-1] = (phi, 0.0, 0.0)
-    start.edge_quaternion = _rotate_frames(start.edge_quaternion, turn)
-    result = QuasiStaticSolver(model, QuasiStaticOptions(contact=False)).solve(start, Loads.zeros(model))
-    assert result.converged
+    model, result = twisted_rod(n_edges, phi)
     moment = GJ / (LENGTH / n_edges) * math.sin(phi / (n_edges - 1))
     np.testing.assert_allclose(result.reaction_moment[-1], [moment, 0.0, 0.0], rtol=0.0, atol=DISCRETE_RTOL * moment)
     np.testing.assert_allclose(result.reaction_moment[0], [-moment, 0.0, 0.0], rtol=0.0, atol=DISCRETE_RTOL * moment)

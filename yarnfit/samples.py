@@ -70,8 +70,10 @@ _LOWER_TENSION = "lower half of the tension levels"
 
 def _stretched(axis: int | None):
     def deformation(e: float) -> tuple[np.ndarray, np.ndarray]:
-        I = (1.0 + e) ** 2 * np.eye(2) if axis is None else np.diag([1.0, 1.0])
-        if axis is not None:
+        I = np.eye(2)
+        if axis is None:
+            I *= (1.0 + e) ** 2  # biaxial: both directions
+        else:
             I[axis, axis] = (1.0 + e) ** 2
         return I, np.zeros((2, 2))
     return deformation

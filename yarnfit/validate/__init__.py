@@ -13,6 +13,7 @@ its parser from it.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 
@@ -37,19 +38,23 @@ class SceneResult:
             value = getattr(self, f.name)
             if not f.metadata.get("summary", True) or (f.metadata.get("optional") and value is None):
                 continue
-            out[f.name] = _jsonable(value)
+            out[f.name] = jsonable(value)
         return out
 
 
-def _jsonable(value):
+def jsonable(value):
+    """``value`` with scene results summarised, NumPy arrays and scalars as lists and numbers and
+    paths as strings, recursively through dicts, lists and tuples (anything else as it is)."""
     if isinstance(value, SceneResult):
         return value.summary()
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.generic):
         return value.item()
+    if isinstance(value, Path):
+        return str(value)
     if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
+        return {k: jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     return value

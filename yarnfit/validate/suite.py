@@ -19,7 +19,7 @@ from typing import Callable
 
 from .. import __version__
 from ..material_file import MaterialFile
-from . import SCENES
+from . import SCENES, jsonable
 from .verdicts import verdicts
 
 
@@ -93,7 +93,7 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
         }
     summary["verdicts"] = [verdict.to_dict() for verdict in verdicts(summary, file.family)]
     path = folder / "summary.json"
-    path.write_text(json.dumps(summary, indent=2, default=_jsonable) + "\n")
+    path.write_text(json.dumps(jsonable(summary), indent=2) + "\n")
     return summary, path
 
 
@@ -168,15 +168,3 @@ def _interp_extend(x, xp, fp):
         slope = (fp[-1] - fp[-2]) / (xp[-1] - xp[-2])
         y[beyond] = fp[-1] + slope * (x[beyond] - xp[-1])
     return y
-
-
-def _jsonable(value):
-    import numpy as np
-
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
