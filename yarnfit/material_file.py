@@ -149,9 +149,12 @@ class MaterialFile:
     # -- reading ------------------------------------------------------------------------------
 
     @classmethod
-    def read(cls, source: str | os.PathLike | Mapping) -> "MaterialFile":
-        """The file at ``source`` (or its decoded contents, a mapping). ValueError ``<path>: ...``
-        for an unreadable file, invalid JSON or anything but a JSON object."""
+    def read(cls, source: "str | os.PathLike | Mapping | MaterialFile") -> "MaterialFile":
+        """The file at ``source`` (or its decoded contents, a mapping; a file already read is
+        returned as it is). ValueError ``<path>: ...`` for an unreadable file, invalid JSON or
+        anything but a JSON object."""
+        if isinstance(source, MaterialFile):
+            return source
         if isinstance(source, Mapping):
             return cls(dict(source), "material")
         where, data = read_json(source, "material file")

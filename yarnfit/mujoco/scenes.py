@@ -108,8 +108,10 @@ class ClothMaterial:
             raise ValueError(f"areal density must be a positive number of kg/m², got {density!r}")
 
     @classmethod
-    def from_file(cls, path: str | os.PathLike, areal_density_kg_m2: float | None = None) -> ClothMaterial:
-        """Read a material file (``yarnfit fit`` output; at least ``shell`` and an areal density).
+    def from_file(cls, path: str | os.PathLike | MaterialFile,
+                  areal_density_kg_m2: float | None = None) -> ClothMaterial:
+        """Read a material file (``yarnfit fit`` output; at least ``shell`` and an areal density;
+        a :class:`~yarnfit.material_file.MaterialFile` already read is taken as it is).
 
         The areal density is ``areal_density_kg_m2`` if given, else the file's
         ``inputs.areal_density_kg_m2``, else its ``yarn.areal_density_kg_m2`` (the relaxed

@@ -59,7 +59,7 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
     file.check_version()
     from ..mujoco.scenes import ClothMaterial
 
-    material = ClothMaterial.from_file(material_path)
+    material = ClothMaterial.from_file(file)
     folder = Path(logs) / material.name
     folder.mkdir(parents=True, exist_ok=True)
     summary = {"yarnfit_version": __version__, "material": {"file": str(material_path), "name": material.name},
@@ -72,8 +72,8 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
         if scene == "stretch" and reference is not None:
             options["reference"] = reference
         start = time.perf_counter()
-        # The yarn swatch rebuilds the fabric from the file's inputs (and names the file in its errors).
-        source = material_path if scene == "yarn" else material
+        # The yarn swatch takes the file's relaxed repeat and inputs (and names the file in its errors).
+        source = file if scene == "yarn" else material
         summary["scenes"][scene] = runner(source, **options).summary()
         summary["wall_seconds"][scene] = time.perf_counter() - start
         if progress:
