@@ -53,6 +53,11 @@ MAX_REL_STD_ERROR = 0.05
 # error 1/√(2N) = 3.5 % for N = 400; 0.12 is a 3.4σ band.
 N_TRIALS = 400
 CALIBRATION_REL = 0.12
+
+
+def fit_linear(*args, **kwargs):
+    """The linear (StVK) fit, as the material: these tests check its least squares exactly."""
+    return fit_shell(*args, membrane="linear", **kwargs)
 # Energy noise of the noisy-data tests, relative to the group's largest energy (10 J/m² membrane,
 # 0.26 J/m² bending). The smallest shear energies are ~1/2500 of the largest membrane energy, so this
 # is already ~25 % noise on them; much more and s22 would reach its floor in some trials, truncating
@@ -156,7 +161,7 @@ def noisy_energies(samples: list[SampleResult], weights: np.ndarray, rng: np.ran
 
 
 def test_full_model_recovers_a_known_material():
-    fit = fit_shell(make_samples(TRUE), H, model="full")
+    fit = fit_linear(make_samples(TRUE), H, model="full")
     for name in PARAMETER_NAMES:
         assert fit.parameters[name] == pytest.approx(getattr(TRUE, name), rel=RECOVERY_REL), name
         assert getattr(fit.material, name) == fit.parameters[name]
@@ -172,7 +177,7 @@ def test_full_model_recovers_a_known_material():
 
 def test_paper_model_recovers_a_material_with_b01_zero_without_saddle_samples():
     families = tuple(f for f in FAMILIES if f != "saddle_bend")
-    fit = fit_shell(make_samples(TRUE_PAPER, families), H, model="paper")
+    fit = fit_linear(make_samples(TRUE_PAPER, families), H, model="paper")
     assert fit.parameters["b01"] == 0.0 and fit.std_error["b01"] == 0.0
     for name in PARAMETER_NAMES:
         if name != "b01":
@@ -183,7 +188,7 @@ def test_paper_model_recovers_a_material_with_b01_zero_without_saddle_samples():
 
 
 def test_paper_model_uses_saddle_samples_when_given():
-    fit = fit_shell(make_samples(TRUE_PAPER), H, model="paper")
+    fit = fit_linear(make_samples(TRUE_PAPER), H, model="paper")
     assert fit.families["saddle_bend"]["r2"] >= 1.0 - R2_TOL
     assert fit.parameters["b00"] == pytest.approx(TRUE_PAPER.b00, rel=RECOVERY_REL)
 
@@ -255,7 +260,7 @@ def test_fit_is_the_weighted_least_squares_solution_with_its_covariance():
     exact = make_samples(TRUE)
     w = hand_weights(exact, H)
     samples = with_energies(exact, noisy_energies(exact, w, np.random.default_rng(11)))
-    fit = fit_shell(samples, H, model="full")
+    fit = fit_linear(samples, H, model="full")
     np.testing.assert_allclose(fit.weights, w, rtol=ROUND_OFF_REL)
 
     D = design_matrix(samples, H)
@@ -292,7 +297,7 @@ def test_fit_is_the_weighted_least_squares_solution_with_its_covariance():
 def test_true_parameters_lie_within_a_few_standard_errors_of_a_noisy_fit():
     exact = make_samples(TRUE)
     w = hand_weights(exact, H)
-    fit = fit_shell(with_energies(exact, noisy_energies(exact, w, np.random.default_rng(2024))), H)
+    fit = fit_linear(with_energies(exact, noisy_energies(exact, w, np.random.default_rng(2024))), H)
     for name in PARAMETER_NAMES:
         true, value, error = getattr(TRUE, name), fit.parameters[name], fit.std_error[name]
         assert 0.0 < error <= MAX_REL_STD_ERROR * abs(true), (name, error)
@@ -305,7 +310,7 @@ def test_standard_errors_match_the_scatter_of_repeated_noisy_fits():
     rng = np.random.default_rng(7)
     estimates, variances = [], []
     for _ in range(N_TRIALS):
-        fit = fit_shell(with_energies(exact, noisy_energies(exact, w, rng)), H)
+        fit = fit_linear(with_energies(exact, noisy_energies(exact, w, rng)), H)
         estimates.append([fit.parameters[n] for n in PARAMETER_NAMES])
         variances.append([fit.std_error[n] ** 2 for n in PARAMETER_NAMES])
     scatter = np.std(estimates, axis=0, ddof=1)
@@ -317,7 +322,7 @@ def test_too_few_samples_give_nan_standard_errors_and_strict_json():
     # One sample per family: n = p = 4 in each group, no degrees of freedom left.
     samples = [s for s in make_samples(TRUE, CORE_FAMILIES) if s.parameter in (LARGEST[s.family],)]
     assert len(samples) == len(CORE_FAMILIES)
-    fit = fit_shell(samples, H)
+    fit = fit_linear(samples, H)
     assert all(math.isnan(v) for v in fit.std_error.values())
     for name in PARAMETER_NAMES:
         assert fit.parameters[name] == pytest.approx(getattr(TRUE, name), rel=RECOVERY_REL), name
@@ -334,7 +339,7 @@ def test_biaxial_energies_far_below_the_uniaxial_sum_give_an_indefinite_membrane
     # (s00 + s11)²/4 > s00 s11 whenever s00 ≠ s11.
     samples = make_samples(TRUE, CORE_FAMILIES, energy=lambda family, W: 1e-3 * W if family == "biaxial_stretch" else W)
     with pytest.raises(IndefiniteFitError, match=r"s01² = .* >= s00·s11 .* biaxial_stretch") as info:
-        fit_shell(samples, H, coupling_limit=None)
+        fit_linear(samples, H, coupling_limit=None)
     assert info.value.family == "biaxial_stretch"
     assert isinstance(info.value, ValueError)
     assert info.value.parameters["s01"] < 0.0
@@ -346,10 +351,10 @@ def test_saddle_energies_far_above_the_uniaxial_sum_give_an_indefinite_bending_b
     samples = make_samples(TRUE, CORE_FAMILIES,
                            energy=lambda family, W: INDEFINITE_FACTOR[family] * W if family == "saddle_bend" else W)
     with pytest.raises(IndefiniteFitError, match=r"b01² = .* >= b00·b11 .* saddle_bend") as info:
-        fit_shell(samples, H, model="full", coupling_limit=None)
+        fit_linear(samples, H, model="full", coupling_limit=None)
     assert info.value.family == "saddle_bend"
     # The paper model cannot be indefinite in bending: b01 = 0.
-    fit_shell(samples, H, model="paper", coupling_limit=None)
+    fit_linear(samples, H, model="paper", coupling_limit=None)
 
 
 def reference_bounded_fit(samples, thickness, group_columns, coupling, limit):
@@ -392,7 +397,7 @@ INDEFINITE_FACTOR = {"biaxial_stretch": 1e-3, "saddle_bend": 10.0}
                                               ("saddle_bend", ("b00", "b01", "b11"))])
 def test_a_coupling_the_data_push_past_positive_definite_ends_on_its_bound(family, coupling):
     samples = make_samples(TRUE, CORE_FAMILIES, energy=lambda f, W: INDEFINITE_FACTOR[family] * W if f == family else W)
-    fit = fit_shell(samples, H)
+    fit = fit_linear(samples, H)
     d0, c, d1 = (fit.parameters[n] for n in coupling)
     assert fit.active_bounds == [coupling[1]]
     assert abs(c) / math.sqrt(d0 * d1) == pytest.approx(COUPLING_LIMIT, rel=ROUND_OFF_REL)
@@ -416,13 +421,13 @@ def test_the_coupling_limit_must_be_a_fraction():
     samples = make_samples(TRUE)
     for bad in (0.0, 1.0, 1.5, -0.5):
         with pytest.raises(ValueError, match="coupling_limit must be in"):
-            fit_shell(samples, H, coupling_limit=bad)
+            fit_linear(samples, H, coupling_limit=bad)
 
 
 def test_a_stiffness_the_data_put_at_zero_is_reported_at_its_floor():
     # Warp stretch carries no energy and neither does the coupling: s11 = 0 in the data.
     soft_warp = ShellMaterial(H, **{**TRUE.parameters, "s11": 0.0, "s01": 0.0})
-    fit = fit_shell(make_samples(soft_warp), H)
+    fit = fit_linear(make_samples(soft_warp), H)
     # s11 at its floor, and with it the coupling held at zero (nothing to couple to).
     assert fit.active_bounds == ["s11", "s01"]
     assert fit.parameters["s01"] == 0.0 and fit.std_error["s01"] == 0.0
@@ -438,7 +443,7 @@ def test_a_stiffness_the_data_put_at_zero_is_reported_at_its_floor():
 
     # Shear energies slightly negative (a solver artefact): s22 would be negative, it stops at the floor.
     samples = make_samples(TRUE, energy=lambda family, W: -1e-3 * W if family == "shear" else W)
-    fit = fit_shell(samples, H)
+    fit = fit_linear(samples, H)
     assert fit.active_bounds == ["s22"]  # s22 is uncoupled: s01 stays free
     assert fit.parameters["s22"] == pytest.approx(DIAGONAL_FLOOR_REL * TRUE.s00, rel=ROUND_OFF_REL)
     assert fit.parameters["s00"] == pytest.approx(TRUE.s00, rel=RECOVERY_REL)
@@ -450,10 +455,10 @@ def test_non_converged_samples_are_excluded_and_listed():
         sample("saddle_bend", *forms("saddle_bend", 300.0), float("nan"), float("nan"), False, 300.0),
         sample("weft_stretch", *forms("weft_stretch", 0.2), 1e9, 0.5, False, 0.2),
     ]
-    fit = fit_shell(good[:5] + bad[:1] + good[5:] + bad[1:], H)
+    fit = fit_linear(good[:5] + bad[:1] + good[5:] + bad[1:], H)
     assert len(fit.excluded) == 2 and fit.excluded[0] is bad[0] and fit.excluded[1] is bad[1]
     assert all(u is g for u, g in zip(fit.used, good)) and len(fit.used) == len(good)
-    reference = fit_shell(good, H)
+    reference = fit_linear(good, H)
     assert fit.parameters == reference.parameters
     # The excluded samples would have changed the weights (larger strains) had they been used.
     np.testing.assert_array_equal(fit.weights, reference.weights)
@@ -465,21 +470,21 @@ def test_non_converged_samples_are_excluded_and_listed():
 def test_missing_families_are_named():
     without_shear = [s for s in make_samples(TRUE) if s.family != "shear"]
     with pytest.raises(ValueError, match=r"no usable \(converged\) samples for families: shear;"):
-        fit_shell(without_shear, H)
+        fit_linear(without_shear, H)
     without_saddle = [s for s in make_samples(TRUE) if s.family != "saddle_bend"]
     with pytest.raises(ValueError, match="families: saddle_bend;"):
-        fit_shell(without_saddle, H, model="full")
-    fit_shell(without_saddle, H, model="paper")
+        fit_linear(without_saddle, H, model="full")
+    fit_linear(without_saddle, H, model="paper")
     # A family whose samples all failed counts as missing, and the message says why.
     failed = [
         sample(s.family, s.I, s.II, s.energy_density, s.residual.force, s.family != "weft_bend", s.parameter)
         for s in make_samples(TRUE)
     ]
     with pytest.raises(ValueError, match=r"weft_bend \(4 excluded as not converged\)"):
-        fit_shell(failed, H)
+        fit_linear(failed, H)
     only_membrane = [s for s in make_samples(TRUE) if s.family in MEMBRANE_FAMILIES]
     with pytest.raises(ValueError, match="weft_bend, warp_bend, bias_bend, saddle_bend"):
-        fit_shell(only_membrane, H)
+        fit_linear(only_membrane, H)
 
 
 def test_undetermined_parameters_are_named():
@@ -489,7 +494,7 @@ def test_undetermined_parameters_are_named():
         for s in make_samples(TRUE)
     ]
     with pytest.raises(ValueError, match="s22 undetermined"):
-        fit_shell(samples, H)
+        fit_linear(samples, H)
     # Bias bends alone cannot separate b01 from b22 when saddle samples repeat the weft bend.
     samples = [
         sample("saddle_bend", np.eye(2), np.diag([s.parameter, 0.0]), 0.0, 0.0, True, s.parameter)
@@ -497,15 +502,16 @@ def test_undetermined_parameters_are_named():
         for s in make_samples(TRUE)
     ]
     with pytest.raises(ValueError, match=r"do not determine b01, b22 separately"):
-        fit_shell(samples, H)
+        fit_linear(samples, H)
 
 
 def test_quality_dict_is_plain_json():
-    fit = fit_shell(make_samples(TRUE), H)
+    fit = fit_linear(make_samples(TRUE), H)
     quality = fit.quality_dict()
     again = json.loads(json.dumps(quality, allow_nan=False))
     assert again == quality
-    keys = {"model", "parameters_pa", "std_error_pa", "families", "active_bounds", "notes", "coupling_limit",
+    keys = {"model", "membrane", "parameters_pa", "std_error_pa", "families", "linear", "strain_range",
+            "reference_energy_j_per_m2", "residual_stress", "active_bounds", "notes", "coupling_limit",
             "weight_widths", "used", "excluded"}
     assert set(quality) == keys
     assert quality["parameters_pa"] == fit.parameters
@@ -519,15 +525,15 @@ def test_quality_dict_is_plain_json():
 def test_bad_fit_arguments():
     samples = make_samples(TRUE)
     with pytest.raises(ValueError, match="model must be one of full, paper, got 'kirchhoff'"):
-        fit_shell(samples, H, model="kirchhoff")
+        fit_linear(samples, H, model="kirchhoff")
     with pytest.raises(ValueError, match=r"thickness must be finite and > 0 \(m\), got -0.0003"):
-        fit_shell(samples, -H)
+        fit_linear(samples, -H)
     with pytest.raises(ValueError, match="weight_width must be finite and > 0"):
-        fit_shell(samples, H, weight_width=0.0)
+        fit_linear(samples, H, weight_width=0.0)
     with pytest.raises(ValueError, match="samples is empty"):
-        fit_shell([], H)
+        fit_linear([], H)
     with pytest.raises(ValueError, match=r"samples\[1\] must be a SampleResult"):
-        fit_shell([samples[0], {"family": "shear"}], H)
+        fit_linear([samples[0], {"family": "shear"}], H)
     with pytest.raises(ValueError, match="weights must be"):
         weighted_residuals(np.ones(8), samples, H, np.ones(3))
     with pytest.raises(ValueError, match=r"params must have shape \(8,\)"):

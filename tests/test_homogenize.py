@@ -29,7 +29,7 @@ from yarnfit.homogenize import (
     tile_repeat,
     transfer_fluctuation,
 )
-from yarnfit.fabric_fit import DEFAULT_SAMPLES, FabricFit, fit_fabric, shell_thickness
+from yarnfit.fabric_fit import DEFAULT_LEVELS, DEFAULT_SAMPLES, FabricFit, fit_fabric, shell_thickness
 from yarnfit.material_file import MaterialFile
 from yarnfit.fibers import Fiber, get_fiber
 from yarnfit.patterns import YarnPattern
@@ -41,7 +41,10 @@ from yarnfit.samples import (
     design_size,
     family_deformation,
     identity_sample,
+    SMALLEST_CURVATURE,
+    SMALLEST_STRAIN,
     levels_for,
+    magnitudes,
     sample_design,
 )
 from yarnfit.yarn import YarnConstruction
@@ -50,8 +53,9 @@ from yarnfit.yarn import YarnConstruction
 FORM_RTOL = 1e-5
 # The cylinder is an exact isometry; the membrane map is linear: their metrics are I to round-off.
 ISOMETRY_ATOL = 1e-9
-# The acceptance bound of the analytic end-to-end test.
-ANALYTIC_RTOL = 0.02
+# The bound for the straight-yarn sheet's fitted weft stretch and bending (measured: 4e-5
+# and 5e-4 for the stretch at breaking strains 0.1 and 0.4, 1e-4 for the bending).
+STRAIGHT_RTOL = 0.01
 # Warp stretch, shear and warp bending of non-touching parallel weft yarns: "at least 100× smaller".
 DECOUPLED_RATIO = 1e-2
 # A square plain weave: weft and warp constants "equal within 5 %".
@@ -68,7 +72,7 @@ def plain(gsm=200.0, counts=(2500.0, 2500.0)):
 
 @functools.lru_cache(maxsize=None)
 def fitted(gsm=200.0):
-    return fit_fabric(plain(gsm), samples=15, workers=1)
+    return fit_fabric(plain(gsm), samples=16, workers=1)
 
 
 # -- the mid-surface -------------------------------------------------------------------------------
@@ -169,25 +173,36 @@ def test_images_on_a_cylinder_are_rotations_about_its_axis():
 
 def test_the_design_samples_every_family_in_tension_and_compression_only_on_request():
     ranges = SampleRanges(stretch=0.2, curvature=100.0)
-    design = sample_design(ranges, 2)
-    assert len(design) == design_size(2) == 2 * 13 + 2 and levels_for(DEFAULT_SAMPLES) == 2
+    design = sample_design(ranges, 3)
+    assert len(design) == design_size(3) == 1 + 3 * 13 + 2
     assert {s.family for s in design} == set(FAMILIES)
-    assert [s.parameter for s in design if s.family == "weft_stretch"] == [0.1, 0.2]
-    # Uniaxial tension only at the smaller level; it starts from the pure stretch.
+    # First the undeformed sample, the energy reference of the others.
+    assert design[0].family == "weft_stretch" and design[0].parameter == 0.0
+    assert np.all(design[0].I == np.eye(2)) and np.all(design[0].II == 0.0)
+    # Magnitudes spaced logarithmically from SMALLEST_STRAIN (SMALLEST_CURVATURE) to the range.
+    strains = np.geomspace(SMALLEST_STRAIN, 0.2, 3)
+    curvatures = np.geomspace(SMALLEST_CURVATURE, 100.0, 3)
+    assert [s.parameter for s in design[1:] if s.family == "weft_stretch"] == pytest.approx(strains)
+    # Uniaxial tension at the middle level; it starts from the pure stretch.
     uniaxial = [s for s in design if s.family == "warp_uniaxial"]
-    assert [s.parameter for s in uniaxial] == [0.1] and np.allclose(uniaxial[0].I, np.diag([1.0, 1.1**2]))
-    for family, largest in (("shear", 0.2), ("weft_bend", 100.0), ("bias_bend", 100.0), ("saddle_bend", 100.0)):
+    assert [s.parameter for s in uniaxial] == pytest.approx(strains[1:2])
+    assert np.allclose(uniaxial[0].I, np.diag([1.0, (1.0 + strains[1]) ** 2]))
+    for family, largest, values in (("shear", 0.2, strains), ("weft_bend", 100.0, curvatures),
+                                    ("bias_bend", 100.0, curvatures), ("saddle_bend", 100.0, curvatures)):
         assert sorted(s.parameter for s in design if s.family == family) == pytest.approx(
-            [-largest, -0.5 * largest, 0.5 * largest, largest]), family
+            np.concatenate([-values[::-1], values])), family
     squeezed = sample_design(SampleRanges(stretch=0.2, curvature=100.0, compression=0.25), 2)
-    weft = [s for s in squeezed if s.family == "weft_stretch"]
-    assert [s.parameter for s in weft] == pytest.approx([-0.05, 0.1, 0.2])
+    weft = [s for s in squeezed[1:] if s.family == "weft_stretch"]
+    assert [s.parameter for s in weft] == pytest.approx([-0.05, SMALLEST_STRAIN, 0.2])
     assert np.allclose(weft[0].I, np.diag([0.95**2, 1.0]))
+    # A range at or below the smallest magnitude is sampled at fractions of itself.
+    assert magnitudes(5e-4, SMALLEST_STRAIN, 2) == pytest.approx([2.5e-4, 5e-4])
     with pytest.raises(ValueError, match="compression"):
         SampleRanges(stretch=0.2, curvature=100.0, compression=-0.1)
-    with pytest.raises(ValueError, match="at least 15"):
-        levels_for(14)
-    assert [levels_for(n) for n in (15, 28, 41, 56)] == [1, 2, 3, 4]
+    with pytest.raises(ValueError, match="at least 16"):
+        levels_for(15)
+    assert [levels_for(n) for n in (16, 29, 42, 55)] == [1, 2, 3, 4]
+    assert levels_for(DEFAULT_SAMPLES) == DEFAULT_LEVELS
 
 
 def test_uniaxial_tension_finds_the_free_width_minimum():
@@ -230,13 +245,16 @@ def test_parallel_and_serial_solves_agree():
 
 
 @pytest.mark.parametrize("model", ["solid", "fibre-assembly"])
-def test_straight_parallel_yarns_give_the_closed_form_stiffness(model):
+@pytest.mark.parametrize("breaking_strain", [0.1, 0.4])
+def test_straight_parallel_yarns_give_the_closed_form_stiffness(model, breaking_strain):
     # One straight weft yarn per repeat, spacing d = 3r (not touching, no empty band wider than a
-    # diameter), of a linear fibre; breaking strain 2 % keeps the stretch samples where Green and
-    # engineering strain agree to 1 %. Closed forms in the yarn's rigidities: stretch EA/d,
-    # bending EI/d (solid rod: E π r²/d and E π r⁴/(4d)).
+    # diameter), of a linear fibre. Closed forms in the yarn's rigidities: stretch EA/d, bending
+    # EI/d (solid rod: E π r²/d and E π r⁴/(4d)). The rod's energy is quadratic in its engineering
+    # strain, the shell's in the Green strain: the default design's small-strain samples and the
+    # stiffening membrane give the tangent within STRAIGHT_RTOL even when the samples reach 40 %
+    # (the linear fit's secant was 6 % low at a 10 % range and 28 % low at 40 %).
     r, d, E = 1e-4, 3e-4, 2e9
-    fiber = Fiber(name="linear", density_kg_m3=1000.0, young_min_pa=E, young_max_pa=E, breaking_strain=0.02,
+    fiber = Fiber(name="linear", density_kg_m3=1000.0, young_min_pa=E, young_max_pa=E, breaking_strain=breaking_strain,
                           poisson=0.3, friction=0.2, fineness_dtex=2.0, flexural_rigidity_nm2_per_tex2=0.5e-9,
                           torsional_rigidity_nm2_per_tex2=0.2e-9)
     x = np.linspace(0.0, 2e-3, 16, endpoint=False)
@@ -244,7 +262,7 @@ def test_straight_parallel_yarns_give_the_closed_form_stiffness(model):
     pattern = YarnPattern.from_yarns("parallel", "woven", (2e-3, d), r, [(points, (1, 0))])
     relaxed = relax_pattern(pattern, fiber, shrink=1.0, yarn=YarnConstruction(model=model))
     assert relaxed.valid
-    results = solve_samples(relaxed, sample_design(default_ranges(relaxed), 2), workers=1)
+    results = solve_samples(relaxed, sample_design(default_ranges(relaxed), DEFAULT_LEVELS), workers=1)
     assert all(s.converged for s in results)
     # The paper's model: with no warp bending stiffness at all, b01 is not identifiable.
     material = fit_shell(results, shell_thickness(relaxed), model="paper").material
@@ -252,8 +270,8 @@ def test_straight_parallel_yarns_give_the_closed_form_stiffness(model):
     stretch, bending = relaxed.yarn.tensile_rigidity_n / d, relaxed.yarn.bending_rigidity_nm2 / d
     if model == "solid":
         assert (stretch, bending) == (E * math.pi * r**2 / d, E * math.pi * r**4 / (4 * d))
-    assert eng["weft_stretch_n_per_m"] == pytest.approx(stretch, rel=ANALYTIC_RTOL)
-    assert eng["bending_weft_nm"] == pytest.approx(bending, rel=ANALYTIC_RTOL)
+    assert eng["weft_stretch_n_per_m"] == pytest.approx(stretch, rel=STRAIGHT_RTOL)
+    assert eng["bending_weft_nm"] == pytest.approx(bending, rel=STRAIGHT_RTOL)
     assert eng["warp_stretch_n_per_m"] <= DECOUPLED_RATIO * stretch
     assert eng["shear_n_per_m"] <= DECOUPLED_RATIO * stretch
     assert eng["bending_warp_nm"] <= DECOUPLED_RATIO * bending

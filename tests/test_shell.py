@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
@@ -11,7 +13,9 @@ from scipy.optimize import minimize_scalar
 from yarnfit.material_file import MaterialFile
 from yarnfit.shell import (
     GF_CM2_PER_CM,
+    NONLINEAR_KEYS,
     PARAMETER_NAMES,
+    NonlinearMembrane,
     SYMMETRY_RTOL,
     ShellMaterial,
     bending_strain,
@@ -383,3 +387,82 @@ def test_uniaxial_tension_is_the_free_width_minimum_and_the_engineering_stretch(
         assert abs(stress[1 - axis, 1 - axis]) <= 1e-12 * abs(stress[axis, axis])
     with pytest.raises(ValueError, match="axis"):
         material.uniaxial_tension(2, 1.1)
+
+
+# -- the strain-stiffening membrane -----------------------------------------------------------------
+
+# Terms on every side: weft and shear stiffen, warp tension softens a little (convex: 3 k3 s11 > k2²).
+STIFFENING = NonlinearMembrane.from_keys({
+    "s00p2": 2.0e6, "s00p3": 3.0e8, "s00n2": -1.0e6, "s00n3": 5.0e7, "s11p2": -1.0e6, "s11p3": 2.0e8,
+    "s11n2": 3.0e5, "s11n3": 1.0e7, "s22p2": 5.0e6, "s22p3": 4.0e7, "s22n2": -5.0e6, "s22n3": 4.0e7,
+})
+STIFF = dataclasses.replace(MATERIAL, nonlinear=STIFFENING)
+# The stiffening energy is a quartic: central differences at step δ = FD_STEP_REL·|I| carry a
+# truncation error ~δ² W'''' ≪ round-off, so the round-off bound of FD_REL holds as for StVK.
+# Points on both sides of every direction, with strains of 5–15 %.
+I_STRAINED = (np.array([[1.25, 0.18], [0.18, 0.9]]), np.array([[0.85, -0.15], [-0.15, 1.2]]))
+
+
+def test_stiffening_energy_gradient_matches_central_differences():
+    for I in I_STRAINED:
+        gI, _ = STIFF.energy_gradient(I, np.zeros((2, 2)))
+        scale = np.max(np.abs(gI))
+        for i in range(2):
+            for j in range(2):
+                fd = _central_difference(lambda A: STIFF.energy_density(A, np.zeros((2, 2))), I, i, j)
+                assert abs(fd - gI[i, j]) <= FD_REL * scale, (i, j, fd, gI[i, j])
+
+
+def test_stiffening_terms_leave_the_small_strain_tangent_and_the_rest_state_alone():
+    # φ is C² at zero strain: at 1e-6 strain the energies differ by ~(1e-6)³ relative to the quadratic.
+    assert STIFF.energy_density(np.eye(2), np.zeros((2, 2))) == 0.0
+    for I in (np.diag([1.0 + 2e-6, 1.0]), np.diag([1.0, 1.0 - 2e-6]), np.array([[1.0, 1e-6], [1e-6, 1.0]])):
+        assert STIFF.energy_density(I, np.zeros((2, 2))) == pytest.approx(
+            MATERIAL.energy_density(I, np.zeros((2, 2))), rel=1e-4)
+    assert STIFF.engineering() == MATERIAL.engineering()
+    assert STIFF.linear == MATERIAL
+
+
+def test_stiffening_uniaxial_tension_is_the_free_width_minimum():
+    for axis in (0, 1):
+        I, W = STIFF.uniaxial_tension(axis, 1.15)
+        assert I[axis, axis] == pytest.approx(1.15**2)
+
+        def energy(free):
+            form = np.diag([1.15**2, 1.0 + 2.0 * free] if axis == 0 else [1.0 + 2.0 * free, 1.15**2])
+            return STIFF.energy_density(form, np.zeros((2, 2)))
+
+        best = minimize_scalar(energy, bounds=(-0.4, 0.1), method="bounded", options={"xatol": 1e-12})
+        assert W == pytest.approx(best.fun, rel=MINIMISED_REL)
+        # Both directions' tension terms are net stiffening at 15 %: above the tangent's StVK.
+        assert W > MATERIAL.uniaxial_tension(axis, 1.15)[1]
+
+
+def test_a_non_convex_or_bad_stiffening_is_refused_naming_what_is_wrong():
+    with pytest.raises(ValueError, match="s00p3 = -1.0"):
+        NonlinearMembrane.from_keys({"s00p3": -1.0})
+    with pytest.raises(ValueError, match="unknown nonlinear membrane keys: s33p2"):
+        NonlinearMembrane.from_keys({"s33p2": 1.0})
+    with pytest.raises(ValueError, match="s11p2"):
+        NonlinearMembrane.from_keys({"s11p2": float("nan")})
+    # Softening with no quartic to stop it: concave at large strain.
+    soft = dataclasses.replace(MATERIAL, nonlinear=NonlinearMembrane.from_keys({"s00p2": -1.0}))
+    with pytest.raises(ValueError, match=r"non-convex: \(s00 \+ min φ0''\) = -inf"):
+        soft.check_positive_definite()
+    # Softening deeper than the tangent: min φ0'' = −k2²/(3 k3) = −2 s00.
+    k3 = 1e6
+    deep = NonlinearMembrane.from_keys({"s00p2": -math.sqrt(6.0 * MATERIAL.s00 * k3), "s00p3": k3})
+    assert deep.softening()[0] == pytest.approx(-2.0 * MATERIAL.s00)
+    with pytest.raises(ValueError, match="non-convex"):
+        dataclasses.replace(MATERIAL, nonlinear=deep).check_positive_definite()
+    STIFF.check_positive_definite()
+
+
+def test_a_stiffening_material_reads_back_and_old_files_still_read():
+    data = STIFF.to_dict()
+    assert data["nonlinear"]["model"] == "green-polynomial"
+    assert set(data["nonlinear"]["stress_terms_pa"]) == set(NONLINEAR_KEYS)
+    assert ShellMaterial.from_dict(json.loads(json.dumps(data))) == STIFF
+    assert ShellMaterial.from_dict(MATERIAL.to_dict()).nonlinear is None
+    with pytest.raises(ValueError, match="nonlinear.model must be 'green-polynomial'"):
+        ShellMaterial.from_dict({**data, "nonlinear": {**data["nonlinear"], "model": "ogden"}})

@@ -69,18 +69,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     fit = commands.add_parser(
         "fit",
-        help="fit an orthotropic StVK shell to a fabric (relax, homogenize, fit)",
+        help="fit an orthotropic shell to a fabric (relax, homogenize, fit)",
         description=(
-            "Relax the fabric's yarn repeat, tile it over sampled stretches, shears and bends, solve each "
-            "sample at the yarn level (in parallel), fit an orthotropic StVK shell (membrane s00 s01 s11 s22, "
-            "bending b00 b01 b11 b22) by weighted least squares, and write the material file (JSON, SI units). "
-            "The summary gives the engineering constants in N/m and gf·cm²/cm beside SI."
+            "Relax the fabric's yarn repeat, tile it over sampled stretches, shears and bends (from 0.1 % "
+            "and 1 /m up to what the fibre bears), solve each sample at the yarn level (in parallel), fit an "
+            "orthotropic shell by least squares: a strain-stiffening membrane (its small-strain tangent "
+            "s00 s01 s11 s22 and stress terms per direction), the linear StVK membrane beside it, and bending "
+            "b00 b01 b11 b22; write the material file (JSON, SI units). The summary gives the engineering "
+            "constants (small-strain) in N/m and gf·cm²/cm beside SI."
         ),
     )
     fit.add_argument("preset", nargs="?", help="a built-in fabric (see `yarnfit materials`)")
     add_fabric_arguments(fit)
     fit.add_argument("--samples", type=int, default=None, metavar="N",
-                     help="about how many deformation samples (at least 15; default 28)")
+                     help="about how many deformation samples (at least 16; default 55)")
     fit.add_argument("--model", choices=("full", "paper"), default="full",
                      help="full: fit b01 too (default); paper: b01 = 0, the paper's 7 parameters")
     fit.add_argument("--strict", action="store_true",
@@ -105,8 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
             "sphere) or wall (dropped across a wall's top edge). The flex carries MuJoCo's built-in isotropic "
             "elasticity (stretch, integrated implicitly under the discrete integrator) at least half as stiff as "
             "the material in every direction, and the yarnfit.shell plugin adds the orthotropic rest and all the "
-            "bending. --fallback writes a plugin-free scene with one isotropic material instead. Lengths in m, "
-            "times in s."
+            "bending, with the material's strain-stiffening membrane (--linear: the linear StVK membrane fitted "
+            "from the same samples). --fallback writes a plugin-free scene with one isotropic material instead. "
+            "Lengths in m, times in s."
         ),
     )
     export.add_argument("material", metavar="MATERIAL.json", help="a material file written by `yarnfit fit`")
@@ -130,6 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--angle", type=float, default=0.0, metavar="DEG",
                         help="weft direction in degrees from world x (stretch: 0 weft strip, 90 warp, 45 bias)")
     export.add_argument("--gsm", type=float, metavar="G", help="areal density in g/m² (default: the material file's)")
+    export.add_argument("--linear", action="store_true",
+                        help="the linear StVK membrane fitted from the same samples instead of the strain-stiffening one")
     export.add_argument("--fallback", action="store_true",
                         help="no plugin: MuJoCo's built-in isotropic elasticity alone (stretch and bending) with the "
                              "material's isotropic fallback")
@@ -430,7 +435,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise UsageError(f"--angle must be a finite number of degrees, got {args.angle:g}")
     if args.width is not None and args.scene != "stretch":
         raise UsageError("--width is the stretch strip's width: give it with --scene stretch only")
-    material = ClothMaterial.from_file(args.material, None if args.gsm is None else args.gsm * 1e-3)
+    material = ClothMaterial.from_file(args.material, None if args.gsm is None else args.gsm * 1e-3,
+                                       linear=args.linear)
     suffix = "-fallback" if args.fallback else ""
     output = Path(args.output) if args.output else Path(f"{material.name}-{args.scene}{suffix}.xml")
     strip = {} if args.width is None else {"width": args.width}
@@ -460,8 +466,10 @@ def export_summary(built, material, output, args) -> str:
     lines.append(f"  built-in        E = {built.young_pa:.6g} Pa, ν = {built.poisson:.6g}, "
                  f"h = {built.thickness_m * 1e3:.4g} mm ({part})")
     if not built.fallback:
-        lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest and all bending), "
-                     f"weft at {args.angle:g}° from x")
+        membrane = ("strain-stiffening membrane" if material.shell.nonlinear is not None
+                    else "linear membrane (--linear)" if args.linear else "linear membrane")
+        lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, all "
+                     f"bending), weft at {args.angle:g}° from x")
     lines += [f"  note            {note}" for note in built.notes]
     lines.append(f"  scene           {output}")
     return "\n".join(lines)
@@ -493,6 +501,15 @@ def fit_summary(fitted, output, recording_path) -> str:
     quality = ", ".join(f"{family} {q['r2']:.3f}" if q["samples"] > 1 else f"{family} (rms {q['relative_rms']:.2g})"
                         for family, q in fit.families.items())
     lines.append(f"  fit R²          {quality}")
+    if fit.membrane == "nonlinear":
+        linear_quality = ", ".join(f"{family} {q['r2']:.3f}" for family, q in fit.linear_families.items()
+                                   if family.startswith(("weft_s", "warp_s", "biaxial", "shear")))
+        lines.append(f"  linear R²       {linear_quality}")
+        lines.append(f"  stiffening      {_stiffening_summary(fit)}")
+    if fit.reference_energy or any(fit.residual_stress.values()):
+        r = fit.residual_stress
+        lines.append(f"  residual stress {r['n0']:.3g} / {r['n1']:.3g} N/m weft / warp, moments {r['m0']:.3g} / "
+                     f"{r['m1']:.3g} N; rest energy {fit.reference_energy:.3g} J/m² (fitted, left out of the shell)")
     lines += [f"  note            {note}" for note in fit.notes]
     t = fitted.seconds
     lines.append(f"  time            relax {t['relax']:.1f} s, samples {t['homogenize']:.1f} s, fit {t['fit']:.2f} s "
@@ -523,6 +540,23 @@ def relax_summary(result, fabric, recording_path, output) -> str:
     if output:
         lines.append(f"  relaxed repeat    {output}")
     return "\n".join(lines)
+
+
+def _stiffening_summary(fit) -> str:
+    """Tangent stiffness at the largest sampled strain over the small-strain one, per direction."""
+    import numpy as np
+
+    material = fit.material
+    if material.nonlinear is None:
+        return "none (too few samples on every side)"
+    parts = []
+    for k, (direction, label) in enumerate((("s00", "weft"), ("s11", "warp"), ("s22", "shear"))):
+        top = fit.strain_range.get(direction, [0.0, 0.0])[1]
+        eps = np.zeros(3)
+        eps[k] = top
+        tangent = getattr(material, direction) + float(material.nonlinear.tangent(eps)[k])
+        parts.append(f"{label} ×{tangent / getattr(material, direction):.3g} at {100 * top:.3g} %")
+    return ", ".join(parts)
 
 
 def _plural(count: int, noun: str) -> str:

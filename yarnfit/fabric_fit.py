@@ -22,13 +22,15 @@ from .fit import COUPLING_LIMIT, ShellFit, fit_shell
 from .homogenize import default_ranges, solve_samples
 from .material_file import MaterialFile
 from .relax import RelaxedRepeat, relax
-from .samples import SampleRanges, SampleResult, levels_for, sample_design
+from .samples import SampleRanges, SampleResult, design_size, levels_for, sample_design
 from .shell import ShellMaterial
 
-# Two magnitudes per family and sign of deformation, uniaxial tension at the smaller (28 in all):
-# enough to see curvature of the response, few enough that a preset fits in about a minute on two
-# cores.
-DEFAULT_SAMPLES = 28
+# Four magnitudes per family and sign, from 0.1 % (1 /m) to the range, uniaxial tension at the
+# third, and the undeformed sample (55 in all): the fewest that give each side of a direction its
+# tangent and two stiffening terms from more than three points (with the biaxial samples), at
+# about a second per small-strain sample.
+DEFAULT_LEVELS = 4
+DEFAULT_SAMPLES = design_size(DEFAULT_LEVELS)
 
 
 class UnusableRelaxation(ValueError):

@@ -1,4 +1,6 @@
-"""Weighted least-squares fit of an orthotropic StVK shell to yarn-level energy densities.
+"""Weighted least-squares fit of an orthotropic shell to yarn-level energy densities: a linear
+(StVK) model, and a strain-stiffening membrane (:class:`~yarnfit.shell.NonlinearMembrane`) fitted
+from the same samples.
 
 Input: samples (:class:`~yarnfit.samples.SampleResult`), each a prescribed surface deformation (first and second fundamental forms
 ``I``, ``II``) with the homogenized yarn-level energy per reference area ``Ū`` (J/m²). Output: a
@@ -29,6 +31,17 @@ Weights. ``w = exp(−½ (s/σ)²)``, Gaussian in the strain magnitude ``s``: ``
 samples, the surface strain ``‖II‖_F h/2`` for bending samples. ``σ`` is the caller's
 ``weight_width`` (dimensionless strain) or half the largest ``s`` of the group, so the fit favours
 the small-strain behaviour the StVK model is meant to capture.
+
+The strain-stiffening membrane (``membrane="nonlinear"``, the default; ``docs/design.md`` §3) adds
+per Voigt direction and strain sign the stress terms ``k2 ε² + k3 ε³`` (:data:`~yarnfit.shell.NONLINEAR_KEYS`)
+to a quadratic part ``S`` that is then the small-strain tangent. Its energy is still linear in its
+parameters; it is fitted to the *relative* energy error of every membrane sample (weight
+``1/Ū²``), so a sample at 0.1 % strain counts as much as one at the range and ``S`` is the
+tangent the small strains measure. A side (tension or compression, positive or negative shear)
+carries terms only if its own pure family has at least :data:`MIN_SIDE_SAMPLES` samples there;
+the others extrapolate with the tangent. The fit keeps the membrane convex in the Green strain at
+every strain (``S + diag(min φ'')`` positive definite, within the coupling bound), which the
+plugin checks again. The bending group is the linear fit's in both models.
 """
 
 from __future__ import annotations
@@ -45,7 +58,9 @@ from .samples import BENDING_FAMILIES, FAMILIES, MEMBRANE_FAMILIES, Group, Sampl
 from .shell import (
     BENDING_PARAMETERS,
     MEMBRANE_PARAMETERS,
+    NONLINEAR_KEYS,
     PARAMETER_NAMES,
+    NonlinearMembrane,
     ShellMaterial,
     bending_strain,
     membrane_strain,
@@ -65,6 +80,35 @@ __all__ = [
 
 # "full" fits all eight parameters; "paper" fixes b01 = 0 (the paper's model).
 MODELS = ("full", "paper")
+# The membrane of the fitted material: "nonlinear" (strain-stiffening, S its small-strain tangent)
+# or "linear" (the paper's StVK, the Gaussian-weighted fit).
+MEMBRANE_MODELS = ("nonlinear", "linear")
+# Samples a side of a direction (its pure family's tension or compression, positive or negative
+# shear) needs before it carries stiffening terms: the tangent and the two terms are three
+# unknowns along that side's curve.
+MIN_SIDE_SAMPLES = 3
+# A stretch stiffness below this fraction of the other one is a direction that carries no energy
+# (a sheet of parallel yarns' warp): the nonlinear fit then holds s01 at 0, as the linear fit does
+# for a diagonal at its floor. Real fabrics' weft/warp ratios stay within 1e-3..1e3; the constrained
+# solve leaves such a direction at ~1e-10 of the other, not exactly on its floor.
+ZERO_STIFFNESS_REL = 1e-6
+# Relative weighting of the nonlinear fit: a sample's energy error is divided by its energy Ū, but
+# not by less than this fraction of the energy a quadratic law through the group's largest sample
+# gives at its strain. A slack sample (Ū ≈ 0: a knit's wales under compression) would otherwise
+# get an unbounded weight; a thousandth keeps its say at a 0.1 % relative error of that law.
+RELATIVE_WEIGHT_FLOOR = 1.0e-3
+# Evaluations of the constrained (convexity, coupling) nonlinear solve: a problem of at most ~20
+# unknowns converges in hundreds; the limit only stops a runaway (the fit then keeps the linear
+# membrane and says so). Its tolerances are BOUNDED_SOLVE_TOLERANCE's.
+CONSTRAINED_SOLVE_ITERATIONS = 20000
+# The parametrised solve meets its constraints by construction; recomputing them from the
+# parameters it returns leaves round-off (~1e-15 relative) on a solution that sits on a bound.
+CONSTRAINT_RTOL = 1e-12
+# A side's terms are dropped when they change the stress at its largest sampled strain by less than
+# this fraction of the stiffest direction's linear stress there: 1e-9 is far above the least-squares
+# round-off of a direction that carries no energy (~1e-12 relative) and far below any stiffening a
+# fabric shows (>= 1e-2).
+NEGLIGIBLE_TERM_REL = 1e-9
 
 # Lower bound of a diagonal stiffness (s00, s11, s22, b00, b11, b22) relative to the largest
 # diagonal of its group in the unbounded fit. Positive, so a fitted material stays strictly positive
@@ -92,6 +136,9 @@ BOUNDED_SOLVE_TOLERANCE = 1e-15
 BOUNDED_SOLVE_EVALUATIONS = 10000
 
 _DIAGONAL = ("s00", "s11", "s22", "b00", "b11", "b22")
+# The residual-stress terms per group (see ShellFit.residual_stress).
+RESIDUAL_STRESS_NAMES = {"membrane": ("n0", "n1", "n2"), "bending": ("m0", "m1", "m2")}
+_ALL_RESIDUAL = RESIDUAL_STRESS_NAMES["membrane"] + RESIDUAL_STRESS_NAMES["bending"]
 _GROUPS = ((Group.MEMBRANE, MEMBRANE_FAMILIES, MEMBRANE_PARAMETERS), (Group.BENDING, BENDING_FAMILIES, BENDING_PARAMETERS))
 # Each group's coupled block: (diagonal, coupling, diagonal).
 _COUPLINGS = {"membrane": ("s00", "s01", "s11"), "bending": ("b00", "b01", "b11")}
@@ -119,13 +166,19 @@ class ShellFit:
     """Result of :func:`fit_shell`.
 
     Attributes:
-        material: the fitted material, with the thickness given to the fit.
+        material: the fitted material, with the thickness given to the fit: for ``membrane``
+            "nonlinear" with its stiffening terms (``material.nonlinear``, ``None`` if no side had
+            enough samples) and ``S`` the small-strain tangent; for "linear" the linear fit.
         model: ``"full"`` or ``"paper"``.
-        parameters: fitted stiffnesses (Pa) by name, all eight (b01 = 0 for the paper model).
+        membrane: ``"nonlinear"`` or ``"linear"``.
+        linear: the linear (StVK) fit from the same samples; the bending block is shared.
+        linear_families: per family statistics of ``linear`` (as ``families``).
+        parameters: fitted stiffnesses (Pa) by name, all eight (b01 = 0 for the paper model): the
+            material's (for "nonlinear", ``S`` is the tangent).
         std_error: standard errors (Pa) by name; 0 for a parameter the model fixes, NaN for a group
             with no more samples than parameters.
-        families: per family ``{"r2": float, "relative_rms": float, "samples": int}``, unweighted,
-            over the used samples (see :func:`fit_shell` for the edge cases).
+        families: per family ``{"r2": float, "relative_rms": float, "samples": int}`` of the
+            material, unweighted, over the used samples (see :func:`fit_shell` for the edge cases).
         active_bounds: names of diagonal stiffnesses that ended on their positive floor, of
             couplings (s01, b01) held at zero because one of their diagonals did (a direction that
             carries no energy has no coupling to identify; positive definiteness then requires it
@@ -135,9 +188,18 @@ class ShellFit:
         coupling_limit: the bound ρ_max on the couplings, or ``None`` (unbounded).
         excluded: the samples left out because they did not converge.
         used: the samples fitted, in input order.
-        weights: ``(len(used),)`` least-squares weights, aligned with ``used``.
+        weights: ``(len(used),)`` least-squares weights of the linear fit, aligned with ``used``.
         weight_widths: σ (dimensionless strain) per group, ``{"membrane": σ, "bending": σ}``.
-        fitted_energy: ``(len(used),)`` shell energy density (J/m²) at the used samples.
+        fitted_energy: ``(len(used),)`` the material's energy density (J/m²) at the used samples.
+        strain_range: per nonlinear direction (``s00``, ``s11``, ``s22``) the least and largest
+            Voigt strain of the used membrane samples ``[lo, hi]``: where the stiffening terms
+            were fitted (beyond it they extrapolate).
+        reference_energy: Ū of the undeformed samples (J/m², their mean; 0 without one): the
+            relaxed repeat's own energy, which every sample's Ū includes.
+        residual_stress: what the repeat carries at rest (0 without an undeformed sample):
+            ``n0 n1 n2`` (N/m) along ε0, ε1, ε2, the membrane terms linear in the strain, fitted
+            with the stiffening membrane and left out of the shell; ``m0 m1 m2`` (N, moment per
+            width) along κ0, κ1, κ2, reported only (:func:`_residual_moments`).
     """
 
     material: ShellMaterial
@@ -151,8 +213,22 @@ class ShellFit:
     weights: np.ndarray
     weight_widths: dict[str, float]
     fitted_energy: np.ndarray = field(repr=False)
+    linear: ShellMaterial
+    linear_families: dict[str, dict]
+    membrane: str = "nonlinear"
+    strain_range: dict[str, list[float]] = field(default_factory=dict)
+    reference_energy: float = 0.0
+    residual_stress: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     coupling_limit: float | None = COUPLING_LIMIT
+
+    def shell_energy(self, samples: Sequence[SampleResult]) -> np.ndarray:
+        """``(n,)`` the part of each sample's Ū the shell represents (J/m²): Ū less the rest
+        energy and the membrane's residual-stress terms (NaN stays NaN)."""
+        samples = _sample_list(samples)
+        energy = np.array([s.energy_density for s in samples], dtype=np.float64)
+        stress = np.array([self.residual_stress.get(n, 0.0) for n in RESIDUAL_STRESS_NAMES["membrane"]])
+        return energy - self.reference_energy - _residual_stress_columns(samples)[:, :3] @ stress
 
     def quality_dict(self) -> dict:
         """Everything but the material as plain JSON data (str, float, int, list, dict).
@@ -178,15 +254,19 @@ class ShellFit:
             used.append(entry)
         return {
             "model": self.model,
+            "membrane": self.membrane,
             "parameters_pa": {k: float(v) for k, v in self.parameters.items()},
             "std_error_pa": {k: _json_float(v) for k, v in self.std_error.items()},
-            "families": {
-                name: {
-                    "r2": _json_float(f["r2"]),
-                    "relative_rms": _json_float(f["relative_rms"]),
-                    "samples": f["samples"],
-                }
-                for name, f in self.families.items()
+            "families": _json_families(self.families),
+            "linear": {
+                "parameters_pa": {k: float(v) for k, v in self.linear.parameters.items()},
+                "families": _json_families(self.linear_families),
+            },
+            "strain_range": {k: [float(v) for v in r] for k, r in self.strain_range.items()},
+            "reference_energy_j_per_m2": float(self.reference_energy),
+            "residual_stress": {
+                "membrane_n_per_m": {k: float(self.residual_stress.get(k, 0.0)) for k in RESIDUAL_STRESS_NAMES["membrane"]},
+                "bending_n": {k: float(self.residual_stress.get(k, 0.0)) for k in RESIDUAL_STRESS_NAMES["bending"]},
             },
             "active_bounds": list(self.active_bounds),
             "notes": list(self.notes),
@@ -302,8 +382,10 @@ def fit_shell(
     model: str = "full",
     weight_width: float | None = None,
     coupling_limit: float | None = COUPLING_LIMIT,
+    membrane: str = "nonlinear",
 ) -> ShellFit:
-    """Fit an orthotropic StVK shell to yarn-level energies by weighted linear least squares.
+    """Fit an orthotropic shell to yarn-level energies: the linear (StVK) model by weighted linear
+    least squares, and (``membrane="nonlinear"``) the strain-stiffening membrane (module docstring).
 
     Solves ``min Σ w_i (W_shell(γ; I_i, II_i) − Ū_i)²`` over the converged samples, each group
     (membrane, bending) on its own, with the diagonal stiffnesses bounded below by
@@ -318,6 +400,7 @@ def fit_shell(
             :func:`sample_weights`.
         coupling_limit: ρ_max in (0, 1), or ``None`` to fit the couplings unbounded and raise
             :class:`IndefiniteFitError` when the optimum is not positive definite.
+        membrane: ``"nonlinear"`` (the material carries the stiffening membrane) or ``"linear"``.
 
     Returns:
         the :class:`ShellFit`. Per family: ``r2 = 1 − SS_res/SS_tot`` (unweighted, ``SS_tot`` about
@@ -335,6 +418,8 @@ def fit_shell(
     h = _thickness(thickness)
     if model not in MODELS:
         raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    if membrane not in MEMBRANE_MODELS:
+        raise ValueError(f"membrane must be one of {', '.join(MEMBRANE_MODELS)}, got {membrane!r}")
     if coupling_limit is not None:
         coupling_limit = real_number(coupling_limit, "coupling_limit")
         if not 0.0 < coupling_limit < 1.0:
@@ -356,43 +441,104 @@ def fit_shell(
             f"{', '.join(required)}"
         )
 
+    # The energy reference and the residual stress (module docstring): the undeformed samples'
+    # mean energy is subtracted, and each group gains the terms linear in its strains.
+    target = np.array([s.energy_density for s in used])
+    undeformed = np.array([_is_undeformed(s) for s in used], dtype=bool)
+    reference_energy = float(np.mean(target[undeformed])) if np.any(undeformed) else 0.0
+    relative = target - reference_energy
+    fitted_rows = used if not np.any(undeformed) else [s for s, u in zip(used, undeformed) if not u]
     weights, widths = sample_weights(used, h, weight_width)
     D = design_matrix(used, h)
-    target = np.array([s.energy_density for s in used])
-    membrane = np.array([s.is_membrane for s in used], dtype=bool)
+    linear_terms = _residual_stress_columns(used)
+    membrane_rows = np.array([s.is_membrane for s in used], dtype=bool)
 
     parameters = dict.fromkeys(PARAMETER_NAMES, 0.0)
     std_error = dict.fromkeys(PARAMETER_NAMES, 0.0)
     active: list[str] = []
     notes: list[str] = []
-    for group, families, names in _GROUPS:
-        rows = membrane if group == "membrane" else ~membrane
+    residual_stress = dict.fromkeys(_ALL_RESIDUAL, 0.0)
+    reference = bool(np.any(undeformed))
+
+    def linear_group(group, families, names, energies, residual):
+        """The linear fit of one group (with its residual-stress terms if ``residual``)."""
+        rows = (membrane_rows if group == "membrane" else ~membrane_rows) & ~undeformed
+        offset = 0 if group == "membrane" else 3
+        extra = list(RESIDUAL_STRESS_NAMES[group]) if residual else []
+        group_notes = []
+        if extra and np.linalg.matrix_rank(np.hstack([D[rows][:, [PARAMETER_NAMES.index(n) for n in names]],
+                                                      linear_terms[rows, offset:offset + 3]])) < len(names) + 3:
+            group_notes.append(f"the {group} samples cannot separate a residual stress from the stiffnesses: "
+                               f"fitted without")
+            extra = []
+        stress = {}
+
+        def fit(free, limit):
+            cols = [PARAMETER_NAMES.index(n) for n in free]
+            block = D[np.ix_(rows, cols)]
+            if extra:
+                block = np.hstack([block, linear_terms[rows, offset:offset + 3]])
+            values, errors, at_bound, ratio = _fit_group(group, families, free + extra, block, energies[rows],
+                                                         weights[rows], _COUPLINGS[group], limit)
+            for n in extra:
+                stress[n] = values.pop(n)
+                errors.pop(n)
+            return values, errors, at_bound, ratio
+
         free = [n for n in names if not (model == "paper" and n == "b01")]
-        cols = [PARAMETER_NAMES.index(n) for n in free]
         d0, off, d1 = _COUPLINGS[group]
         limit = coupling_limit if off in free else None
-        values, errors, at_bound, ratio = _fit_group(group, families, free, D[np.ix_(rows, cols)], target[rows],
-                                                     weights[rows], _COUPLINGS[group], limit)
+        values, errors, at_bound, ratio = fit(free, limit)
         floors = [n for n in at_bound if n in _DIAGONAL]
         if off in free and {d0, d1} & set(floors):
             # A direction that carries no energy has nothing to couple to: refit with the coupling 0.
             free = [n for n in free if n != off]
-            cols = [PARAMETER_NAMES.index(n) for n in free]
-            values, errors, at_bound, _ = _fit_group(group, families, free, D[np.ix_(rows, cols)], target[rows],
-                                                     weights[rows], _COUPLINGS[group], None)
+            values, errors, at_bound, _ = fit(free, None)
             floors = list(at_bound)
             at_bound = floors + [off]
-        notes += [f"{n} at its positive floor: the {_FAMILY_OF[n]} energies carry no {n} stiffness"
-                  for n in floors]
+        group_notes += [f"{n} at its positive floor: the {_FAMILY_OF[n]} energies carry no {n} stiffness"
+                        for n in floors]
         if off in at_bound and off not in values:
-            notes.append(f"{off} held at 0: {' and '.join(n for n in (d0, d1) if n in floors)} at the positive floor")
+            group_notes.append(f"{off} held at 0: {' and '.join(n for n in (d0, d1) if n in floors)} at the positive "
+                               f"floor")
         elif off in at_bound:
-            notes.append(f"{off} at the positive-definite bound |{off}| = {coupling_limit:g} √({d0}·{d1}): the "
-                         f"{_FAMILY_OF[off]} energies ask for {off}/√({d0}·{d1}) = {ratio:.3g}, which no "
-                         f"positive-definite shell has (the unbounded fit is indefinite)")
-        active += at_bound
-        parameters.update(values)
-        std_error.update(errors)
+            group_notes.append(f"{off} at the positive-definite bound |{off}| = {coupling_limit:g} √({d0}·{d1}): the "
+                               f"{_FAMILY_OF[off]} energies ask for {off}/√({d0}·{d1}) = {ratio:.3g}, which no "
+                               f"positive-definite shell has (the unbounded fit is indefinite)")
+        return values, errors, at_bound, group_notes, stress
+
+    # Bending: the linear model, without residual moments. A quadratic bending fit cannot tell a
+    # residual moment from a bend that is stiffer one way than the other (a jersey's, 8x): fitted
+    # with it, cotton jersey's weft-bend asymmetry came out as a moment of −0.016 N that ruined its
+    # bias bends (R² −4.7); what the small curvatures say about it is reported instead.
+    (_, bending_families, bending_names), (_, membrane_families, membrane_names) = _GROUPS[1], _GROUPS[0]
+    values, errors, at_bound, group_notes, _ = linear_group("bending", bending_families, bending_names, relative,
+                                                            False)
+    parameters.update(values), std_error.update(errors)
+    if reference:
+        residual_stress.update(_residual_moments(used, relative))
+    bending_active, bending_notes = at_bound, group_notes
+    # Membrane: a quadratic cannot tell a residual stress from the curvature of the energy (a
+    # linear fibre's Green-strain softening came out as 200 N/m of it), so the stiffening model,
+    # which follows the curve, measures the residual stress; the linear fit takes it as given.
+    # Its first fit (no residual terms) gives the floors and the constrained solve's start.
+    values, errors, at_bound, group_notes, _ = linear_group("membrane", membrane_families, membrane_names, relative,
+                                                            False)
+    start = ShellMaterial(h, **{**parameters, **values})
+    stiffening_fit = None
+    if membrane == "nonlinear" or reference:
+        membrane_used = [(s, e) for s, e, u in zip(used, relative, undeformed) if s.is_membrane and not u]
+        stiffening_fit = _fit_nonlinear_membrane(membrane_used, h, start, coupling_limit, reference)
+        residual_stress.update(stiffening_fit[5])
+    if reference:
+        shifted = relative - linear_terms[:, :3] @ np.array([residual_stress[n] for n in RESIDUAL_STRESS_NAMES["membrane"]])
+        values, errors, at_bound, group_notes, _ = linear_group("membrane", membrane_families, membrane_names, shifted,
+                                                                False)
+    parameters.update(values), std_error.update(errors)
+    active = at_bound + bending_active
+    if membrane == "nonlinear":  # the material's membrane is the stiffening one: say whose these are
+        group_notes = [f"linear model: {note}" for note in group_notes]
+    notes = group_notes + bending_notes
 
     for d0, off, d1 in _COUPLINGS.values():
         family = _FAMILY_OF[off]
@@ -408,12 +554,27 @@ def fit_shell(
                 dict(parameters),
             )
 
-    material = ShellMaterial(h, **parameters)
-    gamma = np.array([parameters[n] for n in PARAMETER_NAMES])
-    fitted = D @ gamma
+    linear = ShellMaterial(h, **parameters)
+
+    def predicted(material: ShellMaterial, stress: dict[str, float]) -> np.ndarray:
+        """The fit's prediction of each used sample's Ū: the shell, the reference, the residual stress."""
+        shell = material.energy_density(np.stack([s.I for s in used]), np.stack([s.II for s in used]))
+        membrane_stress = np.array([stress[n] for n in RESIDUAL_STRESS_NAMES["membrane"]])
+        return shell + reference_energy + linear_terms[:, :3] @ membrane_stress
+
+    linear_families = _family_statistics(used, predicted(linear, residual_stress), target)
+    material, strain_range = linear, {}
+    if membrane == "nonlinear":
+        tangent, errors, stiffening, membrane_notes, strain_range, _ = stiffening_fit
+        parameters = {**parameters, **tangent}
+        std_error = {**std_error, **errors}
+        material = ShellMaterial(h, **parameters, nonlinear=stiffening)
+        notes += membrane_notes
+    fitted = predicted(material, residual_stress)
     return ShellFit(
         material=material,
         model=model,
+        membrane=membrane,
         parameters=parameters,
         std_error=std_error,
         families=_family_statistics(used, fitted, target),
@@ -423,9 +584,277 @@ def fit_shell(
         weights=weights,
         weight_widths=widths,
         fitted_energy=fitted,
+        linear=linear,
+        linear_families=linear_families,
+        strain_range=strain_range,
+        reference_energy=reference_energy,
+        residual_stress=residual_stress,
         notes=notes,
         coupling_limit=coupling_limit,
     )
+
+
+def _residual_moments(used: list[SampleResult], relative: np.ndarray) -> dict[str, float]:
+    """``m0 m1 m2`` (N): the central difference ``(Ū(+κ) − Ū(−κ))/(2κ)`` of the weft, warp and
+    bias bends at their smallest sampled curvature, where a quadratic part of either sign's
+    stiffness is ``κ/2`` times smaller than at the range: the moment the repeat carries at rest.
+    0 where a family lacks a sample of either sign at its smallest magnitude. (A bias bend's κ2 is
+    ±κ with κ0 = κ1 = |κ|/2, so its difference is ``m2``.) Reported, not fitted."""
+    moments = {}
+    for name, family in (("m0", "weft_bend"), ("m1", "warp_bend"), ("m2", "bias_bend")):
+        pairs = {s.parameter: e for s, e in zip(used, relative) if s.family == family}
+        magnitudes = sorted({abs(p) for p in pairs if -p in pairs and p != 0.0})
+        moments[name] = 0.0
+        if magnitudes:
+            k = magnitudes[0]
+            moments[name] = (pairs[k] - pairs[-k]) / (2.0 * k)
+    return moments
+
+
+def _is_undeformed(sample: SampleResult) -> bool:
+    return bool(np.all(sample.I == np.eye(2)) and np.all(sample.II == 0.0))
+
+
+def _residual_stress_columns(samples: list[SampleResult]) -> np.ndarray:
+    """``(n, 6)``: ``dŪ/d(n0 n1 n2 m0 m1 m2)``, the Voigt strains ε and curvatures κ."""
+    return np.hstack([membrane_strain(np.stack([s.I for s in samples])),
+                      bending_strain(np.stack([s.II for s in samples]))])
+
+
+# -- the strain-stiffening membrane ---------------------------------------------------------------
+
+# The pure family whose samples decide whether a direction's side carries terms.
+_SIDE_FAMILY = {"s00": "weft_stretch", "s11": "warp_stretch", "s22": "shear"}
+
+
+def _fit_nonlinear_membrane(
+    pairs: list[tuple[SampleResult, float]], h: float, linear: ShellMaterial, coupling_limit: float | None,
+    residual: bool = False,
+) -> tuple[dict[str, float], dict[str, float], NonlinearMembrane | None, list[str], dict[str, list[float]],
+           dict[str, float]]:
+    """The strain-stiffening membrane fitted to the membrane ``samples`` (module docstring).
+
+    ``pairs``: each membrane sample with its energy relative to the undeformed one (J/m²).
+    Returns ``(S by name, its standard errors by name, the stiffening terms or None, notes,
+    strain range per direction, residual stress n0 n1 n2 (N/m))``; ``residual`` fits the
+    residual-stress terms along. Unconstrained (diagonal floors and ``k3 >= 0`` only) when that
+    optimum is convex and within the coupling bound; else the constrained optimum
+    (:func:`_constrained_nonlinear_solve`, from ``linear`` as a feasible start); if that solve
+    fails, the linear membrane with a note. As the linear fit does for a diagonal at its floor, s00
+    or s11 below ZERO_STIFFNESS_REL of the other holds s01 at 0.
+    """
+    samples = [s for s, _ in pairs]
+    eps = np.stack([membrane_strain(s.I) for s in samples])
+    target = np.array([e for _, e in pairs])
+    strain_range = {d: [float(eps[:, k].min()), float(eps[:, k].max())] for k, d in enumerate(("s00", "s11", "s22"))}
+
+    # Columns: the quadratic part (as design_matrix), then per free side h x³/3 and h x⁴/4.
+    columns = [0.5 * h * eps[:, 0] ** 2, h * eps[:, 0] * eps[:, 1], 0.5 * h * eps[:, 1] ** 2, 0.5 * h * eps[:, 2] ** 2]
+    names = list(MEMBRANE_PARAMETERS)
+    free_sides = []
+    for k, direction in enumerate(("s00", "s11", "s22")):
+        family = _SIDE_FAMILY[direction]
+        for side, sign in (("p", 1.0), ("n", -1.0)):
+            count = sum(s.family == family and sign * s.parameter > 0.0 for s in samples)
+            if count < MIN_SIDE_SAMPLES:
+                continue
+            x = np.where(sign * eps[:, k] > 0.0, eps[:, k], 0.0)
+            columns += [h * x**3 / 3.0, h * x**4 / 4.0]
+            names += [f"{direction}{side}2", f"{direction}{side}3"]
+            free_sides.append((k, direction, side))
+    if residual:
+        # A direction's residual stress, like its stiffening, needs its own family's samples: with
+        # fewer, the linear term takes up whatever the quadratic misses (−2.8 kN/m from one level).
+        for k, direction in enumerate(("s00", "s11", "s22")):
+            count = sum(s.family == _SIDE_FAMILY[direction] and s.parameter != 0.0 for s in samples)
+            if count >= MIN_SIDE_SAMPLES:
+                columns.append(eps[:, k])
+                names.append(RESIDUAL_STRESS_NAMES["membrane"][k])
+    D = np.stack(columns, axis=1)
+    result = _solve_nonlinear_membrane(D, names, target, eps, free_sides, strain_range, linear, coupling_limit)
+    fitted = result[0]
+    if fitted is not None and min(fitted["s00"], fitted["s11"]) <= ZERO_STIFFNESS_REL * max(fitted["s00"], fitted["s11"]):
+        # A direction that carries no energy has nothing to couple to: refit with s01 = 0.
+        keep = [k for k, n in enumerate(names) if n != "s01"]
+        result = _solve_nonlinear_membrane(D[:, keep], [names[k] for k in keep], target, eps, free_sides, strain_range,
+                                           linear, coupling_limit)
+    fitted, errors, notes = result
+    if fitted is None:
+        return ({n: getattr(linear, n) for n in MEMBRANE_PARAMETERS}, {}, None, notes, strain_range, {})
+    stress = {n: fitted.pop(n) for n in RESIDUAL_STRESS_NAMES["membrane"] if n in fitted}
+    terms = {n: v for n, v in fitted.items() if n not in MEMBRANE_PARAMETERS}
+    stiffening = NonlinearMembrane.from_keys(terms) if terms else None
+    return ({k: fitted.get(k, 0.0) for k in MEMBRANE_PARAMETERS}, errors, stiffening, notes, strain_range, stress)
+
+
+def _solve_nonlinear_membrane(
+    D: np.ndarray, names: list[str], target: np.ndarray, eps: np.ndarray, free_sides: list[tuple[int, str, str]],
+    strain_range: dict[str, list[float]], linear: ShellMaterial, coupling_limit: float | None,
+) -> tuple[dict[str, float] | None, dict[str, float], list[str]]:
+    """One relative-weighted solve of :func:`_fit_nonlinear_membrane` over the columns ``D``
+    named ``names``: ``(values by name or None if it failed, standard errors of S, notes)``."""
+    # Relative weights: the residual is divided by Ū, floored at RELATIVE_WEIGHT_FLOOR of the
+    # quadratic law through the largest sample.
+    magnitude = np.linalg.norm(eps, axis=1)
+    largest = int(np.argmax(magnitude))
+    quadratic = max(target[largest], 0.0) * (magnitude / magnitude[largest]) ** 2
+    scale = np.maximum(np.abs(target), RELATIVE_WEIGHT_FLOOR * quadratic)
+    if not np.all(scale > 0.0):
+        raise ValueError("the membrane samples carry no energy: they cannot determine a membrane stiffness")
+    A, b = D / scale[:, None], target / scale
+    norms = np.linalg.norm(A, axis=0)
+    if np.any(norms == 0.0):
+        zero = [n for n, c in zip(names, norms) if c == 0.0]
+        raise ValueError(f"{', '.join(zero)} undetermined: no used membrane sample strains {'it' if len(zero) == 1 else 'them'}")
+    As = A / norms
+
+    diagonal = np.array([n in ("s00", "s11", "s22") for n in names])
+    cubic = np.array([n.endswith("3") and n not in MEMBRANE_PARAMETERS for n in names])
+    unbounded = np.linalg.lstsq(As, b, rcond=None)[0] / norms
+    floor = DIAGONAL_FLOOR_REL * max(float(np.max(unbounded[diagonal])), max(linear.s00, linear.s11, linear.s22))
+    lower = np.where(diagonal, floor, np.where(cubic, 0.0, -np.inf))
+    result = lsq_linear(As, b, bounds=(lower * norms, np.full(len(names), np.inf)), method="bvls")
+    notes = []
+    x = _drop_negligible_terms(result.x / norms, names, free_sides, strain_range, linear) if result.success else None
+    if x is not None and not _nonlinear_problems(x, names, coupling_limit):
+        values = x
+    else:
+        values = _constrained_nonlinear_solve(As, b, norms, names, free_sides, floor, linear, coupling_limit)
+        if values is None:
+            notes.append("the strain-stiffening membrane's constrained fit failed: the material carries the linear "
+                         "membrane")
+            return None, {}, notes
+        notes.append("strain-stiffening membrane fitted under its convexity and coupling bounds (the unconstrained "
+                     f"optimum {'; '.join(_nonlinear_problems(x, names, coupling_limit)) if x is not None else 'failed'})")
+
+    fitted = dict(zip(names, values.tolist()))
+    for n in ("s00", "s11", "s22"):
+        fitted[n] = max(fitted[n], floor)
+    n, p = len(b), len(names)
+    errors = {}
+    if n > p:
+        r = A @ values - b
+        pinv = np.linalg.pinv(As)
+        sigma = np.sqrt(float(r @ r) / (n - p) * np.sum(pinv**2, axis=1)) / norms
+        errors = {name: float(e) for name, e in zip(names, sigma) if name in MEMBRANE_PARAMETERS}
+    return fitted, errors, notes
+
+
+def _split(values: np.ndarray, names: list[str]) -> tuple[dict[str, float], NonlinearMembrane]:
+    """``S`` by name and the stiffening terms from a parameter vector named by ``names``."""
+    named = dict(zip(names, np.asarray(values, dtype=float).tolist()))
+    terms = {n: v for n, v in named.items() if n in NONLINEAR_KEYS}
+    return {k: named.get(k, 0.0) for k in MEMBRANE_PARAMETERS}, NonlinearMembrane.from_keys(
+        {k: (max(v, 0.0) if k.endswith("3") else v) for k, v in terms.items()})
+
+
+def _nonlinear_problems(values: np.ndarray, names: list[str], coupling_limit: float | None,
+                        slack: float = 0.0) -> list[str]:
+    """Why a parameter vector is not an acceptable membrane: non-convex, or its tangent coupling
+    beyond ``coupling_limit`` anywhere (empty if acceptable); ``slack`` admits a coupling that
+    far (relative) past the bound, the round-off of a solution that sits on it."""
+    S, terms = _split(values, names)
+    problems = terms.convexity_problems(S["s00"], S["s01"], S["s11"], S["s22"])
+    if coupling_limit is not None and not problems:
+        m0, m1, _ = terms.softening()
+        least = math.sqrt((S["s00"] + m0) * (S["s11"] + m1))
+        if abs(S["s01"]) > coupling_limit * least * (1.0 + slack):
+            problems.append(f"|s01| = {abs(S['s01']):.6g} Pa > {coupling_limit:g} √((s00 + min φ0'')(s11 + min φ1'')) = "
+                            f"{coupling_limit * least:.6g} Pa")
+    return problems
+
+
+def _constrained_nonlinear_solve(
+    As: np.ndarray, b: np.ndarray, norms: np.ndarray, names: list[str], free_sides: list[tuple[int, str, str]],
+    floor: float, linear: ShellMaterial, coupling_limit: float | None,
+) -> np.ndarray | None:
+    """``min ‖As (x norms) − b‖`` over the parameters ``x`` (by ``names``) of an acceptable
+    membrane: with a softening allowance ``t_d >= 0`` per direction, ``s_dd − t_d >= floor``,
+    ``|s01| <= ρ √((s00 − t0)(s11 − t1))`` and on every free side ``soft(k2)² <= 3 k3 t_d``
+    (``soft`` the part of ``k2`` that softens that side). Those say ``S + diag(min φ'')`` is
+    positive definite within the coupling bound. The set is convex (second-order cones and a
+    hyperbolic constraint), and so is the objective.
+
+    Solved in a parametrisation that meets the constraints by construction, with simple bounds
+    only (a general constrained solver stalled on this problem's scales): ``s_dd = floor + e_d +
+    τ_d²``, ``t_d = τ_d²``, ``s01 = ρ r √((floor + e0)(floor + e1))`` with ``r ∈ [−1, 1]``, and
+    per side ``k3 = v²``, ``k2 = ∓√3 v τ_d ± c`` with ``e, τ, v, c >= 0``. Started from ``linear``
+    (feasible). Returns ``x``, or ``None`` if the solve fails."""
+    index = {n: k for k, n in enumerate(names)}
+    rho = 1.0 if coupling_limit is None else coupling_limit
+    reference = max(linear.s00, linear.s11, linear.s22)
+    diagonal = [n for n in ("s00", "s11", "s22")]
+    others = [n for n in names if n not in MEMBRANE_PARAMETERS and n not in NONLINEAR_KEYS]
+    coupled = "s01" in index
+    # θ = e (3), τ (3), r (1 if coupled), per side (v, c), then the other (residual-stress) terms;
+    # all but the last group in units of ``reference``.
+    sides = [(k, f"{direction}{side}", side) for k, direction, side in free_sides]
+
+    def unpack(theta):
+        e, tau = theta[0:3], theta[3:6]
+        at = 6
+        x = np.zeros(len(names))
+        effective = floor + e * reference
+        for k, n in enumerate(diagonal):
+            x[index[n]] = effective[k] + (tau[k] * tau[k]) * reference
+        if coupled:
+            x[index["s01"]] = rho * theta[at] * math.sqrt(effective[0] * effective[1])
+            at += 1
+        for k, key, side in sides:
+            v, c = theta[at], theta[at + 1]
+            at += 2
+            x[index[key + "3"]] = v * v * reference
+            soft = math.sqrt(3.0) * v * tau[k] * reference
+            x[index[key + "2"]] = (c * reference - soft) if side == "p" else (soft - c * reference)
+        for n in others:
+            x[index[n]] = theta[at]
+            at += 1
+        return x
+
+    def residual(theta):
+        return As @ (unpack(theta) * norms) - b
+
+    start, low, high = [], [], []
+    for n in diagonal:
+        start.append(max(getattr(linear, n) - floor, 0.0) / reference)
+        low.append(0.0), high.append(np.inf)
+    start += [1e-3] * 3  # τ: off zero, where the products v τ would have no gradient
+    low += [0.0] * 3
+    high += [np.inf] * 3
+    if coupled:
+        product = (floor + start[0] * reference) * (floor + start[1] * reference)
+        start.append(float(np.clip(linear.s01 / (rho * math.sqrt(product)), -1.0 + 1e-9, 1.0 - 1e-9)))
+        low.append(-1.0), high.append(1.0)
+    for _ in sides:
+        start += [1e-3, 0.0]
+        low += [0.0, 0.0]
+        high += [np.inf, np.inf]
+    for _ in others:
+        start.append(0.0), low.append(-np.inf), high.append(np.inf)
+    solution = least_squares(residual, np.array(start), bounds=(np.array(low), np.array(high)), method="trf",
+                             x_scale="jac", xtol=BOUNDED_SOLVE_TOLERANCE, ftol=BOUNDED_SOLVE_TOLERANCE,
+                             gtol=BOUNDED_SOLVE_TOLERANCE, max_nfev=CONSTRAINED_SOLVE_ITERATIONS)
+    if solution.status <= 0:
+        return None
+    x = unpack(solution.x)
+    return None if _nonlinear_problems(x, names, coupling_limit, slack=CONSTRAINT_RTOL) else x
+
+
+def _drop_negligible_terms(values: np.ndarray, names: list[str], free_sides: list[tuple[int, str, str]],
+                           strain_range: dict[str, list[float]], linear: ShellMaterial) -> np.ndarray:
+    """``values`` with a side's two terms set to 0 where, at the side's largest sampled strain,
+    they change the stress by less than NEGLIGIBLE_TERM_REL of the stiffest direction's linear
+    stress there: round-off of a direction that carries no energy (a parallel-yarn sheet's warp),
+    whose sign would otherwise decide its convexity."""
+    values = values.copy()
+    reference = max(linear.s00, linear.s11, linear.s22)
+    index = {n: k for k, n in enumerate(names)}
+    for _, direction, side in free_sides:
+        x = strain_range[direction][1 if side == "p" else 0]
+        i2, i3 = index[f"{direction}{side}2"], index[f"{direction}{side}3"]
+        if abs(values[i2] * x * x) + abs(values[i3] * x**3) < NEGLIGIBLE_TERM_REL * reference * abs(x):
+            values[i2] = values[i3] = 0.0
+    return values
 
 
 # -- helpers --------------------------------------------------------------------------------------
@@ -618,6 +1047,11 @@ def _weights(weights: np.ndarray, n: int) -> np.ndarray:
     if w.shape != (n,) or not np.all(np.isfinite(w)) or np.any(w < 0.0):
         raise ValueError(f"weights must be {n} finite non-negative numbers, got shape {w.shape}")
     return w
+
+
+def _json_families(families: dict[str, dict]) -> dict[str, dict]:
+    return {name: {"r2": _json_float(f["r2"]), "relative_rms": _json_float(f["relative_rms"]), "samples": f["samples"]}
+            for name, f in families.items()}
 
 
 def _json_float(value: float) -> float | None:

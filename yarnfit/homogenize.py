@@ -150,9 +150,24 @@ def _bent_plane(bend: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 def _surface_frame(gradient: np.ndarray) -> np.ndarray:
     """``(n, 3, 3)`` frames: the rotation of the polar decomposition ``∂φ = R₂ U`` (two columns)
-    and the unit normal ``r₁ × r₂``."""
-    u, _, vt = np.linalg.svd(gradient, full_matrices=False)
-    r2 = u @ vt
+    and the unit normal ``r₁ × r₂``.
+
+    ``R₂ = G C^(-1/2)`` with ``C = GᵀG`` (2×2 SPD for a surface map of full rank), in closed form:
+    ``√C = (C + s Id)/t`` with ``s = √det C``, ``t = √(tr C + 2 s)`` (Cayley–Hamilton), inverted
+    as a 2×2. It equals the SVD's ``U Vᵀ`` to round-off and costs a tenth of numpy's batched SVD
+    over the tens of thousands of image points a curved tiling evaluates."""
+    C = np.einsum("nki,nkj->nij", gradient, gradient)
+    s = np.sqrt(C[:, 0, 0] * C[:, 1, 1] - C[:, 0, 1] * C[:, 1, 0])
+    t = np.sqrt(C[:, 0, 0] + C[:, 1, 1] + 2.0 * s)
+    root = C.copy()
+    root[:, 0, 0] += s
+    root[:, 1, 1] += s
+    root /= t[:, None, None]
+    det = root[:, 0, 0] * root[:, 1, 1] - root[:, 0, 1] * root[:, 1, 0]
+    inverse = np.empty_like(root)
+    inverse[:, 0, 0], inverse[:, 1, 1] = root[:, 1, 1] / det, root[:, 0, 0] / det
+    inverse[:, 0, 1], inverse[:, 1, 0] = -root[:, 0, 1] / det, -root[:, 1, 0] / det
+    r2 = gradient @ inverse
     normal = np.cross(r2[:, :, 0], r2[:, :, 1])
     return np.concatenate([r2, normal[:, :, None]], axis=2)
 

@@ -18,11 +18,15 @@
   ``friction``, and ``shrink``, ``repeat_size_m``, ``yarn_length_per_area_m_per_m2``,
   ``areal_density_kg_m2`` (of the relaxed repeat) and the relaxation's ``converged``,
   ``iterations``, ``residual`` and ``worst_overlap``;
-- ``shell``: ``thickness_m``, ``membrane_pa`` {s00, s01, s11, s22}, ``bending_pa`` {b00, b01,
-  b11, b22} (:attr:`MaterialFile.shell` reads it back);
-- ``engineering``: the constants of ``docs/design.md`` §3 (``weft_stretch_n_per_m``, …);
-- ``fit``: the fit's quality (model, parameters and standard errors, R² and relative RMS per
-  family, active bounds, weights, used and excluded samples);
+- ``shell``: ``thickness_m``, ``membrane_pa`` {s00, s01, s11, s22} (the small-strain tangent),
+  ``bending_pa`` {b00, b01, b11, b22} and, for the strain-stiffening membrane, ``nonlinear``
+  {``model``, ``stress_terms_pa``} (:attr:`MaterialFile.shell` reads it back; a reader that knows
+  only StVK reads the tangent);
+- ``engineering``: the small-strain constants of ``docs/design.md`` §3 (``weft_stretch_n_per_m``, …);
+- ``fit``: the fit's quality (model, membrane, parameters and standard errors, R² and relative RMS
+  per family, the ``linear`` fit beside it (parameters and quality: :attr:`MaterialFile.linear_shell`),
+  the strain range the stiffening was fitted over, the rest energy and residual stress fitted and
+  left out of the shell, active bounds, weights, used and excluded samples);
 - ``samples``: every sample — ``family``, ``parameter``, ``I``, ``II``, ``energy_density_j_m2``,
   ``converged``, ``residual`` {force, torque, penetration, energy_change}, ``iterations``,
   ``seconds`` — including those that did not converge (excluded from the fit, never used);
@@ -53,7 +57,8 @@ from typing import TYPE_CHECKING
 from . import __version__
 from .fibers import OPTIONAL_FIBER_FIELDS, Fiber
 from .jsonfile import read_json
-from .shell import ShellMaterial
+from .checks import check_keys
+from .shell import PARAMETER_NAMES, ShellMaterial
 
 if TYPE_CHECKING:  # the heavy stages are imported where they are used
     from .fabric import Fabric
@@ -181,6 +186,31 @@ class MaterialFile:
         if "shell" not in self.data:
             raise ValueError(f"{self.where}: missing key 'shell' (the fitted shell material)")
         return ShellMaterial.from_dict(self.data["shell"], f"{self.where}: shell")
+
+    @property
+    def linear_shell(self) -> ShellMaterial:
+        """The linear (StVK) fit from the same samples: ``fit.linear.parameters_pa`` with the
+        shell's thickness. A file without it (written before the strain-stiffening membrane) has a
+        linear shell already: its ``shell``. ValueError naming the key at fault."""
+        shell = self.shell
+        linear = self._block("fit").get("linear")
+        if linear is None:
+            return shell.linear
+        where = f"{self.where}: fit.linear"
+        if not isinstance(linear, Mapping) or not isinstance(linear.get("parameters_pa"), Mapping):
+            raise ValueError(f"{where}: expected an object with 'parameters_pa'")
+        parameters = linear["parameters_pa"]
+        check_keys(parameters, PARAMETER_NAMES, where, prefix="parameters_pa.")
+        values = {}
+        for key in PARAMETER_NAMES:
+            value = parameters[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"{where}: parameters_pa.{key} must be a number, got {value!r}")
+            values[key] = float(value)
+        try:
+            return ShellMaterial(shell.thickness, **values)
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
 
     @property
     def name(self) -> str:

@@ -70,8 +70,9 @@ Entity paths (positions and radii in m, 3D x weft, y warp, z up):
   ``sample``).
 - ``fit/sample/info``: ``TextDocument`` (markdown), the sample's family, parameter, I, II (1/m), Ū,
   convergence, iterations and residuals (by ``sample``).
-- ``fit/curves/<family>/yarn``: ``Points2D`` at (parameter, Ū) of the family's converged samples
-  (static, by ``finish``).
+- ``fit/curves/<family>/yarn``: ``Points2D`` at (parameter, Ū) of the family's converged samples,
+  Ū as the shell sees it (less the fitted rest energy and residual-stress terms,
+  ``ShellFit.shell_energy``; static, by ``finish``).
 - ``fit/curves/<family>/excluded``: ``Points2D`` in red at (parameter, Ū) of the family's samples
   that did not converge (excluded from the fit) with a finite Ū; only logged if there are any
   (static, by ``finish``).
@@ -364,16 +365,17 @@ class FitRecording(Recording):
         for family in FAMILIES:
             results = [r for r in fabric_fit.samples if r.spec.family == family]
             if results:
-                self._log_curves(family, results, material)
+                self._log_curves(family, results, material, fabric_fit.fit.shell_energy(results))
         self.log_markdown("fit/summary", fit_summary(fabric_fit), static=True)
         self.close()
 
-    def _log_curves(self, family: str, results, material) -> None:
-        """Samples (parameter, Ū) and the shell's curve (parameter, W) of one family, in the
-        family's parameter unit and J/m², drawn through a transform that fits them to a unit box
-        with y up (see the module docstring)."""
+    def _log_curves(self, family: str, results, material, energy: np.ndarray) -> None:
+        """Samples (parameter, Ū as the shell sees it: ``energy``, less the rest energy and the
+        residual-stress terms) and the shell's curve (parameter, W) of one family, in the family's
+        parameter unit and J/m², drawn through a transform that fits them to a unit box with y up
+        (see the module docstring)."""
         parameter = np.array([r.spec.parameter for r in results], dtype=np.float64)
-        energy = np.array([r.energy_density for r in results], dtype=np.float64)
+        energy = np.asarray(energy, dtype=np.float64)
         converged = np.array([r.converged for r in results], dtype=bool)
         curve_p, curve_w = shell_curve(material, family, parameter)
         plotted = np.isfinite(energy)

@@ -40,8 +40,9 @@ __all__ = [
     "family_deformation",
     "identity_sample",
     "levels_for",
+    "magnitudes",
     "sample_design",
-    "uniaxial_levels",
+    "uniaxial_level",
 ]
 
 # Largest accepted |I − Id| entry of a bending sample (dimensionless strain). The homogenizer
@@ -65,7 +66,7 @@ class Group(StrEnum):
 _TENSION_AND_COMPRESSION = "tension and compression"
 _TENSION = "tension"
 _BOTH_SIGNS = "both signs"
-_LOWER_TENSION = "lower half of the tension levels"
+_MIDDLE_TENSION = "the middle tension level"
 
 
 def _stretched(axis: int | None):
@@ -125,8 +126,8 @@ class Family(StrEnum):
     BIAXIAL_STRETCH = ("biaxial_stretch", Group.MEMBRANE, "λ − 1", "", "s01", None, False, _TENSION, _stretched(None))
     SHEAR = ("shear", Group.MEMBRANE, "I12", "", "s22", None, False, _BOTH_SIGNS, _sheared)
     # The transverse stretch is found by the solve; the deformation is where its search starts.
-    WEFT_UNIAXIAL = ("weft_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0, True, _LOWER_TENSION, _stretched(0))
-    WARP_UNIAXIAL = ("warp_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 1, True, _LOWER_TENSION, _stretched(1))
+    WEFT_UNIAXIAL = ("weft_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0, True, _MIDDLE_TENSION, _stretched(0))
+    WARP_UNIAXIAL = ("warp_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 1, True, _MIDDLE_TENSION, _stretched(1))
     WEFT_BEND = ("weft_bend", Group.BENDING, "curvature", "1/m", "b00", None, False, _BOTH_SIGNS,
                  _bent(lambda e: np.diag([e, 0.0])))
     WARP_BEND = ("warp_bend", Group.BENDING, "curvature", "1/m", "b11", None, False, _BOTH_SIGNS,
@@ -302,10 +303,19 @@ class SampleResult:
 # -- sample design --------------------------------------------------------------------------------
 
 # Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
-# four bend families of both signs; plus weft and warp uniaxial tension at the lower half of the
-# levels (each costs 5–15 solves; the small strains are what a tensile test's start measures).
+# four bend families of both signs; plus weft and warp uniaxial tension at the middle level (each
+# costs 5–15 solves).
 SAMPLES_PER_LEVEL = 13
-UNIAXIAL_PER_LEVEL = 2
+UNIAXIAL_SAMPLES = 2
+# Smallest sampled strain (λ − 1, and I12 for shear): the design's levels are spaced
+# logarithmically from here up to the range, so the small-strain stiffness that a drape, a low-load
+# tensile test or a robot's grasp sees is measured, not extrapolated from a few per cent. 0.1 %
+# (issue 14): the strain energy there, ~s h 1e-6/2 ≈ 1e-4 J/m² for a cotton woven, is still eight
+# orders above the solver's energy tolerance, and Green and engineering strain differ by 0.05 %.
+SMALLEST_STRAIN = 1.0e-3
+# Smallest sampled curvature (1/m): a draping fabric's folds have radii of 1 cm – 1 m; a metre's
+# radius is where a drape's gentlest curvature lies.
+SMALLEST_CURVATURE = 1.0
 
 
 @dataclass(frozen=True)
@@ -337,45 +347,66 @@ class SampleRanges:
 
 def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
     """The samples (paper §4.6, plus saddles for b01): ``levels`` magnitudes per family and sign,
-    in :data:`FAMILIES` order (:meth:`Family.deformation` gives each one's ``I`` and ``II``).
+    in :data:`FAMILIES` order (:meth:`Family.deformation` gives each one's ``I`` and ``II``). The
+    magnitudes (:func:`magnitudes`) are spaced logarithmically from :data:`SMALLEST_STRAIN` (and
+    :data:`SMALLEST_CURVATURE` for bends) up to the range. The first sample is the undeformed
+    one (:func:`identity_sample`): the relaxed repeat's own energy, the reference of every other
+    sample's Ū (a knit's relaxed repeat carries a few hundredths of a J/m², of the order of its
+    0.1 % samples).
 
-    - weft, warp stretch: ``I = diag(λ², 1)`` / ``diag(1, λ²)``, λ − 1 at ``j/levels`` of the
-      range, and one compression at ``ranges.compression`` of it if that is not 0; biaxial
+    - weft, warp stretch: ``I = diag(λ², 1)`` / ``diag(1, λ²)``, λ − 1 at the stretch magnitudes,
+      and one compression at ``ranges.compression`` of the range if that is not 0; biaxial
       ``I = λ² Id``, all in tension;
-    - shear: ``I = [[1, s], [s, 1]]``, ``s = ±j/levels`` of the stretch range;
-    - weft, warp uniaxial tension: λ as for the pure stretches at the lower half of the levels
-      (:func:`uniaxial_levels`), the other direction free (its stretch μ minimises Ū; the spec
+    - shear: ``I = [[1, s], [s, 1]]``, ``s = ±`` the stretch magnitudes;
+    - weft, warp uniaxial tension: λ as for the pure stretches at the middle magnitude
+      (:func:`uniaxial_level`), the other direction free (its stretch μ minimises Ū; the spec
       holds μ = 1, the result the μ found);
-    - weft, warp bends: ``II = diag(κ, 0)`` / ``diag(0, κ)``, ``κ = ±j/levels`` of the curvature
-      range;
+    - weft, warp bends: ``II = diag(κ, 0)`` / ``diag(0, κ)``, ``κ = ±`` the curvature magnitudes;
     - bias bends: cylinders at ±45°, ``II = κ/2 [[1, ±1], [±1, 1]]``;
     - saddles: ``II = ±κ diag(1, −1)`` (the only samples that separate b01 from b22).
     """
     if not (isinstance(levels, int) and levels >= 1):
         raise ValueError(f"levels must be a positive integer, got {levels!r}")
-    fractions = np.arange(1, levels + 1) / levels
-    layouts = {
-        _TENSION_AND_COMPRESSION: np.concatenate([[-ranges.compression] if ranges.compression > 0 else [], fractions]),
-        _TENSION: fractions,
-        _BOTH_SIGNS: np.concatenate([-fractions[::-1], fractions]),
-        _LOWER_TENSION: fractions[:uniaxial_levels(levels)],
-    }
     specs = []
-    for family in FAMILIES:
-        scale = ranges.stretch if family.group is Group.MEMBRANE else ranges.curvature
-        for value in layouts[family.layout] * scale:
-            specs.append(SampleSpec.at(family, float(value)))
-    return specs
+    for group, largest, smallest in ((Group.MEMBRANE, ranges.stretch, SMALLEST_STRAIN),
+                                     (Group.BENDING, ranges.curvature, SMALLEST_CURVATURE)):
+        values = magnitudes(largest, smallest, levels)
+        layouts = {
+            _TENSION_AND_COMPRESSION: np.concatenate(
+                [[-ranges.compression * largest] if ranges.compression > 0 else [], values]),
+            _TENSION: values,
+            _BOTH_SIGNS: np.concatenate([-values[::-1], values]),
+            _MIDDLE_TENSION: values[uniaxial_level(levels):uniaxial_level(levels) + 1],
+        }
+        for family in FAMILIES:
+            if family.group is group:
+                specs += [SampleSpec.at(family, float(value)) for value in layouts[family.layout]]
+    order = {family: k for k, family in enumerate(FAMILIES)}
+    return [identity_sample()] + sorted(specs, key=lambda spec: order[spec.family])
 
 
-def uniaxial_levels(levels: int) -> int:
-    """Levels at which the uniaxial-tension families are sampled: the lower half, at least one."""
-    return (levels + 1) // 2
+def magnitudes(largest: float, smallest: float, levels: int) -> np.ndarray:
+    """``levels`` magnitudes ``(levels,)`` spaced logarithmically from ``smallest`` to ``largest``
+    (the range itself is always the last). A range at or below ``smallest`` is sampled at
+    ``j/levels`` of itself instead (a log spacing would repeat it)."""
+    if largest <= smallest or levels == 1:
+        return largest * np.arange(1, levels + 1) / levels
+    return np.geomspace(smallest, largest, levels)
+
+
+def uniaxial_level(levels: int) -> int:
+    """The level (index into the magnitudes) at which the uniaxial-tension families are sampled:
+    the middle one (the upper of two). Not the smallest: a relaxed knit carries a residual stress
+    (``docs/design.md`` §6; cotton jersey ~50 N/m), and at 0.1–0.5 % its transverse direction
+    contracts by several times the pull to release it (polyester jersey, warp at 0.46 %: E⊥ =
+    −1.4 %; there and for cotton jersey at 0.1 % the search ran out of solves), which is not what
+    a tensile test measures."""
+    return levels // 2
 
 
 def design_size(levels: int) -> int:
     """Samples in a design of ``levels`` magnitudes per family and sign."""
-    return SAMPLES_PER_LEVEL * levels + UNIAXIAL_PER_LEVEL * uniaxial_levels(levels)
+    return 1 + SAMPLES_PER_LEVEL * levels + UNIAXIAL_SAMPLES
 
 
 def levels_for(samples: int) -> int:

@@ -11,6 +11,10 @@ Conventions (``docs/design.md`` §3), SI units throughout:
 * Bending strain: ``κ = (II_tt, II_pp, 2 II_tp)`` with ``II`` the second fundamental form (2×2
   symmetric, 1/m). Energy per area ``W_b = (h³/2) κᵀ B κ`` (J/m²) with
   ``B = [[b00, b01, 0], [b01, b11, 0], [0, 0, b22]]`` (Pa). The paper's model has ``b01 = 0``.
+* Strain stiffening (optional, :class:`NonlinearMembrane`, ``docs/design.md`` §3): the membrane
+  energy gains ``h Σ_d φ_d(ε_d)`` with ``φ_d(x) = k2 x³/3 + k3 x⁴/4`` per Voigt direction ``d``,
+  one pair ``(k2, k3)`` (Pa) for ``ε_d ≥ 0`` and one for ``ε_d < 0``; the stress along ``d`` is
+  ``(S ε)_d + k2 ε_d² + k3 ε_d³``. ``S`` stays the tangent at zero strain.
 * Moduli (paper Eq. shell_stiffness_moduli), ``D = 1 − ν_tp ν_pt``: ``s00 = E_t/D``, ``s11 = E_p/D``,
   ``s01 = ν_pt E_t/D = ν_tp E_p/D``, ``s22 = μ``.
 
@@ -18,7 +22,7 @@ Matrix arguments. ``I`` and ``II`` are given as full 2×2 matrices, one ``(2, 2)
 ``(n, 2, 2)``. The energy reads them through their symmetric part, so the off-diagonal strains are
 ``2 E_tp = (I_01 + I_10)/2`` and ``2 II_tp = II_01 + II_10``. :meth:`ShellMaterial.energy_gradient`
 returns the derivative with respect to each entry on its own, which is therefore symmetric:
-``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` with ``σ = S ε`` and ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]``
+``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` with ``σ = S ε + φ'(ε)`` and ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]``
 with ``m = B κ``. A symmetric variation that changes both ``I_01`` and ``I_10`` by ``d`` changes
 ``W`` by ``2 d (dW/dI)_01``, i.e. the usual Frobenius pairing ``⟨dW/dI, dI⟩``.
 """
@@ -30,6 +34,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
 from .checks import check_keys, finite_number
 
@@ -37,6 +42,8 @@ __all__ = [
     "BENDING_PARAMETERS",
     "GF_CM2_PER_CM",
     "MEMBRANE_PARAMETERS",
+    "NONLINEAR_KEYS",
+    "NonlinearMembrane",
     "PARAMETER_NAMES",
     "ShellMaterial",
     "as_first_fundamental_form",
@@ -49,6 +56,14 @@ MEMBRANE_PARAMETERS = ("s00", "s01", "s11", "s22")
 BENDING_PARAMETERS = ("b00", "b01", "b11", "b22")
 # The order of the fit's parameter vector γ and of ShellMaterial.parameters.
 PARAMETER_NAMES = MEMBRANE_PARAMETERS + BENDING_PARAMETERS
+
+# The strain-stiffening terms' names (plugin config keys and material-file keys): the stiffness they
+# act along (s00: weft strain ε0, s11: warp strain ε1, s22: shear strain ε2), the strain's sign
+# (p: ε ≥ 0, n: ε < 0) and the power of the strain in the stress term (2: k2 ε², 3: k3 ε³), Pa.
+NONLINEAR_DIRECTIONS = ("s00", "s11", "s22")
+NONLINEAR_SIDES = ("p", "n")
+NONLINEAR_KEYS = tuple(f"{d}{side}{power}" for d in NONLINEAR_DIRECTIONS for side in NONLINEAR_SIDES for power in (2, 3))
+NONLINEAR_MODEL = "green-polynomial"
 
 # 1 gf·cm²/cm = 1 gf·cm = 9.80665e-3 N × 1e-2 m (N·m): KES-F and cantilever bending rigidity units.
 GF_CM2_PER_CM = 9.80665e-5
@@ -127,6 +142,125 @@ def bending_strain(II: object) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class NonlinearMembrane:
+    """Strain-stiffening (or -softening) terms of an orthotropic membrane (``docs/design.md`` §3).
+
+    Per Voigt direction ``d`` (weft ε0, warp ε1, shear ε2 = 2 E01) the energy per reference area
+    and thickness gains ``φ_d(ε_d) = k2 ε_d³/3 + k3 ε_d⁴/4`` (Pa), with one pair ``(k2, k3)`` for
+    ``ε_d ≥ 0`` and one for ``ε_d < 0``: the stress along ``d`` gains ``k2 ε_d² + k3 ε_d³`` and the
+    tangent ``φ_d'' = 2 k2 ε_d + 3 k3 ε_d²``. φ is C² at zero strain, so the material's ``S`` stays
+    the exact small-strain tangent; frame-invariant, because it is a function of the Green strain.
+
+    What it cannot represent: stiffening that couples directions (the weft–warp coupling stays the
+    constant s01; a biaxial pull stiffens each direction as a uniaxial one does), a Poisson ratio
+    that changes with strain, hysteresis and friction (it is elastic), and buckling (a flat
+    membrane under compression: a fabric's compressive response is its bending's).
+
+    Attributes:
+        coefficients: the twelve ``k`` (Pa) in :data:`NONLINEAR_KEYS` order, a tuple of floats;
+            every ``k3`` (``…3``) is >= 0.
+    """
+
+    coefficients: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        values = tuple(self.coefficients) if not isinstance(self.coefficients, Mapping) else None
+        if values is None or len(values) != len(NONLINEAR_KEYS):
+            raise ValueError(f"NonlinearMembrane needs {len(NONLINEAR_KEYS)} coefficients ({', '.join(NONLINEAR_KEYS)}), "
+                             f"got {self.coefficients!r}")
+        values = tuple(finite_number(v, k) for k, v in zip(NONLINEAR_KEYS, values))
+        negative = [f"{k} = {v!r}" for k, v in zip(NONLINEAR_KEYS, values) if k.endswith("3") and v < 0.0]
+        if negative:
+            raise ValueError(f"the cubic stress terms must be >= 0 (a negative one makes the energy concave at large "
+                             f"strain): {', '.join(negative)}")
+        object.__setattr__(self, "coefficients", values)
+
+    @classmethod
+    def from_keys(cls, terms: Mapping[str, float]) -> NonlinearMembrane:
+        """From ``{key: Pa}``; a key of :data:`NONLINEAR_KEYS` left out is 0, an unknown one is an error."""
+        unknown = sorted(set(terms) - set(NONLINEAR_KEYS))
+        if unknown:
+            raise ValueError(f"unknown nonlinear membrane keys: {', '.join(unknown)} (allowed: {', '.join(NONLINEAR_KEYS)})")
+        return cls(tuple(terms.get(key, 0.0) for key in NONLINEAR_KEYS))
+
+    @property
+    def keys(self) -> dict[str, float]:
+        """The coefficients (Pa) by :data:`NONLINEAR_KEYS` name."""
+        return dict(zip(NONLINEAR_KEYS, self.coefficients))
+
+    @property
+    def table(self) -> np.ndarray:
+        """The coefficients as ``(3, 2, 2)``: direction (ε0, ε1, ε2), side (ε ≥ 0, ε < 0), (k2, k3)."""
+        return np.array(self.coefficients).reshape(3, 2, 2)
+
+    @property
+    def is_zero(self) -> bool:
+        return not any(self.coefficients)
+
+    def _sided(self, eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(k2, k3)`` arrays shaped like ``eps (…, 3)``: each strain's own side's pair."""
+        table = self.table
+        negative = eps < 0.0
+        k2 = np.where(negative, table[:, 1, 0], table[:, 0, 0])
+        k3 = np.where(negative, table[:, 1, 1], table[:, 0, 1])
+        return k2, k3
+
+    def energy(self, eps: np.ndarray) -> np.ndarray:
+        """``Σ_d φ_d(ε_d)`` (Pa = J/m³) for Voigt strains ``eps (…, 3)``; shape ``(…)``."""
+        eps = np.asarray(eps, dtype=np.float64)
+        k2, k3 = self._sided(eps)
+        return np.sum(k2 * eps**3 / 3.0 + k3 * eps**4 / 4.0, axis=-1)
+
+    def stress(self, eps: np.ndarray) -> np.ndarray:
+        """``φ_d'(ε_d) = k2 ε_d² + k3 ε_d³`` (Pa), shaped like ``eps (…, 3)``."""
+        eps = np.asarray(eps, dtype=np.float64)
+        k2, k3 = self._sided(eps)
+        return k2 * eps**2 + k3 * eps**3
+
+    def tangent(self, eps: np.ndarray) -> np.ndarray:
+        """``φ_d''(ε_d) = 2 k2 ε_d + 3 k3 ε_d²`` (Pa), shaped like ``eps (…, 3)``."""
+        eps = np.asarray(eps, dtype=np.float64)
+        k2, k3 = self._sided(eps)
+        return 2.0 * k2 * eps + 3.0 * k3 * eps**2
+
+    def softening(self) -> np.ndarray:
+        """``(3,)`` least ``φ_d''`` over all strains (Pa, <= 0): ``−k2²/(3 k3)`` on a side whose
+        ``k2`` softens (``k2 < 0`` for ε ≥ 0, ``k2 > 0`` for ε < 0), ``−inf`` if its ``k3`` is 0."""
+        least = np.zeros(3)
+        for d, ((k2p, k3p), (k2n, k3n)) in enumerate(self.table):
+            for soft, k3 in ((max(0.0, -k2p), k3p), (max(0.0, k2n), k3n)):
+                if soft > 0.0:
+                    least[d] = min(least[d], -soft * soft / (3.0 * k3) if k3 > 0.0 else -math.inf)
+        return least
+
+    def convexity_problems(self, s00: float, s01: float, s11: float, s22: float) -> list[str]:
+        """Why ``S + diag(softening())`` is not positive definite with this ``S`` (empty if it is):
+        then the membrane energy is convex in the Green strain at every strain."""
+        m0, m1, m2 = (float(m) for m in self.softening())
+        problems = _block_problems(s00 + m0, s01, s11 + m1, s22 + m2, ("(s00 + min φ0'')", "s01", "(s11 + min φ1'')",
+                                                                        "(s22 + min φ2'')"))
+        return [f"the stiffening terms make the membrane non-convex: {p}" for p in problems]
+
+    def to_dict(self) -> dict:
+        """JSON form: ``{"model": "green-polynomial", "stress_terms_pa": {key: Pa}}``."""
+        return {"model": NONLINEAR_MODEL, "stress_terms_pa": self.keys}
+
+    @classmethod
+    def from_dict(cls, data: Mapping, where: str = "shell material") -> NonlinearMembrane:
+        """Inverse of :meth:`to_dict`; ValueError ``<where>: …`` naming the key at fault."""
+        _check_keys(data, ("model", "stress_terms_pa"), where, "nonlinear.")
+        if data["model"] != NONLINEAR_MODEL:
+            raise ValueError(f"{where}: nonlinear.model must be {NONLINEAR_MODEL!r}, got {data['model']!r}")
+        _check_keys(data["stress_terms_pa"], NONLINEAR_KEYS, where, "nonlinear.stress_terms_pa.")
+        terms = {k: _json_number(data["stress_terms_pa"][k], where, f"nonlinear.stress_terms_pa.{k}")
+                 for k in NONLINEAR_KEYS}
+        try:
+            return cls.from_keys(terms)
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
+
+
+@dataclass(frozen=True)
 class ShellMaterial:
     """Orthotropic StVK shell: thickness and the membrane and bending stiffness matrices.
 
@@ -137,6 +271,8 @@ class ShellMaterial:
         thickness: shell thickness h (m), > 0.
         s00, s01, s11, s22: membrane stiffnesses (Pa), entries of ``S``.
         b00, b01, b11, b22: bending stiffnesses (Pa), entries of ``B``.
+        nonlinear: the membrane's strain-stiffening terms, or ``None`` (StVK); ``S`` is the
+            small-strain tangent either way.
     """
 
     thickness: float
@@ -148,12 +284,20 @@ class ShellMaterial:
     b01: float
     b11: float
     b22: float
+    nonlinear: NonlinearMembrane | None = None
 
     def __post_init__(self) -> None:
         for name in ("thickness",) + PARAMETER_NAMES:
             object.__setattr__(self, name, finite_number(getattr(self, name), name))
         if self.thickness <= 0.0:
             raise ValueError(f"thickness must be > 0 (m), got {self.thickness!r}")
+        if self.nonlinear is not None and not isinstance(self.nonlinear, NonlinearMembrane):
+            raise ValueError(f"nonlinear must be a NonlinearMembrane or None, got {type(self.nonlinear).__name__}")
+
+    @property
+    def linear(self) -> ShellMaterial:
+        """This material without its strain-stiffening terms (the StVK of its small-strain tangent)."""
+        return ShellMaterial(self.thickness, **self.parameters)
 
     # -- matrices and parameter views ------------------------------------------------------------
 
@@ -185,12 +329,15 @@ class ShellMaterial:
         return not _block_problems(self.b00, self.b01, self.b11, self.b22, BENDING_PARAMETERS)
 
     def check_positive_definite(self) -> None:
-        """Raise ValueError naming the block (membrane/bending) and the entries that fail."""
+        """Raise ValueError naming the block (membrane/bending) and the entries that fail; with
+        stiffening terms, also if they make the membrane energy non-convex at some strain."""
         problems = []
         membrane = _block_problems(self.s00, self.s01, self.s11, self.s22, MEMBRANE_PARAMETERS)
         bending = _block_problems(self.b00, self.b01, self.b11, self.b22, BENDING_PARAMETERS)
         if membrane:
             problems.append(f"membrane block S not positive definite: {'; '.join(membrane)}")
+        elif self.nonlinear is not None:
+            problems += self.nonlinear.convexity_problems(self.s00, self.s01, self.s11, self.s22)
         if bending:
             problems.append(f"bending block B not positive definite: {'; '.join(bending)}")
         if problems:
@@ -295,7 +442,7 @@ class ShellMaterial:
     # -- energy ------------------------------------------------------------------------------------
 
     def energy_density(self, I: object, II: object) -> float | np.ndarray:
-        """Energy per reference area ``W = W_s + W_b`` (J/m²).
+        """Energy per reference area ``W = W_s + W_b`` (J/m²), with the stiffening terms if any.
 
         Args:
             I: first fundamental form, ``(2, 2)`` or ``(n, 2, 2)``.
@@ -307,6 +454,8 @@ class ShellMaterial:
         eps, kap, single = self._strains(I, II)
         h = self.thickness
         W = 0.5 * h * np.einsum("...i,ij,...j->...", eps, self.S, eps)
+        if self.nonlinear is not None:
+            W = W + h * self.nonlinear.energy(eps)
         W = W + 0.5 * h**3 * np.einsum("...i,ij,...j->...", kap, self.B, kap)
         return float(W) if single else W
 
@@ -323,9 +472,11 @@ class ShellMaterial:
 
     def uniaxial_tension(self, axis: int, stretch: float) -> tuple[np.ndarray, float]:
         """Uniaxial tension along weft (``axis`` 0) or warp (1) with the other direction free:
-        ``(I (2, 2), W)``. The free Green strain minimises W, ``E_other = −(s01/s_other) E`` with
-        ``E = (stretch² − 1)/2``, and ``W = (h/2) (s_axis − s01²/s_other) E²`` (J/m²), the
-        free-width stiffness of the engineering constants. Needs a positive-definite membrane."""
+        ``(I (2, 2), W)``. The free Green strain minimises W: for StVK ``E_other = −(s01/s_other) E``
+        with ``E = (stretch² − 1)/2`` and ``W = (h/2) (s_axis − s01²/s_other) E²`` (J/m²), the
+        free-width stiffness of the engineering constants; with stiffening terms it is the root of
+        ``s_other E_other + s01 E + φ_other'(E_other) = 0`` (increasing in E_other for a convex
+        membrane). Needs a positive-definite, convex membrane."""
         if axis not in (0, 1):
             raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
         stretch = finite_number(stretch, "stretch")
@@ -335,15 +486,40 @@ class ShellMaterial:
         along, other = (self.s00, self.s11) if axis == 0 else (self.s11, self.s00)
         strain = 0.5 * (stretch**2 - 1.0)
         free = -self.s01 / other * strain
-        diagonal = [0.0, 0.0]
-        diagonal[axis], diagonal[1 - axis] = 1.0 + 2.0 * strain, 1.0 + 2.0 * free
-        return np.diag(diagonal), 0.5 * self.thickness * (along - self.s01**2 / other) * strain**2
+        if self.nonlinear is None or self.nonlinear.is_zero:
+            diagonal = [0.0, 0.0]
+            diagonal[axis], diagonal[1 - axis] = 1.0 + 2.0 * strain, 1.0 + 2.0 * free
+            return np.diag(diagonal), 0.5 * self.thickness * (along - self.s01**2 / other) * strain**2
+        problems = self.nonlinear.convexity_problems(self.s00, self.s01, self.s11, self.s22)
+        if problems:
+            raise ValueError(f"uniaxial tension states need a convex membrane: {'; '.join(problems)}")
+
+        def form(free_strain: float) -> np.ndarray:
+            diagonal = [0.0, 0.0]
+            diagonal[axis], diagonal[1 - axis] = 1.0 + 2.0 * strain, 1.0 + 2.0 * free_strain
+            return np.diag(diagonal)
+
+        def transverse_stress(free_strain: float) -> float:
+            eps = np.zeros(3)
+            eps[axis], eps[1 - axis] = strain, free_strain
+            return float((self.S @ eps)[1 - axis] + self.nonlinear.stress(eps)[1 - axis])
+
+        # Bracket the root: the stress rises with the free strain (convex membrane), and the free
+        # Green strain cannot fall below −½ (a vanishing transverse stretch).
+        low, high = -0.5 + 1e-12, max(abs(free), abs(strain), 1e-12)
+        while transverse_stress(high) < 0.0:
+            high *= 2.0
+        if transverse_stress(low) > 0.0:
+            raise ValueError(f"uniaxial tension at stretch {stretch!r}: no free width balances the transverse stress")
+        free = brentq(transverse_stress, low, high, xtol=1e-15, rtol=4.0 * np.finfo(float).eps)
+        I = form(free)
+        return I, float(self.energy_density(I, np.zeros((2, 2))))
 
     def energy_gradient(self, I: object, II: object) -> tuple[np.ndarray, np.ndarray]:
         """``(dW/dI, dW/dII)``: derivative of :meth:`energy_density` with respect to each matrix entry.
 
         See the module docstring for the convention: both are symmetric,
-        ``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` (J/m²) with ``σ = S ε`` and
+        ``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` (J/m²) with ``σ = S ε + φ'(ε)`` and
         ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]`` (J/m) with ``m = B κ``.
 
         Returns:
@@ -351,7 +527,10 @@ class ShellMaterial:
         """
         eps, kap, _ = self._strains(I, II)
         shape = np.broadcast_shapes(eps.shape, kap.shape)
-        sigma = np.broadcast_to(eps @ self.S, shape)  # S symmetric: row-vector product = S ε
+        sigma = eps @ self.S  # S symmetric: row-vector product = S ε
+        if self.nonlinear is not None:
+            sigma = sigma + self.nonlinear.stress(eps)
+        sigma = np.broadcast_to(sigma, shape)
         moment = np.broadcast_to(kap @ self.B, shape)
         h = self.thickness
         return 0.5 * h * _voigt_to_matrix(sigma), h**3 * _voigt_to_matrix(moment)
@@ -380,12 +559,16 @@ class ShellMaterial:
     # -- serialisation -----------------------------------------------------------------------------
 
     def to_dict(self) -> dict:
-        """JSON form: ``{"thickness_m": h, "membrane_pa": {s00, s01, s11, s22}, "bending_pa": {b00, ...}}``."""
-        return {
+        """JSON form: ``{"thickness_m": h, "membrane_pa": {s00, s01, s11, s22}, "bending_pa": {b00, ...}}``,
+        plus ``"nonlinear"`` (:meth:`NonlinearMembrane.to_dict`) when the material has stiffening terms."""
+        data = {
             "thickness_m": self.thickness,
             "membrane_pa": {name: getattr(self, name) for name in MEMBRANE_PARAMETERS},
             "bending_pa": {name: getattr(self, name) for name in BENDING_PARAMETERS},
         }
+        if self.nonlinear is not None:
+            data["nonlinear"] = self.nonlinear.to_dict()
+        return data
 
     @classmethod
     def from_dict(cls, data: Mapping, where: str = "shell material") -> ShellMaterial:
@@ -398,8 +581,10 @@ class ShellMaterial:
         Raises:
             ValueError: ``<where>: ...`` naming the missing, unknown or non-numeric key.
         """
-        _check_keys(data, ("thickness_m", "membrane_pa", "bending_pa"), where, "")
+        _check_keys(data, ("thickness_m", "membrane_pa", "bending_pa"), where, "", ("nonlinear",))
         fields = {"thickness": _json_number(data["thickness_m"], where, "thickness_m")}
+        if "nonlinear" in data:
+            fields["nonlinear"] = NonlinearMembrane.from_dict(data["nonlinear"], where)
         for block, names in (("membrane_pa", MEMBRANE_PARAMETERS), ("bending_pa", BENDING_PARAMETERS)):
             _check_keys(data[block], names, where, f"{block}.")
             for name in names:
@@ -473,12 +658,13 @@ def _voigt_to_matrix(v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _check_keys(data: object, required: tuple[str, ...], where: str, prefix: str) -> None:
+def _check_keys(data: object, required: tuple[str, ...], where: str, prefix: str,
+                optional: tuple[str, ...] = ()) -> None:
     """ValueError naming missing and unknown keys of a JSON object (reported together)."""
     if not isinstance(data, Mapping):
         name = prefix.rstrip(".") or "material"
         raise ValueError(f"{where}: {name} must be an object with keys {', '.join(required)}, got {data!r}")
-    check_keys(data, required, where, prefix=prefix)
+    check_keys(data, required, where, allowed=required + optional, prefix=prefix)
 
 
 def _json_number(value: object, where: str, key: str) -> float:

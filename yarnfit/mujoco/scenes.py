@@ -109,20 +109,21 @@ class ClothMaterial:
 
     @classmethod
     def from_file(cls, path: str | os.PathLike | MaterialFile,
-                  areal_density_kg_m2: float | None = None) -> ClothMaterial:
+                  areal_density_kg_m2: float | None = None, linear: bool = False) -> ClothMaterial:
         """Read a material file (``yarnfit fit`` output; at least ``shell`` and an areal density;
         a :class:`~yarnfit.material_file.MaterialFile` already read is taken as it is).
 
-        The areal density is ``areal_density_kg_m2`` if given, else the file's
-        ``inputs.areal_density_kg_m2``, else its ``yarn.areal_density_kg_m2`` (the relaxed
-        repeat's).
+        The shell is the file's (with its strain-stiffening membrane if it has one), or with
+        ``linear`` the linear StVK fit from the same samples. The areal density is
+        ``areal_density_kg_m2`` if given, else the file's ``inputs.areal_density_kg_m2``, else its
+        ``yarn.areal_density_kg_m2`` (the relaxed repeat's).
 
         Raises:
             ValueError: ``<file>: ...`` for an unreadable or malformed file, a missing ``shell``,
                 or no usable areal density.
         """
         file = MaterialFile.read(path)
-        shell = file.shell
+        shell = file.linear_shell if linear else file.shell
         try:
             shell.check_positive_definite()
         except ValueError as exc:

@@ -1,0 +1,217 @@
+"""The strain-stiffening membrane fit (``fit_shell(membrane="nonlinear")``) against materials whose
+energies are known exactly: recovery of the tangent, the stiffening terms, the rest energy and the
+residual stress; convexity enforced when the data ask for more softening than a convex membrane
+has, checked against an independent constrained minimiser of the same least-squares problem."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import scipy.optimize
+
+from yarnfit.engine import Residual
+from yarnfit.fit import fit_shell
+from yarnfit.samples import SampleRanges, SampleResult, sample_design
+from yarnfit.shell import NonlinearMembrane, bending_strain, membrane_strain
+
+from fabric_shell import FABRIC, H
+
+# Exact data, a well-posed linear least-squares problem (condition ~1e4 after unit columns): the
+# parameters come back to ~1e-11 relative; 1e-6 fails only for a real error (a wrong column, a
+# dropped term, a weight applied twice).
+RECOVERY_REL = 1e-6
+# The coefficients are compared on the scale of their direction's stress: |Δk| x_max² (x_max the
+# largest sampled strain) against s_dd x_max. A term that the data barely see (a cubic on a side
+# sampled to 0.2 %) is then judged by what it does to the stress, not by its own digits.
+TERM_REL = 1e-6
+# Independent constrained solve (SLSQP on the original parameters): it stops at a relative cost
+# change of 1e-12, so its optimum's cost is known to about that; ours must not be worse by more.
+COST_REL = 1e-6
+# The ranges of the synthetic designs: a woven's (20 % and 200 /m), five magnitudes per family.
+RANGES = SampleRanges(stretch=0.2, curvature=200.0)
+LEVELS = 5
+
+# Stiffening on every side of every direction, convex: weft and warp stiffen 2–4x at 20 %, shear 10x.
+STIFFENING = NonlinearMembrane.from_keys({
+    "s00p2": 2.0e6, "s00p3": 3.0e8, "s11p2": -1.0e6, "s11p3": 2.0e8,
+    "s22p2": 5.0e6, "s22p3": 4.0e7, "s22n2": -5.0e6, "s22n3": 4.0e7,
+})
+TRUE = dataclasses.replace(FABRIC, nonlinear=STIFFENING)
+REST_ENERGY = 0.02  # J/m²
+RESIDUAL = {"n0": 3.0, "n1": -1.5, "n2": 0.2, "m0": 2e-4, "m1": -1e-4, "m2": 5e-5}  # N/m and N
+
+
+def samples_of(material, rest_energy=0.0, residual=None, design=None):
+    """The design's samples with ``material``'s exact energies, plus the rest energy and the
+    residual-stress terms."""
+    residual = residual or {}
+    out = []
+    for spec in design or sample_design(RANGES, LEVELS):
+        eps, kap = membrane_strain(spec.I), bending_strain(spec.II)
+        linear = sum(residual.get(f"n{k}", 0.0) * eps[k] + residual.get(f"m{k}", 0.0) * kap[k] for k in range(3))
+        energy = float(material.energy_density(spec.I, spec.II)) + rest_energy + linear
+        out.append(SampleResult(spec, energy, True, Residual(1e-10, 1e-10, 0.0, 0.0)))
+    return out
+
+
+def test_a_stiffening_material_is_recovered_from_its_own_energies():
+    fit = fit_shell(samples_of(TRUE), H)
+    assert fit.membrane == "nonlinear" and fit.notes == []
+    for name, value in TRUE.parameters.items():
+        assert fit.parameters[name] == pytest.approx(value, rel=RECOVERY_REL, abs=1e-9 * TRUE.s00), name
+    assert_terms_match(fit, STIFFENING)
+    fit.material.check_positive_definite()
+    # The linear fit beside it cannot follow the curve: its R² is lower.
+    for family in ("weft_stretch", "warp_stretch", "shear"):
+        assert fit.families[family]["r2"] == pytest.approx(1.0, abs=1e-12), family
+        assert fit.linear_families[family]["r2"] < fit.families[family]["r2"] - 1e-6, family
+
+
+def test_the_rest_energy_and_residual_stress_are_fitted_and_left_out_of_the_shell():
+    membrane_only = {k: v for k, v in RESIDUAL.items() if k.startswith("n")}
+    fit = fit_shell(samples_of(TRUE, REST_ENERGY, membrane_only), H)
+    assert fit.reference_energy == pytest.approx(REST_ENERGY, rel=1e-12)
+    for name, value in membrane_only.items():
+        assert fit.residual_stress[name] == pytest.approx(value, rel=RECOVERY_REL), name
+    for name, value in TRUE.parameters.items():
+        assert fit.parameters[name] == pytest.approx(value, rel=RECOVERY_REL, abs=1e-9 * TRUE.s00), name
+    assert_terms_match(fit, STIFFENING)
+    quality = fit.quality_dict()
+    assert quality["residual_stress"]["membrane_n_per_m"]["n0"] == pytest.approx(RESIDUAL["n0"], rel=RECOVERY_REL)
+    assert quality["reference_energy_j_per_m2"] == pytest.approx(REST_ENERGY, rel=1e-12)
+    # What the shell sees of each sample is its own energy.
+    used = fit.used
+    shell = TRUE.energy_density(np.stack([s.I for s in used]), np.stack([s.II for s in used]))
+    np.testing.assert_allclose(fit.shell_energy(used), shell, rtol=1e-9, atol=1e-12 * float(np.max(shell)))
+
+
+def test_residual_moments_are_the_central_differences_at_the_smallest_curvature():
+    # A symmetric quadratic bending plus a moment: the ± difference at any curvature is the moment
+    # exactly (the quadratic part cancels), so the reported moments are the data's to round-off.
+    fit = fit_shell(samples_of(TRUE, REST_ENERGY, RESIDUAL), H)
+    for name in ("m0", "m1", "m2"):
+        assert fit.residual_stress[name] == pytest.approx(RESIDUAL[name], rel=1e-9), name
+
+
+def test_a_side_without_enough_samples_extrapolates_with_the_tangent():
+    # Compression is not sampled: the negative weft and warp sides carry no terms.
+    fit = fit_shell(samples_of(TRUE), H)
+    keys = fit.material.nonlinear.keys
+    assert all(keys[k] == 0.0 for k in ("s00n2", "s00n3", "s11n2", "s11n3"))
+    # Two levels give two samples per side, fewer than MIN_SIDE_SAMPLES: no terms anywhere.
+    few = fit_shell(samples_of(TRUE, design=sample_design(RANGES, 2)), H)
+    assert few.material.nonlinear is None
+
+
+def test_softening_beyond_convexity_ends_on_the_convexity_bound():
+    # Weft tension that softens too fast for any convex quartic: the stress k2 ε² with k3 = 0.
+    wanted = NonlinearMembrane.from_keys({"s00p2": -4.0 * FABRIC.s00})
+    samples = []
+    for spec in sample_design(RANGES, LEVELS):
+        eps = membrane_strain(spec.I)
+        energy = float(FABRIC.energy_density(spec.I, spec.II)) + H * float(wanted.energy(eps))
+        samples.append(SampleResult(spec, energy, True, Residual(1e-10, 1e-10, 0.0, 0.0)))
+    fit = fit_shell(samples, H)
+    fit.material.check_positive_definite()  # convex at every strain
+    assert any("convexity" in note for note in fit.notes)
+    # Nothing convex fits better: an independent solver of the same constrained problem.
+    ours = relative_cost(fit, samples)
+    reference = independent_constrained_cost(samples, fit)
+    assert ours <= reference * (1.0 + COST_REL)
+
+
+def test_the_nonlinear_material_reads_back():
+    material = fit_shell(samples_of(TRUE), H).material
+    again = type(material).from_dict(material.to_dict())
+    assert again == material
+    with pytest.raises(ValueError, match="unknown keys: nonlinear.stress_terms_pa.s33p2"):
+        data = material.to_dict()
+        data["nonlinear"]["stress_terms_pa"]["s33p2"] = 1.0
+        type(material).from_dict(data)
+
+
+# -- helpers ---------------------------------------------------------------------------------------
+
+
+def assert_terms_match(fit, expected: NonlinearMembrane) -> None:
+    got = fit.material.nonlinear.keys
+    for key, value in expected.keys.items():
+        direction = key[:3]
+        x = max(abs(v) for v in fit.strain_range[direction])
+        scale = getattr(TRUE, direction) * x
+        power = 2 if key.endswith("2") else 3
+        assert abs(got[key] - value) * x**power <= TERM_REL * scale, (key, got[key], value)
+
+
+def membrane_rows(samples):
+    return [s for s in samples if s.is_membrane and not np.all(s.I == np.eye(2))]
+
+
+def relative_cost(fit, samples) -> float:
+    """Σ ((W − Ū)/Ū)² over the membrane samples: the nonlinear fit's objective."""
+    rows = membrane_rows(samples)
+    W = fit.material.energy_density(np.stack([s.I for s in rows]), np.stack([s.II for s in rows]))
+    W = W + residual_energy(fit, rows)
+    U = np.array([s.energy_density for s in rows])
+    return float(np.sum(((W - U) / U) ** 2))
+
+
+def residual_energy(fit, rows) -> np.ndarray:
+    """The fitted residual-stress terms n·ε (J/m²) at the membrane samples ``rows``."""
+    eps = np.stack([membrane_strain(s.I) for s in rows])
+    return eps @ np.array([fit.residual_stress[f"n{k}"] for k in range(3)])
+
+
+def independent_constrained_cost(samples, fit) -> float:
+    """The same relative least squares over s00 and the weft tension terms (the side the data
+    bend), the other parameters at the fit's values, minimised by SLSQP on the original
+    parameters under the acceptability condition written out directly."""
+    rows = membrane_rows(samples)
+    eps = np.stack([membrane_strain(s.I) for s in rows])
+    U = np.array([s.energy_density for s in rows])
+    base = fit.material
+    others = {k: v for k, v in base.nonlinear.keys.items() if not k.startswith("s00p")}
+    fixed = residual_energy(fit, rows)
+
+    def energy(z):
+        s00, k2, k3 = z[0] * FABRIC.s00, z[1] * FABRIC.s00, z[2] * FABRIC.s00
+        S = np.array([[s00, base.s01, 0.0], [base.s01, base.s11, 0.0], [0.0, 0.0, base.s22]])
+        terms = NonlinearMembrane.from_keys({**others, "s00p2": k2, "s00p3": max(k3, 0.0)})
+        return H * (0.5 * np.einsum("ni,ij,nj->n", eps, S, eps) + terms.energy(eps)) + fixed
+
+    def cost(z):
+        return float(np.sum(((energy(z) - U) / U) ** 2))
+
+    # The acceptable set: S + diag(min φ'') positive definite within the coupling bound ρ, i.e.
+    # ρ² (s00 + m0)(s11 + m1) >= s01² with m0 = −k2²/(3 k3) for a softening k2 (times 3 k3 >= 0).
+    m = NonlinearMembrane.from_keys(others).softening()
+    rho2 = fit.coupling_limit**2
+    transverse = (base.s11 + m[1]) / FABRIC.s00
+
+    def convex(z):
+        return rho2 * (3.0 * z[2] * z[0] - min(z[1], 0.0) ** 2) * transverse - 3.0 * z[2] * (base.s01 / FABRIC.s00) ** 2
+
+    start = np.array([base.s00, base.nonlinear.keys["s00p2"], base.nonlinear.keys["s00p3"]]) / FABRIC.s00
+    result = scipy.optimize.minimize(cost, start * 0.9, method="SLSQP", bounds=[(1e-6, None), (None, None), (0.0, None)],
+                                     constraints=[{"type": "ineq", "fun": convex}],
+                                     options={"ftol": 1e-14, "maxiter": 2000})
+    assert result.success, result.message
+    return min(result.fun, cost(start * 0.9))
+
+
+def test_the_straight_yarn_tangent_reference_is_exact():
+    # The closed form the homogenization test uses: ½ k e² per area in the engineering strain e is,
+    # in the Green strain E = e + e²/2, ½ k (√(1 + 2E) − 1)²: its tangent at 0 is k. Fitted from a
+    # log design up to 40 %, the tangent comes back to better than 1e-3.
+    k = 1.0e3  # N/m
+    samples = []
+    for spec in sample_design(SampleRanges(stretch=0.4, curvature=200.0), LEVELS):
+        e = math.sqrt(spec.I[0, 0]) - 1.0
+        energy = 0.5 * k * e * e + float(FABRIC.linear.energy_density(np.eye(2), spec.II))
+        samples.append(SampleResult(spec, energy, True, Residual(1e-10, 1e-10, 0.0, 0.0)))
+    fit = fit_shell(samples, H, model="paper")
+    assert H * fit.parameters["s00"] == pytest.approx(k, rel=1e-3)
+    assert fit.material.engineering()["weft_stretch_n_per_m"] == pytest.approx(k, rel=1e-3)
