@@ -447,7 +447,7 @@ def test_a_non_convex_or_bad_stiffening_is_refused_naming_what_is_wrong():
         NonlinearMembrane.from_keys({"s11p2": float("nan")})
     # Softening with no quartic to stop it: concave at large strain.
     soft = dataclasses.replace(MATERIAL, nonlinear=NonlinearMembrane.from_keys({"s00p2": -1.0}))
-    with pytest.raises(ValueError, match=r"non-convex: \(s00 \+ min φ0''\) = -inf"):
+    with pytest.raises(ValueError, match=r"non-convex: \(s00 \+ min stiffening\) = -inf"):
         soft.check_positive_definite()
     # Softening deeper than the tangent: min φ0'' = −k2²/(3 k3) = −2 s00.
     k3 = 1e6

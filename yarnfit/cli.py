@@ -543,7 +543,8 @@ def relax_summary(result, fabric, recording_path, output) -> str:
 
 
 def _stiffening_summary(fit) -> str:
-    """Tangent stiffness at the largest sampled strain over the small-strain one, per direction."""
+    """Tangent stiffness at the largest sampled strain over the small-strain one, per direction
+    (the pure stretch or shear: the other strains held)."""
     import numpy as np
 
     material = fit.material
@@ -554,7 +555,7 @@ def _stiffening_summary(fit) -> str:
         top = fit.strain_range.get(direction, [0.0, 0.0])[1]
         eps = np.zeros(3)
         eps[k] = top
-        tangent = getattr(material, direction) + float(material.nonlinear.tangent(eps)[k])
+        tangent = getattr(material, direction) + float(material.nonlinear.hessian(eps)[k, k])
         parts.append(f"{label} ×{tangent / getattr(material, direction):.3g} at {100 * top:.3g} %")
     return ", ".join(parts)
 

@@ -97,6 +97,16 @@ ZERO_STIFFNESS_REL = 1e-6
 # gives at its strain. A slack sample (Ū ≈ 0: a knit's wales under compression) would otherwise
 # get an unbounded weight; a thousandth keeps its say at a 0.1 % relative error of that law.
 RELATIVE_WEIGHT_FLOOR = 1.0e-3
+# Passes of the stiffening fit, each with the stiffening strains' coupling (c01, c10) =
+# (s01/s00, s01/s11) of the previous pass's S, until it changes by less than COUPLING_RTOL: the
+# tangent S barely depends on the terms. Plain passes contract by ~0.4; with Aitken's
+# extrapolation 1e-7 takes about ten to twenty (each a least-squares solve, constrained ones ~1 s). The
+# fitted parameters follow the coupling to ~10x that (s01, the smallest, to ~2e-6).
+COUPLING_ITERATIONS = 30
+COUPLING_RTOL = 1e-7
+# A membrane with s01²/(s00 s11) below this is uncoupled for the constrained stiffening fit (may
+# soften): a fit of data with s01 = 0 leaves ~1e-8; a real fabric's Poisson coupling is >= 1e-3.
+UNCOUPLED = 1e-6
 # Evaluations of the constrained (convexity, coupling) nonlinear solve: a problem of at most ~20
 # unknowns converges in hundreds; the limit only stops a runaway (the fit then keeps the linear
 # membrane and says so). Its tolerances are BOUNDED_SOLVE_TOLERANCE's.
@@ -648,7 +658,51 @@ def _fit_nonlinear_membrane(
     target = np.array([e for _, e in pairs])
     strain_range = {d: [float(eps[:, k].min()), float(eps[:, k].max())] for k, d in enumerate(("s00", "s11", "s22"))}
 
-    # Columns: the quadratic part (as design_matrix), then per free side h x³/3 and h x⁴/4.
+    # The coupling is a fixed point c = g(c) (g: fit with c, take the coupling of its S), iterated
+    # with Aitken's extrapolation every third pass (plain iteration contracts by ~0.4 a pass).
+    coupling = np.array(NonlinearMembrane.coupling_of(linear.s00, linear.s01, linear.s11))
+    iterates = [coupling]
+    for _ in range(COUPLING_ITERATIONS):
+        used = tuple(float(c) for c in coupling)
+        result, strain_range = _stiffening_pass(samples, eps, target, h, linear, coupling_limit, residual, used)
+        fitted = result[0]
+        if fitted is None:
+            break
+        updated = np.array(NonlinearMembrane.coupling_of(fitted["s00"], fitted.get("s01", 0.0), fitted["s11"]))
+        if np.all(np.abs(updated - coupling) <= COUPLING_RTOL * (1.0 + np.abs(coupling))):
+            break
+        iterates.append(updated)
+        coupling = updated
+        if len(iterates) == 3:
+            first, second = iterates[1] - iterates[0], iterates[2] - iterates[1]
+            curvature = second - first
+            with np.errstate(divide="ignore", invalid="ignore"):
+                extrapolated = np.where(np.abs(curvature) > 0.0, iterates[2] - second**2 / curvature, iterates[2])
+            # Keep it a coupling some positive-definite S has: c01 c10 = s01²/(s00 s11) < 1.
+            if np.all(np.isfinite(extrapolated)) and extrapolated[0] * extrapolated[1] < 1.0:
+                coupling = extrapolated
+            iterates = [coupling]
+    else:
+        result[2].append(f"the stiffening strains' coupling did not settle in {COUPLING_ITERATIONS} passes "
+                         f"(c01, c10 = {coupling[0]:.6g}, {coupling[1]:.6g})")
+    fitted, errors, notes = result
+    if fitted is None:
+        return ({n: getattr(linear, n) for n in MEMBRANE_PARAMETERS}, {}, None, notes, strain_range, {})
+    stress = {n: fitted.pop(n) for n in RESIDUAL_STRESS_NAMES["membrane"] if n in fitted}
+    terms = {n: v for n, v in fitted.items() if n not in MEMBRANE_PARAMETERS}
+    S = {k: fitted.get(k, 0.0) for k in MEMBRANE_PARAMETERS}
+    stiffening = None
+    if terms:  # with the coupling it was fitted with (that of S to COUPLING_RTOL)
+        stiffening = NonlinearMembrane(NonlinearMembrane.from_keys(terms).coefficients, used)
+    return (S, errors, stiffening, notes, strain_range, stress)
+
+
+def _stiffening_pass(samples, eps, target, h, linear, coupling_limit, residual, coupling):
+    """One fit of the stiffening membrane with the stiffening strains' ``coupling`` held:
+    ``((values by name or None, errors, notes), stiffening-strain range per direction)``."""
+    y = NonlinearMembrane((0.0,) * len(NONLINEAR_KEYS), coupling).stiffening_strain(eps)
+    strain_range = {d: [float(y[:, k].min()), float(y[:, k].max())] for k, d in enumerate(("s00", "s11", "s22"))}
+    # Columns: the quadratic part (as design_matrix), then per free side h y³/3 and h y⁴/4.
     columns = [0.5 * h * eps[:, 0] ** 2, h * eps[:, 0] * eps[:, 1], 0.5 * h * eps[:, 1] ** 2, 0.5 * h * eps[:, 2] ** 2]
     names = list(MEMBRANE_PARAMETERS)
     free_sides = []
@@ -658,7 +712,7 @@ def _fit_nonlinear_membrane(
             count = sum(s.family == family and sign * s.parameter > 0.0 for s in samples)
             if count < MIN_SIDE_SAMPLES:
                 continue
-            x = np.where(sign * eps[:, k] > 0.0, eps[:, k], 0.0)
+            x = np.where(sign * y[:, k] > 0.0, y[:, k], 0.0)
             columns += [h * x**3 / 3.0, h * x**4 / 4.0]
             names += [f"{direction}{side}2", f"{direction}{side}3"]
             free_sides.append((k, direction, side))
@@ -671,25 +725,21 @@ def _fit_nonlinear_membrane(
                 columns.append(eps[:, k])
                 names.append(RESIDUAL_STRESS_NAMES["membrane"][k])
     D = np.stack(columns, axis=1)
-    result = _solve_nonlinear_membrane(D, names, target, eps, free_sides, strain_range, linear, coupling_limit)
+    result = _solve_nonlinear_membrane(D, names, target, eps, free_sides, strain_range, linear, coupling_limit,
+                                       coupling)
     fitted = result[0]
     if fitted is not None and min(fitted["s00"], fitted["s11"]) <= ZERO_STIFFNESS_REL * max(fitted["s00"], fitted["s11"]):
         # A direction that carries no energy has nothing to couple to: refit with s01 = 0.
         keep = [k for k, n in enumerate(names) if n != "s01"]
         result = _solve_nonlinear_membrane(D[:, keep], [names[k] for k in keep], target, eps, free_sides, strain_range,
-                                           linear, coupling_limit)
-    fitted, errors, notes = result
-    if fitted is None:
-        return ({n: getattr(linear, n) for n in MEMBRANE_PARAMETERS}, {}, None, notes, strain_range, {})
-    stress = {n: fitted.pop(n) for n in RESIDUAL_STRESS_NAMES["membrane"] if n in fitted}
-    terms = {n: v for n, v in fitted.items() if n not in MEMBRANE_PARAMETERS}
-    stiffening = NonlinearMembrane.from_keys(terms) if terms else None
-    return ({k: fitted.get(k, 0.0) for k in MEMBRANE_PARAMETERS}, errors, stiffening, notes, strain_range, stress)
+                                           linear, coupling_limit, coupling)
+    return result, strain_range
 
 
 def _solve_nonlinear_membrane(
     D: np.ndarray, names: list[str], target: np.ndarray, eps: np.ndarray, free_sides: list[tuple[int, str, str]],
     strain_range: dict[str, list[float]], linear: ShellMaterial, coupling_limit: float | None,
+    coupling: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[dict[str, float] | None, dict[str, float], list[str]]:
     """One relative-weighted solve of :func:`_fit_nonlinear_membrane` over the columns ``D``
     named ``names``: ``(values by name or None if it failed, standard errors of S, notes)``."""
@@ -716,16 +766,16 @@ def _solve_nonlinear_membrane(
     result = lsq_linear(As, b, bounds=(lower * norms, np.full(len(names), np.inf)), method="bvls")
     notes = []
     x = _drop_negligible_terms(result.x / norms, names, free_sides, strain_range, linear) if result.success else None
-    if x is not None and not _nonlinear_problems(x, names, coupling_limit):
+    if x is not None and not _nonlinear_problems(x, names, coupling_limit, coupling):
         values = x
     else:
-        values = _constrained_nonlinear_solve(As, b, norms, names, free_sides, floor, linear, coupling_limit)
+        values = _constrained_nonlinear_solve(As, b, norms, names, free_sides, floor, linear, coupling_limit, coupling)
         if values is None:
             notes.append("the strain-stiffening membrane's constrained fit failed: the material carries the linear "
                          "membrane")
             return None, {}, notes
         notes.append("strain-stiffening membrane fitted under its convexity and coupling bounds (the unconstrained "
-                     f"optimum {'; '.join(_nonlinear_problems(x, names, coupling_limit)) if x is not None else 'failed'})")
+                     f"optimum {'; '.join(_nonlinear_problems(x, names, coupling_limit, coupling)) if x is not None else 'failed'})")
 
     fitted = dict(zip(names, values.tolist()))
     for n in ("s00", "s11", "s22"):
@@ -740,44 +790,46 @@ def _solve_nonlinear_membrane(
     return fitted, errors, notes
 
 
-def _split(values: np.ndarray, names: list[str]) -> tuple[dict[str, float], NonlinearMembrane]:
-    """``S`` by name and the stiffening terms from a parameter vector named by ``names``."""
+def _split(values: np.ndarray, names: list[str],
+           coupling: tuple[float, float] = (0.0, 0.0)) -> tuple[dict[str, float], NonlinearMembrane]:
+    """``S`` by name and the stiffening terms (with ``coupling``) from a parameter vector named by ``names``."""
     named = dict(zip(names, np.asarray(values, dtype=float).tolist()))
-    terms = {n: v for n, v in named.items() if n in NONLINEAR_KEYS}
-    return {k: named.get(k, 0.0) for k in MEMBRANE_PARAMETERS}, NonlinearMembrane.from_keys(
-        {k: (max(v, 0.0) if k.endswith("3") else v) for k, v in terms.items()})
+    terms = {n: (max(v, 0.0) if n.endswith("3") else v) for n, v in named.items() if n in NONLINEAR_KEYS}
+    return ({k: named.get(k, 0.0) for k in MEMBRANE_PARAMETERS},
+            NonlinearMembrane(NonlinearMembrane.from_keys(terms).coefficients, coupling))
 
 
 def _nonlinear_problems(values: np.ndarray, names: list[str], coupling_limit: float | None,
-                        slack: float = 0.0) -> list[str]:
-    """Why a parameter vector is not an acceptable membrane: non-convex, or its tangent coupling
-    beyond ``coupling_limit`` anywhere (empty if acceptable); ``slack`` admits a coupling that
-    far (relative) past the bound, the round-off of a solution that sits on it."""
-    S, terms = _split(values, names)
+                        coupling: tuple[float, float] = (0.0, 0.0), slack: float = 0.0) -> list[str]:
+    """Why a parameter vector is not an acceptable membrane: non-convex, or its least tangent's
+    coupling beyond ``coupling_limit`` (empty if acceptable); ``slack`` admits a coupling that far
+    (relative) past the bound, the round-off of a solution that sits on it."""
+    S, terms = _split(values, names, coupling)
     problems = terms.convexity_problems(S["s00"], S["s01"], S["s11"], S["s22"])
     if coupling_limit is not None and not problems:
-        m0, m1, _ = terms.softening()
-        least = math.sqrt((S["s00"] + m0) * (S["s11"] + m1))
-        if abs(S["s01"]) > coupling_limit * least * (1.0 + slack):
-            problems.append(f"|s01| = {abs(S['s01']):.6g} Pa > {coupling_limit:g} √((s00 + min φ0'')(s11 + min φ1'')) = "
+        H = terms.least_tangent(S["s00"], S["s01"], S["s11"], S["s22"])
+        least = math.sqrt(H[0, 0] * H[1, 1])
+        if abs(H[0, 1]) > coupling_limit * least * (1.0 + slack):
+            problems.append(f"|s01| of the least tangent = {abs(H[0, 1]):.6g} Pa > {coupling_limit:g} √(H00 H11) = "
                             f"{coupling_limit * least:.6g} Pa")
     return problems
 
 
 def _constrained_nonlinear_solve(
     As: np.ndarray, b: np.ndarray, norms: np.ndarray, names: list[str], free_sides: list[tuple[int, str, str]],
-    floor: float, linear: ShellMaterial, coupling_limit: float | None,
+    floor: float, linear: ShellMaterial, coupling_limit: float | None, coupling: tuple[float, float] = (0.0, 0.0),
 ) -> np.ndarray | None:
     """``min ‖As (x norms) − b‖`` over the parameters ``x`` (by ``names``) of an acceptable
-    membrane: with a softening allowance ``t_d >= 0`` per direction, ``s_dd − t_d >= floor``,
-    ``|s01| <= ρ √((s00 − t0)(s11 − t1))`` and on every free side ``soft(k2)² <= 3 k3 t_d``
-    (``soft`` the part of ``k2`` that softens that side). Those say ``S + diag(min φ'')`` is
+    membrane: with a softening allowance ``t_d >= 0`` per direction, ``H = S − Dᵀ diag(t) D``
+    (D the stiffening strains' map) positive definite with diagonals ``>= floor`` and coupling
+    ``|H01| <= ρ √(H00 H11)``, and on every free side ``soft(k2)² <= 3 k3 t_d`` (``soft`` the part
+    of ``k2`` that softens that side). Those say the least tangent ``S + Dᵀ diag(min φ'') D`` is
     positive definite within the coupling bound. The set is convex (second-order cones and a
     hyperbolic constraint), and so is the objective.
 
     Solved in a parametrisation that meets the constraints by construction, with simple bounds
-    only (a general constrained solver stalled on this problem's scales): ``s_dd = floor + e_d +
-    τ_d²``, ``t_d = τ_d²``, ``s01 = ρ r √((floor + e0)(floor + e1))`` with ``r ∈ [−1, 1]``, and
+    only (a general constrained solver stalled on this problem's scales): ``H_dd = floor + e_d``,
+    ``H01 = ρ r √(H00 H11)`` with ``r ∈ [−1, 1]``, ``t_d = τ_d²``, ``S = H + Dᵀ diag(t) D``, and
     per side ``k3 = v²``, ``k2 = ∓√3 v τ_d ± c`` with ``e, τ, v, c >= 0``. Started from ``linear``
     (feasible). Returns ``x``, or ``None`` if the solve fails."""
     index = {n: k for k, n in enumerate(names)}
@@ -790,16 +842,26 @@ def _constrained_nonlinear_solve(
     # all but the last group in units of ``reference``.
     sides = [(k, f"{direction}{side}", side) for k, direction, side in free_sides]
 
+    D = NonlinearMembrane((0.0,) * len(NONLINEAR_KEYS), coupling).map
+    # With coupled stiffening strains, S = H + Dᵀ diag(t) D can carry a coupling past ρ even with
+    # H's within it (cotton jersey: s01²/(s00 s11) = 1.000, a free-width stiffness of 1e-5 N/m);
+    # there no side may soften (t = 0, every φ'' >= 0) and S = H keeps the bound. A membrane
+    # whose coupling is round-off (c01 c10 = s01²/(s00 s11) <= UNCOUPLED) may.
+    soften = coupling[0] * coupling[1] <= UNCOUPLED
+
     def unpack(theta):
-        e, tau = theta[0:3], theta[3:6]
-        at = 6
+        e = theta[0:3]
+        tau, at = (theta[3:6], 6) if soften else (np.zeros(3), 3)
         x = np.zeros(len(names))
-        effective = floor + e * reference
-        for k, n in enumerate(diagonal):
-            x[index[n]] = effective[k] + (tau[k] * tau[k]) * reference
+        H = np.diag(floor + e * reference)
         if coupled:
-            x[index["s01"]] = rho * theta[at] * math.sqrt(effective[0] * effective[1])
+            H[0, 1] = H[1, 0] = rho * theta[at] * math.sqrt(H[0, 0] * H[1, 1])
             at += 1
+        S = H + D.T @ np.diag(tau * tau * reference) @ D
+        for k, n in enumerate(diagonal):
+            x[index[n]] = S[k, k]
+        if coupled:
+            x[index["s01"]] = S[0, 1]
         for k, key, side in sides:
             v, c = theta[at], theta[at + 1]
             at += 2
@@ -818,9 +880,10 @@ def _constrained_nonlinear_solve(
     for n in diagonal:
         start.append(max(getattr(linear, n) - floor, 0.0) / reference)
         low.append(0.0), high.append(np.inf)
-    start += [1e-3] * 3  # τ: off zero, where the products v τ would have no gradient
-    low += [0.0] * 3
-    high += [np.inf] * 3
+    if soften:
+        start += [1e-3] * 3  # τ: off zero, where the products v τ would have no gradient
+        low += [0.0] * 3
+        high += [np.inf] * 3
     if coupled:
         product = (floor + start[0] * reference) * (floor + start[1] * reference)
         start.append(float(np.clip(linear.s01 / (rho * math.sqrt(product)), -1.0 + 1e-9, 1.0 - 1e-9)))
@@ -837,7 +900,10 @@ def _constrained_nonlinear_solve(
     if solution.status <= 0:
         return None
     x = unpack(solution.x)
-    return None if _nonlinear_problems(x, names, coupling_limit, slack=CONSTRAINT_RTOL) else x
+    # By construction the least tangent is H plus a positive semi-definite term: convex. Its own
+    # coupling may sit a little past ρ (the term has off-diagonals: cotton jersey 1.01 ρ); the
+    # conditioning the bound is for is H's. So only convexity is checked again, for round-off.
+    return None if _nonlinear_problems(x, names, None, coupling, slack=CONSTRAINT_RTOL) else x
 
 
 def _drop_negligible_terms(values: np.ndarray, names: list[str], free_sides: list[tuple[int, str, str]],

@@ -12,9 +12,9 @@ Conventions (``docs/design.md`` §3), SI units throughout:
   symmetric, 1/m). Energy per area ``W_b = (h³/2) κᵀ B κ`` (J/m²) with
   ``B = [[b00, b01, 0], [b01, b11, 0], [0, 0, b22]]`` (Pa). The paper's model has ``b01 = 0``.
 * Strain stiffening (optional, :class:`NonlinearMembrane`, ``docs/design.md`` §3): the membrane
-  energy gains ``h Σ_d φ_d(ε_d)`` with ``φ_d(x) = k2 x³/3 + k3 x⁴/4`` per Voigt direction ``d``,
-  one pair ``(k2, k3)`` (Pa) for ``ε_d ≥ 0`` and one for ``ε_d < 0``; the stress along ``d`` is
-  ``(S ε)_d + k2 ε_d² + k3 ε_d³``. ``S`` stays the tangent at zero strain.
+  energy gains ``h Σ_d φ_d(y_d)`` with ``φ_d(y) = k2 y³/3 + k3 y⁴/4`` per direction ``d``, one pair
+  ``(k2, k3)`` (Pa) for ``y_d ≥ 0`` and one for ``y_d < 0``, on the stiffening strains
+  ``y = (ε0 + c01 ε1, ε1 + c10 ε0, ε2)``. ``S`` stays the tangent at zero strain.
 * Moduli (paper Eq. shell_stiffness_moduli), ``D = 1 − ν_tp ν_pt``: ``s00 = E_t/D``, ``s11 = E_p/D``,
   ``s01 = ν_pt E_t/D = ν_tp E_p/D``, ``s22 = μ``.
 
@@ -22,7 +22,7 @@ Matrix arguments. ``I`` and ``II`` are given as full 2×2 matrices, one ``(2, 2)
 ``(n, 2, 2)``. The energy reads them through their symmetric part, so the off-diagonal strains are
 ``2 E_tp = (I_01 + I_10)/2`` and ``2 II_tp = II_01 + II_10``. :meth:`ShellMaterial.energy_gradient`
 returns the derivative with respect to each entry on its own, which is therefore symmetric:
-``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` with ``σ = S ε + φ'(ε)`` and ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]``
+``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` with ``σ = S ε + Dᵀ φ'(y)`` and ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]``
 with ``m = B κ``. A symmetric variation that changes both ``I_01`` and ``I_10`` by ``d`` changes
 ``W`` by ``2 d (dW/dI)_01``, i.e. the usual Frobenius pairing ``⟨dW/dI, dI⟩``.
 """
@@ -42,6 +42,7 @@ __all__ = [
     "BENDING_PARAMETERS",
     "GF_CM2_PER_CM",
     "MEMBRANE_PARAMETERS",
+    "NONLINEAR_COUPLING_KEYS",
     "NONLINEAR_KEYS",
     "NonlinearMembrane",
     "PARAMETER_NAMES",
@@ -63,6 +64,8 @@ PARAMETER_NAMES = MEMBRANE_PARAMETERS + BENDING_PARAMETERS
 NONLINEAR_DIRECTIONS = ("s00", "s11", "s22")
 NONLINEAR_SIDES = ("p", "n")
 NONLINEAR_KEYS = tuple(f"{d}{side}{power}" for d in NONLINEAR_DIRECTIONS for side in NONLINEAR_SIDES for power in (2, 3))
+# The stiffening strains' coupling (NonlinearMembrane.coupling): y0 = ε0 + c01 ε1, y1 = ε1 + c10 ε0.
+NONLINEAR_COUPLING_KEYS = ("c01", "c10")
 NONLINEAR_MODEL = "green-polynomial"
 
 # 1 gf·cm²/cm = 1 gf·cm = 9.80665e-3 N × 1e-2 m (N·m): KES-F and cantilever bending rigidity units.
@@ -145,23 +148,33 @@ def bending_strain(II: object) -> np.ndarray:
 class NonlinearMembrane:
     """Strain-stiffening (or -softening) terms of an orthotropic membrane (``docs/design.md`` §3).
 
-    Per Voigt direction ``d`` (weft ε0, warp ε1, shear ε2 = 2 E01) the energy per reference area
-    and thickness gains ``φ_d(ε_d) = k2 ε_d³/3 + k3 ε_d⁴/4`` (Pa), with one pair ``(k2, k3)`` for
-    ``ε_d ≥ 0`` and one for ``ε_d < 0``: the stress along ``d`` gains ``k2 ε_d² + k3 ε_d³`` and the
-    tangent ``φ_d'' = 2 k2 ε_d + 3 k3 ε_d²``. φ is C² at zero strain, so the material's ``S`` stays
-    the exact small-strain tangent; frame-invariant, because it is a function of the Green strain.
+    Each yarn direction stiffens with its own *stiffening strain*: the stress the linear part
+    carries along it, over its axial stiffness,
 
-    What it cannot represent: stiffening that couples directions (the weft–warp coupling stays the
-    constant s01; a biaxial pull stiffens each direction as a uniaxial one does), a Poisson ratio
-    that changes with strain, hysteresis and friction (it is elastic), and buckling (a flat
-    membrane under compression: a fabric's compressive response is its bending's).
+        y = (ε0 + c01 ε1, ε1 + c10 ε0, ε2),   c01 = s01/s00, c10 = s01/s11 (the material's ``coupling``),
+
+    and the energy per reference area and thickness gains ``Σ_d φ_d(y_d)``, ``φ_d(y) = k2 y³/3 +
+    k3 y⁴/4`` (Pa) with one pair ``(k2, k3)`` for ``y ≥ 0`` and one for ``y < 0``. The stress (the
+    derivative in ε) gains ``Dᵀ φ'(y)`` with ``D = ∂y/∂ε``, ``φ' = k2 y² + k3 y³``. φ is C² at zero,
+    so the material's ``S`` stays the exact small-strain tangent; frame-invariant, a function of
+    the Green strain. Why the stress and not the strain along a direction: a knit's membrane is
+    near rank one; pulled at free width its courses lengthen while its wales shorten and the yarn
+    hardly stretches (``y0 = (1 − s01²/s00 s11) ε0``, 2 % of ε0 for cotton jersey), while at fixed
+    width (``y0 = ε0``) its loops jam and it stiffens eightfold. Stiffening on ε0 alone put the
+    jersey's free-width pull at 3.4 kN/m at 10 % against 10 N/m in its yarn swatch.
+
+    What it cannot represent: a coupling s01 that changes with strain (so a Poisson ratio that
+    does), stiffening that depends on more than each direction's stiffening strain, hysteresis and
+    friction (it is elastic), and buckling (a flat membrane under compression).
 
     Attributes:
         coefficients: the twelve ``k`` (Pa) in :data:`NONLINEAR_KEYS` order, a tuple of floats;
             every ``k3`` (``…3``) is >= 0.
+        coupling: ``(c01, c10)``, dimensionless (``(0, 0)``: each direction's own strain).
     """
 
     coefficients: tuple[float, ...]
+    coupling: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         values = tuple(self.coefficients) if not isinstance(self.coefficients, Mapping) else None
@@ -173,59 +186,84 @@ class NonlinearMembrane:
         if negative:
             raise ValueError(f"the cubic stress terms must be >= 0 (a negative one makes the energy concave at large "
                              f"strain): {', '.join(negative)}")
+        coupling = tuple(self.coupling)
+        if len(coupling) != 2:
+            raise ValueError(f"NonlinearMembrane.coupling must be (c01, c10), got {self.coupling!r}")
+        coupling = tuple(finite_number(v, k) for k, v in zip(NONLINEAR_COUPLING_KEYS, coupling))
         object.__setattr__(self, "coefficients", values)
+        object.__setattr__(self, "coupling", coupling)
 
     @classmethod
     def from_keys(cls, terms: Mapping[str, float]) -> NonlinearMembrane:
-        """From ``{key: Pa}``; a key of :data:`NONLINEAR_KEYS` left out is 0, an unknown one is an error."""
-        unknown = sorted(set(terms) - set(NONLINEAR_KEYS))
+        """From ``{key: value}`` (:data:`NONLINEAR_KEYS` in Pa, ``c01`` and ``c10``); a key left
+        out is 0, an unknown one is an error."""
+        allowed = NONLINEAR_KEYS + NONLINEAR_COUPLING_KEYS
+        unknown = sorted(set(terms) - set(allowed))
         if unknown:
-            raise ValueError(f"unknown nonlinear membrane keys: {', '.join(unknown)} (allowed: {', '.join(NONLINEAR_KEYS)})")
-        return cls(tuple(terms.get(key, 0.0) for key in NONLINEAR_KEYS))
+            raise ValueError(f"unknown nonlinear membrane keys: {', '.join(unknown)} (allowed: {', '.join(allowed)})")
+        return cls(tuple(terms.get(key, 0.0) for key in NONLINEAR_KEYS),
+                   tuple(terms.get(key, 0.0) for key in NONLINEAR_COUPLING_KEYS))
+
+    @classmethod
+    def coupling_of(cls, s00: float, s01: float, s11: float) -> tuple[float, float]:
+        """``(c01, c10) = (s01/s00, s01/s11)``: the stiffening strains of a membrane ``S``."""
+        return (s01 / s00, s01 / s11)
 
     @property
     def keys(self) -> dict[str, float]:
-        """The coefficients (Pa) by :data:`NONLINEAR_KEYS` name."""
-        return dict(zip(NONLINEAR_KEYS, self.coefficients))
+        """Every value by name: the twelve terms (Pa, :data:`NONLINEAR_KEYS`), then ``c01``, ``c10``
+        (the plugin's config keys)."""
+        return {**dict(zip(NONLINEAR_KEYS, self.coefficients)), **dict(zip(NONLINEAR_COUPLING_KEYS, self.coupling))}
 
     @property
     def table(self) -> np.ndarray:
-        """The coefficients as ``(3, 2, 2)``: direction (ε0, ε1, ε2), side (ε ≥ 0, ε < 0), (k2, k3)."""
+        """The coefficients as ``(3, 2, 2)``: direction (y0, y1, y2), side (y ≥ 0, y < 0), (k2, k3)."""
         return np.array(self.coefficients).reshape(3, 2, 2)
+
+    @property
+    def map(self) -> np.ndarray:
+        """``D = ∂y/∂ε`` ``(3, 3)``."""
+        c01, c10 = self.coupling
+        return np.array([[1.0, c01, 0.0], [c10, 1.0, 0.0], [0.0, 0.0, 1.0]])
 
     @property
     def is_zero(self) -> bool:
         return not any(self.coefficients)
 
-    def _sided(self, eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(k2, k3)`` arrays shaped like ``eps (…, 3)``: each strain's own side's pair."""
+    def stiffening_strain(self, eps: np.ndarray) -> np.ndarray:
+        """``y`` for Voigt strains ``eps (…, 3)``, same shape."""
+        return np.asarray(eps, dtype=np.float64) @ self.map.T
+
+    def _sided(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(k2, k3)`` arrays shaped like ``y (…, 3)``: each stiffening strain's own side's pair."""
         table = self.table
-        negative = eps < 0.0
+        negative = y < 0.0
         k2 = np.where(negative, table[:, 1, 0], table[:, 0, 0])
         k3 = np.where(negative, table[:, 1, 1], table[:, 0, 1])
         return k2, k3
 
     def energy(self, eps: np.ndarray) -> np.ndarray:
-        """``Σ_d φ_d(ε_d)`` (Pa = J/m³) for Voigt strains ``eps (…, 3)``; shape ``(…)``."""
-        eps = np.asarray(eps, dtype=np.float64)
-        k2, k3 = self._sided(eps)
-        return np.sum(k2 * eps**3 / 3.0 + k3 * eps**4 / 4.0, axis=-1)
+        """``Σ_d φ_d(y_d)`` (Pa = J/m³) for Voigt strains ``eps (…, 3)``; shape ``(…)``."""
+        y = self.stiffening_strain(eps)
+        k2, k3 = self._sided(y)
+        return np.sum(k2 * y**3 / 3.0 + k3 * y**4 / 4.0, axis=-1)
 
     def stress(self, eps: np.ndarray) -> np.ndarray:
-        """``φ_d'(ε_d) = k2 ε_d² + k3 ε_d³`` (Pa), shaped like ``eps (…, 3)``."""
-        eps = np.asarray(eps, dtype=np.float64)
-        k2, k3 = self._sided(eps)
-        return k2 * eps**2 + k3 * eps**3
+        """``Dᵀ φ'(y)`` (Pa), the derivative of :meth:`energy` in ε, shaped like ``eps (…, 3)``."""
+        y = self.stiffening_strain(eps)
+        k2, k3 = self._sided(y)
+        return (k2 * y**2 + k3 * y**3) @ self.map
 
-    def tangent(self, eps: np.ndarray) -> np.ndarray:
-        """``φ_d''(ε_d) = 2 k2 ε_d + 3 k3 ε_d²`` (Pa), shaped like ``eps (…, 3)``."""
-        eps = np.asarray(eps, dtype=np.float64)
-        k2, k3 = self._sided(eps)
-        return 2.0 * k2 * eps + 3.0 * k3 * eps**2
+    def hessian(self, eps: np.ndarray) -> np.ndarray:
+        """``Dᵀ diag(φ''(y)) D`` ``(…, 3, 3)`` (Pa), ``φ'' = 2 k2 y + 3 k3 y²``."""
+        y = self.stiffening_strain(eps)
+        k2, k3 = self._sided(y)
+        D = self.map
+        return np.einsum("ki,...k,kj->...ij", D, 2.0 * k2 * y + 3.0 * k3 * y**2, D)
 
     def softening(self) -> np.ndarray:
         """``(3,)`` least ``φ_d''`` over all strains (Pa, <= 0): ``−k2²/(3 k3)`` on a side whose
-        ``k2`` softens (``k2 < 0`` for ε ≥ 0, ``k2 > 0`` for ε < 0), ``−inf`` if its ``k3`` is 0."""
+        ``k2`` softens (``k2 < 0`` for y ≥ 0, ``k2 > 0`` for y < 0), ``−inf`` if its ``k3`` is 0."""
         least = np.zeros(3)
         for d, ((k2p, k3p), (k2n, k3n)) in enumerate(self.table):
             for soft, k3 in ((max(0.0, -k2p), k3p), (max(0.0, k2n), k3n)):
@@ -233,27 +271,42 @@ class NonlinearMembrane:
                     least[d] = min(least[d], -soft * soft / (3.0 * k3) if k3 > 0.0 else -math.inf)
         return least
 
+    def least_tangent(self, s00: float, s01: float, s11: float, s22: float) -> np.ndarray:
+        """``S + Dᵀ diag(softening()) D`` ``(3, 3)``: below every tangent the membrane has."""
+        m = self.softening()
+        if np.any(np.isinf(m)):
+            return np.full((3, 3), -np.inf)
+        D = self.map
+        S = np.array([[s00, s01, 0.0], [s01, s11, 0.0], [0.0, 0.0, s22]])
+        return S + D.T @ np.diag(m) @ D
+
     def convexity_problems(self, s00: float, s01: float, s11: float, s22: float) -> list[str]:
-        """Why ``S + diag(softening())`` is not positive definite with this ``S`` (empty if it is):
+        """Why :meth:`least_tangent` is not positive definite with this ``S`` (empty if it is):
         then the membrane energy is convex in the Green strain at every strain."""
-        m0, m1, m2 = (float(m) for m in self.softening())
-        problems = _block_problems(s00 + m0, s01, s11 + m1, s22 + m2, ("(s00 + min φ0'')", "s01", "(s11 + min φ1'')",
-                                                                        "(s22 + min φ2'')"))
+        H = self.least_tangent(s00, s01, s11, s22)
+        problems = _block_problems(float(H[0, 0]), float(H[0, 1]) if np.isfinite(H[0, 1]) else 0.0, float(H[1, 1]),
+                                   float(H[2, 2]), ("(s00 + min stiffening)", "s01", "(s11 + min stiffening)",
+                                                    "(s22 + min stiffening)"))
         return [f"the stiffening terms make the membrane non-convex: {p}" for p in problems]
 
     def to_dict(self) -> dict:
-        """JSON form: ``{"model": "green-polynomial", "stress_terms_pa": {key: Pa}}``."""
-        return {"model": NONLINEAR_MODEL, "stress_terms_pa": self.keys}
+        """JSON form: ``{"model": "green-polynomial", "stress_terms_pa": {key: Pa},
+        "stiffening_strain": {"c01": …, "c10": …}}``."""
+        return {"model": NONLINEAR_MODEL, "stress_terms_pa": dict(zip(NONLINEAR_KEYS, self.coefficients)),
+                "stiffening_strain": dict(zip(NONLINEAR_COUPLING_KEYS, self.coupling))}
 
     @classmethod
     def from_dict(cls, data: Mapping, where: str = "shell material") -> NonlinearMembrane:
         """Inverse of :meth:`to_dict`; ValueError ``<where>: …`` naming the key at fault."""
-        _check_keys(data, ("model", "stress_terms_pa"), where, "nonlinear.")
+        _check_keys(data, ("model", "stress_terms_pa", "stiffening_strain"), where, "nonlinear.")
         if data["model"] != NONLINEAR_MODEL:
             raise ValueError(f"{where}: nonlinear.model must be {NONLINEAR_MODEL!r}, got {data['model']!r}")
         _check_keys(data["stress_terms_pa"], NONLINEAR_KEYS, where, "nonlinear.stress_terms_pa.")
+        _check_keys(data["stiffening_strain"], NONLINEAR_COUPLING_KEYS, where, "nonlinear.stiffening_strain.")
         terms = {k: _json_number(data["stress_terms_pa"][k], where, f"nonlinear.stress_terms_pa.{k}")
                  for k in NONLINEAR_KEYS}
+        terms.update({k: _json_number(data["stiffening_strain"][k], where, f"nonlinear.stiffening_strain.{k}")
+                      for k in NONLINEAR_COUPLING_KEYS})
         try:
             return cls.from_keys(terms)
         except ValueError as exc:
@@ -475,7 +528,7 @@ class ShellMaterial:
         ``(I (2, 2), W)``. The free Green strain minimises W: for StVK ``E_other = −(s01/s_other) E``
         with ``E = (stretch² − 1)/2`` and ``W = (h/2) (s_axis − s01²/s_other) E²`` (J/m²), the
         free-width stiffness of the engineering constants; with stiffening terms it is the root of
-        ``s_other E_other + s01 E + φ_other'(E_other) = 0`` (increasing in E_other for a convex
+        the transverse stress ``(S ε + Dᵀ φ'(y))_other = 0`` (increasing in E_other for a convex
         membrane). Needs a positive-definite, convex membrane."""
         if axis not in (0, 1):
             raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
@@ -519,7 +572,7 @@ class ShellMaterial:
         """``(dW/dI, dW/dII)``: derivative of :meth:`energy_density` with respect to each matrix entry.
 
         See the module docstring for the convention: both are symmetric,
-        ``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` (J/m²) with ``σ = S ε + φ'(ε)`` and
+        ``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` (J/m²) with ``σ = S ε + Dᵀ φ'(y)`` and
         ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]`` (J/m) with ``m = B κ``.
 
         Returns:
