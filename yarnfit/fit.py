@@ -660,7 +660,9 @@ def _fit_nonlinear_membrane(
 
     # The coupling is a fixed point c = g(c) (g: fit with c, take the coupling of its S), iterated
     # with Aitken's extrapolation every third pass (plain iteration contracts by ~0.4 a pass).
-    coupling = np.array(NonlinearMembrane.coupling_of(linear.s00, linear.s01, linear.s11))
+    # Started uncoupled: the linear fit's coupling is a poor guess where a direction carries
+    # almost no energy (a parallel-yarn sheet's warp: s01/s11 of round-off).
+    coupling = np.zeros(2)
     iterates = [coupling]
     for _ in range(COUPLING_ITERATIONS):
         used = tuple(float(c) for c in coupling)
