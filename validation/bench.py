@@ -1,6 +1,6 @@
 """Benchmarks of yarnfit, one section per stage.
 
-    python validation/bench.py [engine] [relax] [fit] [mujoco]
+    python validation/bench.py [engine] [relax] [fit] [mujoco] [plugin_nonlinear_stable_step]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -12,6 +12,7 @@ import argparse
 import math
 import sys
 import time
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -289,7 +290,181 @@ def bench_mujoco() -> None:
         report(f"{key}_plugin_compute_fraction", plugin_ms / ms_per_step["without"], "of the step without it")
 
 
-SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco}
+# -- plugin_nonlinear_stable_step -----------------------------------------------------------------
+
+# Strain stiffening added to the woven for this section: weft and warp tangents 5 times their
+# small-strain value at 10 % strain, from the x³ stress term alone on the tension side
+# (s00p3 = 4 s00 / (3 · 0.1²), s11p3 likewise); compression and shear unchanged.
+STIFFENING_RATIO = 5.0
+STIFFENING_STRAIN = 0.1
+# Cell sizes (m) of the exported 0.5 m hanging cloth: 26 and 51 vertices per side.
+STABLE_STEP_CELLS = (0.02, 0.01)
+# Simulated time per trial (s). The cloth falls from horizontal and swings; its pinned corners are
+# yanked at each turn, and stiffened runs near their limit diverged at 0.33, 0.85, 1.0 and 1.3 s
+# (2 cm cells). Near the limit the outcome also depends on the exact step (a step 1e-4 larger than
+# one that survived 2 s diverged at 1.3 s), hence the grid below rather than a bisection.
+STABLE_STEP_SECONDS = 2.0
+# Steps tried: DEFAULT_TIMESTEP × STABLE_STEP_GRID^k, from the start up while stable or down until
+# stable; the answer is a grid step that ran stably and its neighbour above that did not (19 %
+# apart).
+STABLE_STEP_GRID = 2.0**0.25
+STABLE_STEP_MAX = 0.016  # s: 16× the export default; the swing is not resolved beyond it anyway
+STABLE_STEP_MIN = 1e-6  # s
+# A run fails on MuJoCo's bad-QACC warning, a non-finite position, a vertex faster than this (m/s):
+# free fall from the cloth's 0.6 m gives 3.4 m/s and its whipping corners reached 7–11 m/s in
+# stable runs, while a diverging run passes 100 m/s within tens of steps of leaving that range ...
+STABLE_STEP_SPEED_LIMIT = 50.0
+# ... or a weft or warp Green strain above this: stable runs peak at 5–7 % (2 cm cells) and 11 %
+# (1 cm, the pinned corners' point load) at 1 ms; at 8 ms (2 cm) the StVK cloth stays clear of
+# bad QACC but its corner triangles pass 30 % (660 % at 16 ms): a failed step, not cloth.
+STABLE_STEP_STRAIN_LIMIT = 0.3
+
+
+class _Hang(NamedTuple):
+    """One trial: whether it ran stably, what failed (empty if nothing), the largest vertex speed
+    (m/s) and weft or warp Green strain seen."""
+
+    stable: bool
+    failure: str
+    speed: float
+    strain: float
+
+
+def _stiffening_keys(shell) -> dict[str, float]:
+    """The section's strain-stiffening keys for ``shell`` (Pa)."""
+    k3 = (STIFFENING_RATIO - 1.0) / (3.0 * STIFFENING_STRAIN**2)
+    return {"s00p3": k3 * shell.s00, "s11p3": k3 * shell.s11}
+
+
+def _hanging_cloth(material, cell: float, timestep: float, damping: float, stiffening: dict[str, float]):
+    """The exported cloth scene (built-in split, discrete integrator) at ``cell`` spacing, its
+    plugin given the ``stiffening`` keys on top of the material."""
+    from yarnfit.mujoco.scenes import DEFAULT_SIZE, build_scene, compile_quietly
+
+    size = DEFAULT_SIZE["cloth"]
+    built = build_scene(material, "cloth", resolution=round(size / cell) + 1, timestep=timestep, damping=damping)
+    plugin = built.spec.plugins[0]
+    plugin.config = {**plugin.config, **{key: repr(value) for key, value in stiffening.items()}}
+    return compile_quietly(built.spec)
+
+
+def _hang(model, seconds: float) -> _Hang:
+    """Step ``model`` for ``seconds`` and watch it (the cloth flat at qpos0, weft along world x)."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    rest = data.flexvert_xpos.copy()
+    triangles = model.flex_elem.reshape(-1, 3)
+    rest_edges = np.stack([rest[triangles[:, 1], :2] - rest[triangles[:, 0], :2],
+                           rest[triangles[:, 2], :2] - rest[triangles[:, 0], :2]], axis=2)  # (T, 2, 2)
+    rest_inverse = np.linalg.inv(rest_edges)
+    bodies = np.unique(model.flex_vertbodyid)
+    bodies = bodies[model.body_dofnum[bodies] == 3]
+    dofs = model.body_dofadr[bodies][:, None] + np.arange(3)
+    warning = int(mujoco.mjtWarning.mjWARN_BADQACC)
+    speed, strain = 0.0, 0.0
+    for step in range(round(seconds / model.opt.timestep)):
+        mujoco.mj_step(model, data)
+        when = f"at {(step + 1) * model.opt.timestep:.2f} s"  # MuJoCo resets data.time on bad QACC
+        if data.warning[warning].number:
+            return _Hang(False, f"bad QACC {when}", speed, strain)
+        if not np.all(np.isfinite(data.qpos)):
+            return _Hang(False, f"non-finite {when}", speed, strain)
+        speed = max(speed, float(np.sqrt((data.qvel[dofs] ** 2).sum(axis=1)).max()))
+        x = data.flexvert_xpos
+        edges = np.stack([x[triangles[:, 1]] - x[triangles[:, 0]], x[triangles[:, 2]] - x[triangles[:, 0]]], axis=2)
+        F = edges @ rest_inverse  # (T, 3, 2): columns along weft and warp
+        strain = max(strain, 0.5 * (float((F**2).sum(axis=1).max()) - 1.0))
+        if speed > STABLE_STEP_SPEED_LIMIT:
+            return _Hang(False, f"speed {speed:.3g} m/s {when}", speed, strain)
+        if strain > STABLE_STEP_STRAIN_LIMIT:
+            return _Hang(False, f"strain {strain:.3g} {when}", speed, strain)
+    return _Hang(True, "", speed, strain)
+
+
+def _largest_stable_step(material, cell: float, damping: float, stiffening: dict[str, float], start: float):
+    """Scan the step grid from the grid step nearest ``start`` (s). Returns the largest stable step
+    found (s, None if none down to the minimum) with its trial, and the failing step above it (s,
+    inf if every step up to the maximum ran) with its trial."""
+    from yarnfit.mujoco import DEFAULT_TIMESTEP
+
+    def trial(k):
+        timestep = DEFAULT_TIMESTEP * STABLE_STEP_GRID**k
+        result = _hang(_hanging_cloth(material, cell, timestep, damping, stiffening), STABLE_STEP_SECONDS)
+        print(f"  {cell * 100:g} cm, damping {damping:g} s, {'stiffening' if stiffening else 'stvk'}: "
+              f"{timestep * 1e3:.4g} ms {result.failure or 'stable'}", file=sys.stderr, flush=True)  # progress
+        return timestep, result
+
+    k = round(math.log(start / DEFAULT_TIMESTEP, STABLE_STEP_GRID))
+    timestep, result = trial(k)
+    stable = unstable = None
+    if result.stable:
+        stable = (timestep, result)
+        while DEFAULT_TIMESTEP * STABLE_STEP_GRID ** (k + 1) <= STABLE_STEP_MAX:
+            k += 1
+            timestep, result = trial(k)
+            if not result.stable:
+                unstable = (timestep, result)
+                break
+            stable = (timestep, result)
+    else:
+        unstable = (timestep, result)
+        while DEFAULT_TIMESTEP * STABLE_STEP_GRID ** (k - 1) >= STABLE_STEP_MIN:
+            k -= 1
+            timestep, result = trial(k)
+            if result.stable:
+                stable = (timestep, result)
+                break
+            unstable = (timestep, result)
+    return stable, unstable
+
+
+def bench_plugin_nonlinear_stable_step() -> None:
+    """Largest stable time step of the exported hanging cloth (0.5 m, two corners pinned, built-in
+    split, discrete integrator) of the realistic woven of tests/fabric_shell.py, as StVK and with
+    strain stiffening (tangents 5× at 10 % weft/warp strain), at 2 cm and 1 cm cells, with the
+    export's damping time and without damping. The stiffening forces, and their damping, are
+    explicit: nothing of them is in the implicit built-in part."""
+    from pathlib import Path
+
+    from yarnfit.mujoco import DEFAULT_DAMPING, DEFAULT_TIMESTEP
+    from yarnfit.mujoco.scenes import ClothMaterial
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from fabric_shell import FABRIC  # a realistic medium-weight woven
+
+    material = ClothMaterial("medium woven", FABRIC, 0.2)
+    variants = {"stvk": {}, "stiffening": _stiffening_keys(FABRIC)}
+    for name, value in variants["stiffening"].items():
+        report(f"plugin_nonlinear_{name}", value, "Pa")
+    report("plugin_nonlinear_trial_seconds", STABLE_STEP_SECONDS, "s simulated per trial")
+    found = {}  # (damping, variant) -> (cell, largest stable step) at the coarser cell
+    for cell in STABLE_STEP_CELLS:
+        for damping in (DEFAULT_DAMPING, 0.0):
+            for variant, keys in variants.items():
+                key = f"plugin_nonlinear_{cell * 100:g}cm_{variant}_damping_{damping * 1e3:g}ms"
+                # From the export's step, or from the coarser cloth's limit scaled with the cell (as
+                # an explicit elastic limit scales): fewer trials where they are expensive.
+                coarser = found.get((damping, variant))
+                start = DEFAULT_TIMESTEP if coarser is None else coarser[1] * cell / coarser[0]
+                start_time = time.perf_counter()
+                stable, unstable = _largest_stable_step(material, cell, damping, keys, start)
+                if unstable is None:
+                    above = f"stable at every grid step up to {stable[0] * 1e3:.3g} ms"
+                else:
+                    above = f"{unstable[0] * 1e3:.3g} ms failed: {unstable[1].failure}"
+                if stable is None:
+                    report(f"{key}_stable_step", 0.0, f"ms (none down to {STABLE_STEP_MIN * 1e3:g} ms; {above})")
+                    continue
+                found[damping, variant] = (cell, stable[0])
+                report(f"{key}_stable_step", stable[0] * 1e3, f"ms ({above})")
+                report(f"{key}_largest_speed", stable[1].speed, "m/s (at that step)")
+                report(f"{key}_largest_strain", stable[1].strain, "Green strain, weft or warp (at that step)")
+                report(f"{key}_search_seconds", time.perf_counter() - start_time, "s")
+
+SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco,
+            "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -18,8 +18,18 @@
 // converges to (h^3/2) kappa^T B kappa; a boundary edge has no hinge (a free edge carries no
 // moment). See plugins/README.md.
 //
-// Damping (Kelvin-Voigt, stiffness-proportional, the Rayleigh form of the Gauss-Newton stiffness):
-// stresses use eps + damping * d(eps)/dt and kappa + damping * d(kappa)/dt.
+// Strain stiffening (optional keys s00p2 ... s22n3 in Pa, c01 and c10, default 0): each direction
+// stiffens with its stiffening strain y = D eps = (eps0 + c01 eps1, eps1 + c10 eps0, eps2) (yarnfit
+// writes c01 = s01/s00, c10 = s01/s11: the linear stress along a yarn over its stiffness). The
+// membrane energy per reference area gains h sum_d phi_d(y_d), phi_d(y) = k2 y^3/3 + k3 y^4/4 with
+// (k2, k3) from the positive-side keys (s<dd>p2, s<dd>p3) for y >= 0 and the negative-side keys
+// (s<dd>n2, s<dd>n3) for y < 0, so the stress gains h D^T phi'(y), phi' = k2 y^2 + k3 y^3. phi is C2
+// at 0: the tangent at zero strain is exactly S. No hysteresis. init demands a convex energy in eps
+// (the least tangent S + D^T diag(min phi_d'') D positive definite).
+//
+// Damping (Kelvin-Voigt, stiffness-proportional, the Rayleigh form of the tangent stiffness):
+// stresses use eps + damping * d(eps)/dt and kappa + damping * d(kappa)/dt for the quadratic
+// energy; the nonlinear terms add damping * h D^T diag(phi''(y)) D d(eps)/dt.
 //
 // Split with MuJoCo's built-in elasticity: the configuration is always the full material. When
 // the flex also carries <elasticity elastic2d="stretch" young poisson thickness>, the keys
@@ -46,9 +56,20 @@
 // round-off of body frames composed at qpos0 is ~1e-16; a bent mesh is off by its angle.
 #define YF_FLAT_RTOL 1e-9
 
+// The strain-stiffening keys, per Voigt direction d (s00: eps_0, s11: eps_1, s22: eps_2) and side
+// of zero strain: the coefficient k2 of x^2 and k3 of x^3 in the stress for x >= 0, then for x < 0.
+enum { kP2, kP3, kN2, kN3, kNumStiffening };
+static const char* const kStiffeningKeys[3][kNumStiffening] = {
+  {"s00p2", "s00p3", "s00n2", "s00n3"},
+  {"s11p2", "s11p3", "s11n2", "s11n3"},
+  {"s22p2", "s22p3", "s22n2", "s22n3"},
+};
+
 static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
   "builtin_young", "builtin_poisson", "builtin_thickness",
+  "s00p2", "s00p3", "s00n2", "s00n3", "s11p2", "s11p3", "s11n2", "s11n3", "s22p2", "s22p3", "s22n2", "s22n3",
+  "c01", "c10",
 };
 enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 
@@ -56,6 +77,9 @@ enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 typedef struct {
   double s00, s01, s11, s22, b00, b01, b11, b22, thickness, angle, damping;
   double builtin_young, builtin_poisson, builtin_thickness;
+  double stiffening[3][kNumStiffening];  // k2, k3 for y >= 0, k2, k3 for y < 0, per direction (Pa)
+  double c01, c10;      // the stiffening strains' coupling: y0 = eps0 + c01 eps1, y1 = eps1 + c10 eps0
+  int stiffens;         // any stiffening key nonzero: else the membrane is exactly StVK
   double membrane[4];   // the plugin's membrane stiffness h S - t_b S_iso: c00 c01 c11 c22 (N/m)
   double bending[4];    // h^3 B: d00 d01 d11 d22 (N m)
   int flex;
@@ -106,6 +130,74 @@ static int read_number(const mjModel* m, int instance, const char* key, double f
   return 0;
 }
 
+// Least value over one side of zero strain of phi'' = 2 k2 x + 3 k3 x^2 (side +1: x >= 0, -1:
+// x < 0). It is 0 at x = 0 and falls only if the cubic term softens that side (k2 < 0 for x > 0,
+// k2 > 0 for x < 0), to its minimum -k2^2 / (3 k3) at x = -k2 / (3 k3), or without bound when k3 = 0
+// (returns -INFINITY).
+static double least_tangent(double k2, double k3, int side) {
+  if (side * k2 >= 0) return 0;
+  if (!(k3 > 0)) return -INFINITY;
+  return -k2 * k2 / (3 * k3);
+}
+
+// The strain-stiffening keys: every x^3 coefficient >= 0 (a negative one softens at large strain
+// without bound), a softening x^2 term only with a positive x^3 term, and an energy convex in eps:
+// its Hessian S + diag(phi_d''(eps_d)) is at least S + diag(m) with m_d the least phi_d'' over both
+// sides, which must be positive definite. Convexity keeps the stress a monotone function of the
+// strain (no snap-through in the material law itself) and the tangent used by damping dissipative.
+static int check_stiffening(const Shell* s) {
+  static const int kSide[2] = {+1, -1};  // kP2, kP3 are the positive side; kN2, kN3 the negative
+  double least[3];
+  int least_side[3];
+  for (int d = 0; d < 3; d++) {
+    least[d] = 0;
+    least_side[d] = 0;
+    for (int side = 0; side < 2; side++) {
+      const char* key2 = kStiffeningKeys[d][2 * side];
+      const char* key3 = kStiffeningKeys[d][2 * side + 1];
+      double k2 = s->stiffening[d][2 * side], k3 = s->stiffening[d][2 * side + 1];
+      if (k3 < 0) {
+        mju_error(YF_NAME ": config key '%s' must be >= 0 (Pa), got %g: a negative x^3 stress term softens "
+                  "without bound", key3, k3);
+        return -1;
+      }
+      double m = least_tangent(k2, k3, kSide[side]);
+      if (m == -INFINITY) {
+        mju_error(YF_NAME ": config key '%s' = %g softens the %s strain side without bound because '%s' = 0: "
+                  "a softening x^2 stress term needs a positive x^3 term", key2, k2,
+                  side == 0 ? "positive" : "negative", key3);
+        return -1;
+      }
+      if (m < least[d]) {
+        least[d] = m;
+        least_side[d] = side;
+      }
+    }
+  }
+  // The least tangent S + D^T diag(m) D (m <= 0), D = [[1, c01], [c10, 1]] on the normal block.
+  double a = s->s00 + least[0] + s->c10 * s->c10 * least[1];
+  double b = s->s11 + s->c01 * s->c01 * least[0] + least[1];
+  double off = s->s01 + s->c01 * least[0] + s->c10 * least[1];
+  double c = s->s22 + least[2];
+  double det = a * b - off * off;
+  int bad[3] = {!(a > 0) || !(det > 0), !(b > 0) || !(det > 0), !(c > 0)};
+  if (!bad[0] && !bad[1] && !bad[2]) return 0;
+  // S alone is positive definite (checked before), so a failing direction has a softening side.
+  char culprits[400] = "";
+  for (int d = 0; d < 3; d++) {
+    if (!bad[d] || !(least[d] < 0)) continue;
+    size_t used = strlen(culprits);
+    const char* const* keys = kStiffeningKeys[d] + 2 * least_side[d];
+    snprintf(culprits + used, sizeof(culprits) - used, "%s'%s' = %g and '%s' = %g give m%d = %g", used ? "; " : "",
+             keys[0], s->stiffening[d][2 * least_side[d]], keys[1], s->stiffening[d][2 * least_side[d] + 1], d,
+             least[d]);
+  }
+  mju_error(YF_NAME ": the stiffening terms make the membrane energy non-convex: S + D^T diag(m) D must be "
+            "positive definite, m_d the least phi_d'' (Pa), D from c01 = %g, c10 = %g; %s; then its 00 entry = %g, "
+            "11 entry = %g, determinant of the normal block = %g, 22 entry = %g", s->c01, s->c10, culprits, a, b, det, c);
+  return -1;
+}
+
 // Every attribute validated here, in one place.
 static int read_config(const mjModel* m, int instance, Shell* s) {
   struct { const char* key; double* value; int required; double fallback; } keys[] = {
@@ -117,6 +209,14 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
   };
   for (size_t k = 0; k < sizeof(keys) / sizeof(keys[0]); k++) {
     if (read_number(m, instance, keys[k].key, keys[k].fallback, keys[k].required, keys[k].value)) return -1;
+  }
+  if (read_number(m, instance, "c01", 0, 0, &s->c01) || read_number(m, instance, "c10", 0, 0, &s->c10)) return -1;
+  s->stiffens = 0;
+  for (int d = 0; d < 3; d++) {
+    for (int k = 0; k < kNumStiffening; k++) {
+      if (read_number(m, instance, kStiffeningKeys[d][k], 0, 0, &s->stiffening[d][k])) return -1;
+      if (s->stiffening[d][k] != 0) s->stiffens = 1;
+    }
   }
   const char* positive[] = {"s00", "s11", "s22", "b00", "b11", "b22", "thickness"};
   const double values[] = {s->s00, s->s11, s->s22, s->b00, s->b11, s->b22, s->thickness};
@@ -154,7 +254,7 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
     mju_error(YF_NAME ": config key 'builtin_poisson' must lie in [0, 0.5), got %g", s->builtin_poisson);
     return -1;
   }
-  return 0;
+  return check_stiffening(s);
 }
 
 // World position of body b at qpos0, composed from the model's body frames.
@@ -516,9 +616,30 @@ static void shell_destroy(mjData* d, int instance) {
   d->plugin_data[instance] = 0;
 }
 
-// Membrane force of one triangle: grad (3 x 3, added to) of its energy A0/2 eps^T C eps with the
-// stress evaluated at eps + damping * d(eps)/dt. x, xdot: (3 x 3) vertex positions and velocities
-// (xdot NULL without damping).
+// Stress (N/m, Voigt) of the strain-stiffening terms at elastic strain eps and strain rate rate:
+// h D^T (phi'(y) + damping phi''(y) D rate), y = D eps, phi' = k2 y^2 + k3 y^3, phi'' = 2 k2 y + 3 k3 y^2,
+// (k2, k3) of the side of zero y_d lies on.
+static void stiffening_stress(const Shell* s, const double eps[3], const double rate[3], double stress[3]) {
+  double y[3] = {eps[0] + s->c01 * eps[1], eps[1] + s->c10 * eps[0], eps[2]};
+  double yrate[3] = {rate[0] + s->c01 * rate[1], rate[1] + s->c10 * rate[0], rate[2]};
+  double along[3];  // the stress on each stiffening strain
+  for (int d = 0; d < 3; d++) {
+    double x = y[d];
+    const double* k = s->stiffening[d] + (x >= 0 ? kP2 : kN2);
+    double slope = x * x * (k[0] + k[1] * x);          // phi'
+    double tangent = x * (2 * k[0] + 3 * k[1] * x);    // phi''
+    along[d] = s->thickness * (slope + s->damping * tangent * yrate[d]);
+  }
+  stress[0] = along[0] + s->c10 * along[1];  // D^T along
+  stress[1] = s->c01 * along[0] + along[1];
+  stress[2] = along[2];
+}
+
+// Membrane force of one triangle: grad (3 x 3, added to) of its energy A0/2 eps^T C eps (plus the
+// stiffening terms A0 h sum_d phi_d(eps_d)), with the damping stress of d(eps)/dt added: C times it
+// (so the quadratic part's stress is evaluated at eps + damping * d(eps)/dt) and the stiffening
+// terms' tangent times it. x, xdot: (3 x 3) vertex positions and velocities (xdot NULL without
+// damping).
 static void membrane_triangle(const Shell* s, int t, const double x[9], const double* xdot, double grad[9]) {
   const double* Dinv = s->rest_inv + 4 * t;
   const double* c = s->membrane;
@@ -532,7 +653,8 @@ static void membrane_triangle(const Shell* s, int t, const double x[9], const do
     F0[i] = e1[i] * Dinv[0] + e2[i] * Dinv[2];
     F1[i] = e1[i] * Dinv[1] + e2[i] * Dinv[3];
   }
-  double eps0 = 0.5 * (mju_dot3(F0, F0) - 1), eps1 = 0.5 * (mju_dot3(F1, F1) - 1), eps2 = mju_dot3(F0, F1);
+  double eps[3] = {0.5 * (mju_dot3(F0, F0) - 1), 0.5 * (mju_dot3(F1, F1) - 1), mju_dot3(F0, F1)};
+  double rate[3] = {0, 0, 0};
   if (xdot) {
     double r1[3], r2[3], Fd0[3], Fd1[3];
     for (int i = 0; i < 3; i++) {
@@ -543,13 +665,27 @@ static void membrane_triangle(const Shell* s, int t, const double x[9], const do
       Fd0[i] = r1[i] * Dinv[0] + r2[i] * Dinv[2];
       Fd1[i] = r1[i] * Dinv[1] + r2[i] * Dinv[3];
     }
-    eps0 += s->damping * mju_dot3(F0, Fd0);
-    eps1 += s->damping * mju_dot3(F1, Fd1);
-    eps2 += s->damping * (mju_dot3(F0, Fd1) + mju_dot3(F1, Fd0));
+    rate[0] = mju_dot3(F0, Fd0);
+    rate[1] = mju_dot3(F1, Fd1);
+    rate[2] = mju_dot3(F0, Fd1) + mju_dot3(F1, Fd0);
+  }
+  // The quadratic part with its damping, as StVK: C (eps + damping * rate).
+  double eps0 = eps[0], eps1 = eps[1], eps2 = eps[2];
+  if (xdot) {
+    eps0 += s->damping * rate[0];
+    eps1 += s->damping * rate[1];
+    eps2 += s->damping * rate[2];
   }
   double scale = s->area[t];
   double sig0 = scale * (c[0] * eps0 + c[1] * eps1), sig1 = scale * (c[1] * eps0 + c[2] * eps1);
   double sig2 = scale * c[3] * eps2;
+  if (s->stiffens) {  // skipped without the keys: the membrane is then StVK to the last bit
+    double extra[3];
+    stiffening_stress(s, eps, rate, extra);
+    sig0 += scale * extra[0];
+    sig1 += scale * extra[1];
+    sig2 += scale * extra[2];
+  }
   // dW/dF = F P, P = [[sig0, sig2], [sig2, sig1]] (second Piola-Kirchhoff in Voigt order).
   double G0[3], G1[3];
   for (int i = 0; i < 3; i++) {

@@ -411,6 +411,8 @@ def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damp
     spec.activate_plugin(PLUGIN_NAME)
     plugin = spec.add_plugin(name=name, plugin_name=PLUGIN_NAME, active=True)
     config = {name: repr(value) for name, value in shell.parameters.items()}
+    if shell.nonlinear is not None:  # the strain-stiffening terms and their coupling (plugins/README.md)
+        config.update({name: repr(value) for name, value in shell.nonlinear.keys.items()})
     config["thickness"] = repr(shell.thickness)
     config["angle"] = repr(float(angle))
     config["damping"] = repr(float(damping))
