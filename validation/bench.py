@@ -203,7 +203,7 @@ def bench_fit() -> None:
     fabrics.append(Fabric(name="stockinette", fiber=get_fiber("polyester"), pattern_file=stockinette))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fit_fabric(fabrics[0], samples=15, workers=1)
+        fit_fabric(fabrics[0], samples=16, workers=1)
         for fabric in fabrics:
             fitted = fit_fabric(fabric)
             key = "fit_" + fabric.name.replace("-", "_")
@@ -212,6 +212,8 @@ def bench_fit() -> None:
             for stage in ("relax", "homogenize", "fit"):
                 report(f"{key}_{stage}_seconds", seconds[stage], "s")
             report(f"{key}_slowest_sample_seconds", max(r.seconds for r in fitted.samples), "s (one core)")
+            report(f"{key}_mean_sample_seconds", sum(r.seconds for r in fitted.samples) / len(fitted.samples),
+                   "s (one core)")
             report(f"{key}_samples_fitted", len(fitted.fit.used), f"of {len(fitted.samples)}")
             for name, value in fitted.material.engineering().items():
                 report(f"{key}_{name}", value, "")
