@@ -776,8 +776,9 @@ def _solve_nonlinear_membrane(
             notes.append("the strain-stiffening membrane's constrained fit failed: the material carries the linear "
                          "membrane")
             return None, {}, notes
-        notes.append("strain-stiffening membrane fitted under its convexity and coupling bounds (the unconstrained "
-                     f"optimum {'; '.join(_nonlinear_problems(x, names, coupling_limit, coupling)) if x is not None else 'failed'})")
+        why = _nonlinear_problems(x, names, coupling_limit, coupling)[:1] if x is not None else ["failed"]
+        notes.append(f"strain-stiffening membrane fitted under its convexity and coupling bounds (the unconstrained "
+                     f"optimum: {why[0].removeprefix('the stiffening terms make the membrane ')})")
 
     fitted = dict(zip(names, values.tolist()))
     for n in ("s00", "s11", "s22"):
