@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from yarnfit.engine import Rod, RodMaterial, RodModel
-from yarnfit.engine.contact import find_pairs, pair_distances
+from yarnfit.engine.contact import ImageMaps, find_pairs, pair_distances
 from yarnfit.engine.tiling import node_maps
 from curved_tiling import curved_model
 from yarnfit.patterns import DRAFTS, STITCHES, knit, read_pyp, weave
@@ -150,3 +150,18 @@ def test_a_periodic_yarn_does_not_touch_its_own_continuation():
     tiles[-1] = (1, 0)
     model = RodModel.from_rods([Rod(points, 1e-4, MATERIAL, closed=True, tile_offsets=tiles)], lattice=lattice)
     assert len(find_pairs(model, model.node_rest_position, 1e-4)) == 0
+
+
+def test_kept_image_maps_give_the_same_pairs_and_maps():
+    # A curved tiling's per-node image maps are the model's: kept across queries (as the
+    # quasi-static solver does) they give bit for bit what a fresh query builds.
+    model = curved_model(reach=3, turn=0.05, jitter=5e-5)
+    rng = np.random.default_rng(1)
+    maps = ImageMaps(model)
+    for step in range(4):
+        x = model.node_rest_position + 2e-5 * rng.standard_normal(model.node_rest_position.shape)
+        end = None if step % 2 == 0 else x + 1e-4 * rng.standard_normal(x.shape)
+        fresh, kept = find_pairs(model, x, 2e-4, end), find_pairs(model, x, 2e-4, end, maps)
+        assert len(fresh) > 0
+        for name in ("pairs", "images", "rotation", "translation"):
+            np.testing.assert_array_equal(getattr(kept, name), getattr(fresh, name))

@@ -74,9 +74,69 @@ def image_range(model: RodModel, position: np.ndarray, reach: float) -> np.ndarr
     return needed
 
 
-def find_pairs(model: RodModel, position: np.ndarray, margin: float, position_end: np.ndarray | None = None) -> ContactPairs:
+class ImageMaps:
+    """The rigid maps that carry every edge's two nodes to every tile image a contact search of a
+    curved tiling looks at, per search range ``(si, sj)`` (tiles ``|i| ≤ si``, ``|j| ≤ sj``).
+
+    They depend on the model alone, but a query used to rebuild them for every edge at every tile
+    (and the pairs' maps again after it), twice per Newton iteration: a fifth of a HYLC
+    stockinette sample's time. Keep one per model and pass it to :func:`find_pairs`; the maps are
+    the same numbers either way, so the pairs and their maps are too.
+    """
+
+    def __init__(self, model: RodModel):
+        self.model = model
+        self._rows: dict[tuple[int, int], _ImageRows] = {}
+
+    def rows(self, searched: np.ndarray) -> "_ImageRows":
+        key = (int(searched[0]), int(searched[1]))
+        rows = self._rows.get(key)
+        if rows is None:
+            rows = self._rows[key] = _image_rows(self.model, *key)
+        return rows
+
+
+@dataclass(frozen=True)
+class _ImageRows:
+    """Every edge at every tile of a search range, tile-major (row ``k E + e``: edge e in tile
+    ``tiles[k]``): its start node mapped into the tile (``r0``, ``t0``), its end node into the tile
+    plus the edge's own tile offset (``r1``, ``t1``)."""
+
+    si: int
+    sj: int
+    n_edges: int
+    edge: np.ndarray
+    image: np.ndarray
+    start: np.ndarray
+    finish: np.ndarray
+    r0: np.ndarray
+    t0: np.ndarray
+    r1: np.ndarray
+    t1: np.ndarray
+    home: np.ndarray
+
+    def row(self, edges: np.ndarray, images: np.ndarray) -> np.ndarray:
+        """Rows of ``edges`` at tile ``images (P, 2)``."""
+        tile = (images[:, 0] + self.si) * (2 * self.sj + 1) + (images[:, 1] + self.sj)
+        return tile * self.n_edges + edges
+
+
+def _image_rows(model: RodModel, si: int, sj: int) -> _ImageRows:
+    m = model
+    tiles = np.array([(i, j) for i in range(-si, si + 1) for j in range(-sj, sj + 1)], dtype=np.int64)  # (T, 2)
+    edge = np.tile(np.arange(m.n_edges), len(tiles))
+    image = np.repeat(tiles, m.n_edges, axis=0)
+    start, finish = m.edge_nodes[edge, 0], m.edge_nodes[edge, 1]
+    r0, t0 = node_maps(m, start, image)
+    r1, t1 = node_maps(m, finish, image + m.edge_tile[edge])
+    return _ImageRows(si, sj, m.n_edges, edge, image, start, finish, r0, t0, r1, t1, np.all(image == 0, axis=1))
+
+
+def find_pairs(model: RodModel, position: np.ndarray, margin: float, position_end: np.ndarray | None = None,
+               maps: ImageMaps | None = None) -> ContactPairs:
     """Candidate pairs near ``position`` or anywhere on the way to ``position_end`` (m), their
-    boxes inflated by radius plus ``margin / 2`` (m)."""
+    boxes inflated by radius plus ``margin / 2`` (m). ``maps``: the model's :class:`ImageMaps`
+    (curved tilings; built for this query when not given)."""
     m = model
     end = position if position_end is None else np.ascontiguousarray(position_end)
     reach = 2.0 * float(m.edge_radius.max()) + margin + float(m.edge_rest_length.max())
@@ -89,18 +149,21 @@ def find_pairs(model: RodModel, position: np.ndarray, margin: float, position_en
             m.edge_chain_tile, m.edge_arc_start, m.edge_rest_length, m.rod_length, m.rod_closed, m.rod_period,
             m.lattice, searched, ~m.node_pinned, margin, CONTACT_EXCLUSION_FACTOR,
         )
-    else:
-        boxes = _curved_virtual_boxes(m, position, end, margin, searched)
-        pairs, images = _contact_kernels.pairs_of_boxes(
-            *boxes, m.edge_nodes, m.edge_rod, m.edge_chain_tile, m.edge_arc_start, m.edge_rest_length, m.edge_radius,
-            m.rod_length, m.rod_closed, m.rod_period, ~m.node_pinned, CONTACT_EXCLUSION_FACTOR,
-        )
-    return ContactPairs(pairs, images, *_pair_maps(m, pairs, images))
+        return ContactPairs(pairs, images, *_pair_maps(m, pairs, images))
+    rows = (maps if maps is not None else ImageMaps(m)).rows(searched)
+    boxes = _curved_virtual_boxes(m, rows, position, end, margin)
+    pairs, images = _contact_kernels.pairs_of_boxes(
+        *boxes, m.edge_nodes, m.edge_rod, m.edge_chain_tile, m.edge_arc_start, m.edge_rest_length, m.edge_radius,
+        m.rod_length, m.rod_closed, m.rod_period, ~m.node_pinned, CONTACT_EXCLUSION_FACTOR,
+    )
+    return ContactPairs(pairs, images, *_pair_maps(m, pairs, images, rows))
 
 
-def _pair_maps(model: RodModel, pairs: np.ndarray, images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _pair_maps(model: RodModel, pairs: np.ndarray, images: np.ndarray,
+               rows: _ImageRows | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Rigid maps of the nodes ``(a0, a1, b0, b1)`` of each pair: a0 stays, a1 is edge a's end in
-    its tile, b's nodes go to their images in tile ``image`` (b1 one edge tile further)."""
+    its tile, b's nodes go to their images in tile ``image`` (b1 one edge tile further; read from
+    ``rows`` when given, the images' maps of a curved tiling)."""
     n = len(pairs)
     rotation = np.empty((n, 4, 3, 3))
     translation = np.empty((n, 4, 3))
@@ -109,38 +172,32 @@ def _pair_maps(model: RodModel, pairs: np.ndarray, images: np.ndarray) -> tuple[
     translation[:, 0] = 0.0
     rotation[:, 1] = model.edge_end_rotation[a]
     translation[:, 1] = model.edge_offset[a]
-    rotation[:, 2], translation[:, 2] = node_maps(model, model.edge_nodes[b, 0], images)
-    rotation[:, 3], translation[:, 3] = node_maps(model, model.edge_nodes[b, 1], images + model.edge_tile[b])
+    if rows is None:
+        rotation[:, 2], translation[:, 2] = node_maps(model, model.edge_nodes[b, 0], images)
+        rotation[:, 3], translation[:, 3] = node_maps(model, model.edge_nodes[b, 1], images + model.edge_tile[b])
+    else:
+        row = rows.row(b, images)
+        rotation[:, 2], translation[:, 2] = rows.r0[row], rows.t0[row]
+        rotation[:, 3], translation[:, 3] = rows.r1[row], rows.t1[row]
     return rotation, translation
 
 
-def _curved_virtual_boxes(model: RodModel, position, end, margin, searched):
-    """Boxes of every edge at every tile image within ``searched`` that can reach the home tile's
-    boxes, each edge's nodes placed by their own maps: ``(edge, image, lower, upper)``."""
+def _curved_virtual_boxes(model: RodModel, rows: _ImageRows, position, end, margin):
+    """Boxes of every edge at every tile image of ``rows`` that can reach the home tile's boxes,
+    each edge's nodes placed by their own maps: ``(edge, image, lower, upper)``."""
     m = model
-    n0, n1 = m.edge_nodes[:, 0], m.edge_nodes[:, 1]
     pad = (m.edge_radius + 0.5 * margin)[None, :, None]
-    si, sj = int(searched[0]), int(searched[1])
-    tiles = np.array([(i, j) for i in range(-si, si + 1) for j in range(-sj, sj + 1)], dtype=np.int64)  # (T, 2)
-    n_tiles = len(tiles)
-    # All tiles at once, tile-major rows (T·E): each edge's start node mapped into the tile, its end
-    # node into the tile plus the edge's own tile offset.
-    edge = np.tile(np.arange(m.n_edges), n_tiles)
-    image = np.repeat(tiles, m.n_edges, axis=0)
-    start, finish = n0[edge], n1[edge]
-    r0, t0 = node_maps(m, start, image)
-    r1, t1 = node_maps(m, finish, image + m.edge_tile[edge])
-    shape = (n_tiles, m.n_edges, 3)
+    shape = (len(rows.edge) // m.n_edges, m.n_edges, 3)
+    ends = ((rows.r0, rows.t0, rows.start), (rows.r1, rows.t1, rows.finish))
     points = [(np.einsum("eij,ej->ei", r, x[nodes]) + t).reshape(shape)
-              for x in (position, end) for r, t, nodes in ((r0, t0, start), (r1, t1, finish))]
+              for x in (position, end) for r, t, nodes in ends]
     lower = (np.minimum.reduce(points) - pad).reshape(-1, 3)
     upper = (np.maximum.reduce(points) + pad).reshape(-1, 3)
     # Keep only boxes that overlap the hull of the home tile's boxes.
-    home = np.all(image == 0, axis=1)
-    hull_lo, hull_hi = lower[home].min(axis=0), upper[home].max(axis=0)
+    hull_lo, hull_hi = lower[rows.home].min(axis=0), upper[rows.home].max(axis=0)
     keep = np.all((lower <= hull_hi) & (upper >= hull_lo), axis=1)
-    return (np.ascontiguousarray(edge[keep]), np.ascontiguousarray(image[keep]), np.ascontiguousarray(lower[keep]),
-            np.ascontiguousarray(upper[keep]))
+    return (np.ascontiguousarray(rows.edge[keep]), np.ascontiguousarray(rows.image[keep]),
+            np.ascontiguousarray(lower[keep]), np.ascontiguousarray(upper[keep]))
 
 
 def pair_distances(model: RodModel, position: np.ndarray, pairs: ContactPairs) -> np.ndarray:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact import ContactPairs, find_pairs
+from .contact import ContactPairs, ImageMaps, find_pairs
 from .model import RodModel
 
 __all__ = ["CONTACT_SAMPLE_SPACING", "CONTACT_SMOOTHING", "ContactLagrangian", "ContactSet"]
@@ -179,6 +179,8 @@ class ContactLagrangian:
             1, np.ceil(model.edge_rest_length / (CONTACT_SAMPLE_SPACING * model.edge_radius))).astype(np.int64)
         self._margin = options.contact_margin * float(model.edge_radius.min())
         self._memory = _Memory(model.n_edges)
+        # A curved tiling's image maps, built once per search range rather than at every query.
+        self._maps = ImageMaps(model)
         self.restart()
 
     def restart(self) -> None:
@@ -193,7 +195,7 @@ class ContactLagrangian:
         m = self.model
         if not self.options.contact:
             return ContactSet.none(self.edge_samples)
-        pairs = find_pairs(m, position, self._margin, position_end)
+        pairs = find_pairs(m, position, self._margin, position_end, self._maps)
         counts = self.edge_samples[pairs.pairs].sum(axis=1) if len(pairs) else np.zeros(0, dtype=np.int64)
         start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         multiplier, stiffening = self._memory.recall(pairs, start)
