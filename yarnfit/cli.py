@@ -470,6 +470,9 @@ def export_summary(built, material, output, args) -> str:
                     else "linear membrane (--linear)" if args.linear else "linear membrane")
         lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, all "
                      f"bending), weft at {args.angle:g}° from x")
+    if not built.fallback and material.shell.nonlinear is not None and args.check is None:
+        lines.append("  note            the strain-stiffening forces are explicit and can need a step below 1 ms "
+                     "(plugins/README.md): check the scene with --check SECONDS, or export --linear")
     lines += [f"  note            {note}" for note in built.notes]
     lines.append(f"  scene           {output}")
     return "\n".join(lines)
