@@ -43,7 +43,7 @@ from .engine.contact import TilingReachError, image_range
 from .engine.model import aligned_frames
 from .engine.rotations import rotate_frames
 from .engine.tiling import CurvedTiling, retile
-from .relax import RelaxedRepeat
+from .relax import RelaxedRepeat, yarn_centroid_constraints
 from .samples import SampleRanges, SampleResult, SampleSpec
 from .shell import as_first_fundamental_form, as_second_fundamental_form
 
@@ -248,12 +248,7 @@ def _turned_frames(model: RodModel, quaternion: np.ndarray, reference: np.ndarra
 
 def _rve_constraints(model: RodModel, frame: np.ndarray) -> LinearConstraints:
     """``C_RVE``: per yarn and axis k, ``Σ_j (R_jᵀ x_j)_k`` keeps its initial value."""
-    rows = np.zeros((3 * model.n_rods, model.n_nodes, 3))
-    for r in range(model.n_rods):
-        nodes = np.arange(model.rod_node_start[r], model.rod_node_start[r + 1])
-        for k in range(3):
-            rows[3 * r + k, nodes] = frame[nodes, :, k]
-    return LinearConstraints(rows.reshape(3 * model.n_rods, -1))
+    return yarn_centroid_constraints(model, frame)
 
 
 # -- one sample -----------------------------------------------------------------------------------

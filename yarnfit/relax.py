@@ -9,6 +9,20 @@ equilibrium with contacts between all yarns and all their periodic images, the r
 size. The relaxed configuration then becomes the rest state: rest lengths and curvatures of the
 relaxed yarns (frames turned onto their edges, removing the tiny equilibrium shear).
 
+That rest state is then **settled** (:func:`settle_rest_state`): solved once more in its own rest
+model under the constraints every homogenization sample has (each yarn's centroid held), and the
+equilibrium made the rest state again, :data:`REST_SETTLES` times at most. The relaxation samples
+its contacts at points spaced along its own (shrunk) rest lengths; the rest model, whose rest
+lengths are the relaxed ones, samples them elsewhere, and between the relaxation's points yarns
+overlap by up to ~0.2 % of the diameter, within its tolerance. Without the settle every sample
+began by pushing those overlaps apart, with no elastic force to resist but the one it was
+creating: HYLC's stockinette (polyester, as written) stored 1.8e-3 J/m² in the undeformed sample,
+more than the 0.1 % weft and warp samples did (1.1e-3 and 5.7e-5 J/m²), so the smallest samples
+read the release of that stored energy rather than the fabric's stiffness, and every sample spent
+its first ~20 Newton iterations on it. One settle left 1.8e-4 J/m², three 3.8e-5: what remains is
+the contact ramp's smoothing band (``yarnfit.engine.contact_lagrangian.CONTACT_SMOOTHING``), whose
+fresh multipliers push touching yarns apart by up to 1e-4 of the radius sum.
+
 For a fabric given by areal density, the yarn radius is the fixed point of
 ``r = sqrt(ρ_fabric p_x p_y / (ρ_yarn L π))`` with ``L`` the *relaxed* yarn length and
 ``ρ_yarn = φ ρ_fibre``, so the relaxed repeat carries the stated g/m² (a relaxation or two more
@@ -18,12 +32,14 @@ than the first). The rods' rigidities are the :class:`~yarnfit.yarn.Yarn`'s at t
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
 
 from .engine import (
+    ConvergenceWarning,
     EnergyTerms,
     LinearConstraints,
     Progress,
@@ -57,6 +73,11 @@ MAX_ITERATIONS = 1000
 # may keep. The solver drives its sampled contact gaps to 1e-5; between samples a crossing hides
 # at most 0.2 %, so a valid relaxation stays far below this.
 OVERLAP_TOLERANCE = 0.01
+# Settles of the rest state (see the module docstring): each is a solve from the rest state, its
+# equilibrium the next rest state. The first removes the contact sampling's overlaps (stockinette:
+# 24 Newton iterations, stored energy 1.8e-3 -> 1.8e-4 J/m²); later ones take 3-5 iterations and
+# shrink what the smoothing band stores roughly as 1/k (9e-5, 3.8e-5 J/m²).
+REST_SETTLES = 3
 
 
 def pattern_rods(pattern: YarnPattern, section: RodSection, shrink: float) -> list[Rod]:
@@ -135,7 +156,9 @@ class RelaxedRepeat:
             curvatures of the relaxed yarns; nothing pinned, see :func:`free_motion_constraints`).
         relaxation_model: the model that was relaxed (straight rest shape, shrunk rest lengths);
             ``state`` is its equilibrium.
-        state: the relaxed configuration (positions ``(N, 3)`` m, frames ``(E, 4)``).
+        state: the rest state of ``model`` (positions ``(N, 3)`` m, frames ``(E, 4)``): the
+            relaxed configuration after its settles (see :func:`settle_rest_state`).
+        relaxation_state: the equilibrium of ``relaxation_model`` (before the settles).
         shrink: the rest-length factor used.
         converged: the solve met every tolerance.
         iterations: Newton iterations of the last relaxation.
@@ -144,6 +167,10 @@ class RelaxedRepeat:
         penetration: worst overlap of two yarns, relative to the diameter.
         seconds: wall time of all relaxations (s).
         relaxations: relaxations run (more than one when the radius follows the relaxed length).
+        settles: settles of the rest state used (converged ones).
+        settle_energy: rod energy (J) the last settle stored, i.e. how far the rest state was
+            from an equilibrium of its own model when it was last reset (0 if the last settle took
+            no Newton step).
     """
 
     name: str
@@ -153,6 +180,7 @@ class RelaxedRepeat:
     model: RodModel
     relaxation_model: RodModel
     state: RodState
+    relaxation_state: RodState
     shrink: float
     converged: bool
     iterations: int
@@ -161,6 +189,8 @@ class RelaxedRepeat:
     penetration: float
     seconds: float
     relaxations: int = 1
+    settles: int = 0
+    settle_energy: float = 0.0
 
     @property
     def radius(self) -> float:
@@ -195,13 +225,13 @@ class RelaxedRepeat:
         positions, the rest lengths they balance (the shrunk ones) and the relaxed frames' ``d1``
         as reference directors. Relaxing it again as written (shrink 1) reproduces the same
         equilibrium."""
-        m = self.relaxation_model
+        m, state = self.relaxation_model, self.relaxation_state
         position = np.empty_like(self.pattern.node_position)
         rest_length = np.empty(self.pattern.n_nodes)
         director = np.empty((self.pattern.n_nodes, 3))
-        d1 = quaternion_d1(self.state.edge_quaternion)
+        d1 = quaternion_d1(state.edge_quaternion)
         for r, nodes in enumerate(_rod_nodes(self.pattern)):
-            position[nodes] = self.state.node_position[m.rod_nodes(r)]
+            position[nodes] = state.node_position[m.rod_nodes(r)]
             rest_length[nodes] = m.edge_rest_length[m.rod_edges(r)]
             director[nodes] = d1[m.rod_edges(r)]
         return replace(self.pattern, node_position=position, rest_length=rest_length, reference_director=director,
@@ -231,12 +261,9 @@ def relax_pattern(
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
     result = QuasiStaticSolver(phase1, options).solve(RodState.from_model(phase1), callback=on_iteration,
                                                        constraints=free_motion_constraints(phase1))
-    frames = aligned_frames(phase1, result.state.node_position, result.state.edge_quaternion)
-    rods = [replace(rod, points=result.state.node_position[phase1.rod_nodes(r)], frames=frames[phase1.rod_edges(r)])
-            for r, rod in enumerate(rods)]
-    # The relaxed configuration (frames turned onto their edges) becomes the rest state.
-    rest_rods = [replace(rod, rest_lengths=None, straight=False) for rod in rods]
-    model = RodModel.from_rods(rest_rods, lattice=pattern.lattice)
+    # The relaxed configuration (frames turned onto their edges) becomes the rest state, settled.
+    model = rest_model(rods, phase1, result.state, pattern.lattice)
+    model, settles, settle_energy = settle_rest_state(model, rods, pattern.lattice, options)
     state = RodState.from_model(model)
     return RelaxedRepeat(
         name=name or pattern.name,
@@ -246,6 +273,9 @@ def relax_pattern(
         model=model,
         relaxation_model=phase1,
         state=state,
+        relaxation_state=result.state,
+        settles=settles,
+        settle_energy=settle_energy,
         shrink=shrink,
         converged=result.converged,
         iterations=result.iterations,
@@ -254,6 +284,56 @@ def relax_pattern(
         penetration=max_penetration(model, state.node_position),
         seconds=time.perf_counter() - start,
     )
+
+
+def rest_model(rods: list[Rod], solved: RodModel, state: RodState, lattice: np.ndarray) -> RodModel:
+    """The model whose rest state is ``state`` (an equilibrium of ``solved``, built from ``rods``
+    in the same order): each rod's points and frames (turned onto their edges) taken from
+    ``state``, its rest lengths and curvatures from them."""
+    frames = aligned_frames(solved, state.node_position, state.edge_quaternion)
+    return RodModel.from_rods([replace(rod, points=state.node_position[solved.rod_nodes(r)],
+                                       frames=frames[solved.rod_edges(r)], rest_lengths=None, straight=False)
+                               for r, rod in enumerate(rods)], lattice=lattice)
+
+
+def yarn_centroid_constraints(model: RodModel, frame: np.ndarray | None = None) -> LinearConstraints:
+    """Per yarn and axis k, ``Σ_j (R_jᵀ x_j)_k`` keeps its value, ``R_j`` the ``(N, 3, 3)``
+    ``frame`` of node j (identity if None). With the surface frames of a deformed sample these are
+    the homogenization's ``C_RVE`` (:mod:`yarnfit.homogenize`); with none, they hold each yarn's
+    centroid, which is what ``C_RVE`` holds of the undeformed repeat."""
+    rows = np.zeros((3 * model.n_rods, model.n_nodes, 3))
+    for r in range(model.n_rods):
+        nodes = np.arange(model.rod_node_start[r], model.rod_node_start[r + 1])
+        for k in range(3):
+            rows[3 * r + k, nodes] = np.eye(3)[k] if frame is None else frame[nodes, :, k]
+    return LinearConstraints(rows.reshape(3 * model.n_rods, -1))
+
+
+def settle_rest_state(model: RodModel, rods: list[Rod], lattice: np.ndarray,
+                      options: QuasiStaticOptions) -> tuple[RodModel, int, float]:
+    """Settle the rest state of ``model`` (built from ``rods``) into an equilibrium of its own
+    contacts, as the module docstring says: up to :data:`REST_SETTLES` solves from the rest state
+    with each yarn's centroid held, each equilibrium the next rest state. Stops early when a solve
+    takes no Newton step. A settle that does not converge is not used (its warning says why).
+    Returns ``(model, settles used, rod energy (J) the last one stored)``."""
+    settles, stored = 0, 0.0
+    for settles in range(1, REST_SETTLES + 1):
+        state = RodState.from_model(model)
+        with warnings.catch_warnings():
+            # Said below, with what it means for the rest state.
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            solved = QuasiStaticSolver(model, options).solve(state, constraints=yarn_centroid_constraints(model))
+        if not solved.converged:
+            warnings.warn(f"settle {settles} of the rest state did not converge ({solved.residual}); the rest state "
+                          f"is the one before it" + (" (contacts overlapping as the relaxation left them)"
+                                                     if settles == 1 else ""), ConvergenceWarning, stacklevel=3)
+            settles -= 1
+            break
+        stored = solved.energy.internal
+        if solved.iterations == 0:
+            break
+        model = rest_model(rods, model, solved.state, lattice)
+    return model, settles, stored
 
 
 def relax(
