@@ -12,7 +12,8 @@ from yarnfit.validate.verdicts import SHELL_YARN_TOLERANCE, verdicts
 
 SUMMARY = {
     "scenes": {
-        "stretch": {"strips": {"8x5_weft": {"settled": [True, True]}, "8x5_bias": {"settled": [True, False]}}},
+        "stretch": {"strips": {"8x5_weft": {"settled": [True, True], "stable": [True, True]},
+                               "8x5_bias": {"settled": [True, False], "stable": [True, False]}}},
         "sphere": {"settled": True, "bad_qacc": 0, "simulated_s": 1.2},
         "wall": {"settled": False, "bad_qacc": 0, "simulated_s": 3.0},
         "body": {"passed": True, "stable": True, "max_penetration_m": 0.004, "max_distance_m": 0.1,
@@ -33,6 +34,7 @@ def by_check(summary, family="woven"):
 def test_each_check_against_its_criterion():
     v = by_check(SUMMARY)
     assert v["stretch strips settled"].passed is False and "8x5_bias" in v["stretch strips settled"].figure
+    assert v["stretch strips stable"].passed is False and "8x5_bias" in v["stretch strips stable"].figure
     assert v["bias softer (8x5 strips)"].passed is True
     assert v["shell vs yarn swatch"].passed is True  # worst 19 %, warp at 2 %
     assert "19.0 %" in v["shell vs yarn swatch"].figure and "warp at 2 %" in v["shell vs yarn swatch"].figure
@@ -76,4 +78,4 @@ def test_strict_exits_1_when_a_check_fails(strict, code, monkeypatch, tmp_path, 
     assert main(argv) == code
     out, err = capsys.readouterr()
     assert "FAIL  wall drape settled" in out and "pass  garments stayed on" in out
-    assert ("failed: stretch strips settled, wall drape settled" in err) == strict
+    assert ("failed: stretch strips stable, stretch strips settled, wall drape settled" in err) == strict

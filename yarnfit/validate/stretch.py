@@ -90,6 +90,9 @@ class StripResult:
     settled: np.ndarray  # bool: came to rest within MAX_HOLD_SECONDS
     wall_seconds: float
     clamped_law_n_per_m: float  # clamped_strip_stiffness on the scene's own mesh
+    # bool: MuJoCo found no bad accelerations while reaching and holding the level (an unstable
+    # step resets the state, and the level's force is then meaningless)
+    stable: np.ndarray | None = None
 
     def summary(self, shell) -> dict:
         """The strip's figures for ``summary.json`` (JSON values, keys carrying units), beside the
@@ -104,6 +107,7 @@ class StripResult:
             "force_per_width_n_per_m": self.force_per_width_n_per_m.tolist(),
             "compression_ratio": self.compression_ratio.tolist(),
             "settled": self.settled.tolist(),
+            "stable": None if self.stable is None else self.stable.tolist(),
             "uniaxial_law_n_per_m": stiffness,
             "uniaxial_law_poisson": poisson,
             "small_strain_stiffness_over_law": small_strain / stiffness,
@@ -151,9 +155,11 @@ def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bo
 
     if on_level:
         on_level(0, 0.0, rest, triangles, 0.0, 1.0)
-    strains, forces, ratios, settled = [], [], [], []
+    strains, forces, ratios, settled, stable = [], [], [], [], []
     target = 0.0
+    bad = mujoco.mjtWarning.mjWARN_BADQACC
     for index, strain in enumerate(levels, start=1):
+        resets = int(data.warning[bad].number)
         ramp_steps = max(1, round(RAMP_SECONDS / dt))
         goal = strain * length
         for k in range(1, ramp_steps + 1):
@@ -179,12 +185,13 @@ def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bo
         forces.append(force)
         ratios.append(ratio)
         settled.append(rested)
+        stable.append(int(data.warning[bad].number) == resets)
         if on_level:
             on_level(index, strain, data.flexvert_xpos.copy(), triangles, force, ratio)
     wall = time.perf_counter() - start
     return StripResult(f"{strip}_{direction}", length, width, angle, np.array(strains), np.array(forces),
                        np.array(ratios), np.array(settled), wall,
-                       clamped_strip_stiffness(material.shell, rest, triangles, angle))
+                       clamped_strip_stiffness(material.shell, rest, triangles, angle), np.array(stable))
 
 
 def elastic_clamp_force(model, data, still, pull_dof: int) -> float:

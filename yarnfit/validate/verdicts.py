@@ -39,6 +39,11 @@ def verdicts(summary: dict, family: str | None) -> list[Verdict]:
     out = []
     if "stretch" in scenes:
         strips = scenes["stretch"]["strips"]
+        unstable = sorted(name for name, strip in strips.items() if not all(strip.get("stable") or [True]))
+        out.append(Verdict("stretch strips stable", not unstable,
+                           f"{len(strips) - len(unstable)}/{len(strips)} strips without bad accelerations"
+                           + (f" (MuJoCo reset: {', '.join(unstable)})" if unstable else ""),
+                           "no bad-acceleration reset at any level"))
         unsettled = sorted(name for name, strip in strips.items() if not all(strip["settled"]))
         out.append(Verdict("stretch strips settled", not unsettled,
                            f"{len(strips) - len(unsettled)}/{len(strips)} strips at rest at every level"
