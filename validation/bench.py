@@ -1,6 +1,6 @@
 """Benchmarks of yarnfit, one section per stage.
 
-    python validation/bench.py [engine] [relax] [fit] [mujoco] [plugin_nonlinear_stable_step]
+    python validation/bench.py [engine] [relax] [fit] [mujoco] [plugin_nonlinear_stable_step] [swatch]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -465,8 +465,41 @@ def bench_plugin_nonlinear_stable_step() -> None:
                 report(f"{key}_largest_strain", stable[1].strain, "Green strain, weft or warp (at that step)")
                 report(f"{key}_search_seconds", time.perf_counter() - start_time, "s")
 
+# -- swatch ---------------------------------------------------------------------------------------
+
+
+def bench_swatch() -> None:
+    """The explicit yarn-level stretch test's strips at the suite's full size (``yarnfit validate``,
+    node budget included), weft direction, 2 / 5 / 10 % on one core: nodes, and per strain the
+    solve's wall time and Newton iterations. Cotton jersey and cotton twill (the largest strips of
+    the presets; a satin is cut to the same node budget). ``validation/swatch_convergence.py``
+    gives the strips of other sizes."""
+    import warnings
+
+    from yarnfit.fabric import Fabric
+    from yarnfit.relax import relax
+    from yarnfit.validate.swatch import stretch_repeat
+
+    numba.set_num_threads(1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name in ("cotton-jersey", "cotton-twill"):
+            relaxed = relax(Fabric.preset(name))
+            out = stretch_repeat(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), name=name,
+                                 directions=("weft",))
+            curve = out["directions"]["weft"]
+            key = "swatch_" + name.replace("-", "_")
+            report(f"{key}_weft_nodes", curve["nodes"], "nodes")
+            for point in curve["points"][1:]:
+                percent = f"{100 * point['strain']:g}pct"
+                report(f"{key}_weft_{percent}_seconds", point["seconds"], "s (one core)")
+                report(f"{key}_weft_{percent}_iterations", point["iterations"], "iterations")
+                report(f"{key}_weft_{percent}_converged", int(point["converged"]), "bool")
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+
+
 SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco,
-            "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step}
+            "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step, "swatch": bench_swatch}
 
 
 def main(argv: list[str] | None = None) -> int:
