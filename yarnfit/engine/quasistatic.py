@@ -90,8 +90,12 @@ POTENTIAL_ROUNDOFF = 1e-13
 # good: HYLC's stockinette, settled rest state, weft bend at -6.5 /m, cycled between force
 # imbalances of 3e-8 and 2e-7 N (6.6e-5 relative) for 29,000 iterations at damping 1e-12.
 NOISE_DAMPING = 10.0
-# Central-difference step of the contact Hessian, relative to the pair's sum of radii.
-CONTACT_FD_STEP = 1e-9
+# Central-difference step of the contact Hessian, relative to the pair's sum of radii: it moves a
+# constraint's ramp argument λ − k g by 1e-4 of the smoothing band's half-width δ, well inside the
+# foot of the ramp where lightly held loops rest ((λ − k g + δ)/δ ~ 2e-3, force and stiffness going
+# to zero). The rods' 1e-6 moved it by 1e-2 δ, straddled the foot, and Newton cycled there for
+# 30,000 iterations (docs/design.md §5). Round-off ε|x|/h: ~3e-8 of the largest entry.
+CONTACT_FD_STEP = 1e-8
 # Levenberg–Marquardt damping bounds, relative to diag(H). The floor is far below the Hessian's
 # own error (~1e-10 relative); it only regularises exactly singular directions.
 INITIAL_DAMPING = 1e-8
@@ -122,8 +126,8 @@ class QuasiStaticOptions:
             times).
         contact_margin: broad-phase margin in units of the smallest radius.
         max_rotation_step: largest frame rotation per iteration (rad).
-        fd_relative_step: central-difference step of the bend–twist and contact Hessians
-            (relative to the sum of radii for contacts; rad for rotations).
+        fd_relative_step: central-difference step of the bend–twist Hessian (rad); the contact
+            Hessian's is CONTACT_FD_STEP.
     """
 
     force_tolerance: float = 1e-8
