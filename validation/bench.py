@@ -465,6 +465,7 @@ def bench_plugin_nonlinear_stable_step() -> None:
                 report(f"{key}_largest_strain", stable[1].strain, "Green strain, weft or warp (at that step)")
                 report(f"{key}_search_seconds", time.perf_counter() - start_time, "s")
 
+
 # -- swatch ---------------------------------------------------------------------------------------
 
 

@@ -214,7 +214,8 @@ def tile_repeat(relaxed: RelaxedRepeat, I, II) -> TiledRepeat:
     state = RodState.from_model(model)
     state.node_position[:] = position
     state.edge_quaternion[:] = aligned_frames(model, position, quaternion)
-    return TiledRepeat(surface, model, state, _rve_constraints(model, frame), reference, height, px * py)
+    # C_RVE: per yarn and axis k, Σ_j (R_jᵀ x_j)_k keeps its initial value.
+    return TiledRepeat(surface, model, state, yarn_centroid_constraints(model, frame), reference, height, px * py)
 
 
 def _curved_tiling(surface, flat, reference, height, position, frame, repeat) -> CurvedTiling:
@@ -244,11 +245,6 @@ def _turned_frames(model: RodModel, quaternion: np.ndarray, reference: np.ndarra
     end = reference[model.edge_nodes[:, 1]] + model.edge_tile * np.asarray(repeat)
     frame = surface.evaluate(0.5 * (start + end))[2]
     return rotate_frames(frame, quaternion)
-
-
-def _rve_constraints(model: RodModel, frame: np.ndarray) -> LinearConstraints:
-    """``C_RVE``: per yarn and axis k, ``Σ_j (R_jᵀ x_j)_k`` keeps its initial value."""
-    return yarn_centroid_constraints(model, frame)
 
 
 # -- one sample -----------------------------------------------------------------------------------

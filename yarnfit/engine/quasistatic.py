@@ -76,10 +76,6 @@ POOR_STEP = 0.1
 # A step never moves two segments closer by more than this fraction of their current centreline
 # distance, so yarns cannot pass through each other between two contact checks.
 TUNNELING_FRACTION = 0.9
-# A step never moves a node further than the model's reach (one tile of a periodic model, the rest
-# configuration's extent otherwise): a Newton step beyond it means the quadratic model has failed,
-# and the contact search along it would have to map that many tiles (a HYLC satin at r = 1 mm, in a
-# halved continuation step, proposed a step that overflowed the image count).
 # A step whose predicted decrease of the potential is below this fraction of it is below the
 # potential's round-off: the Armijo test would compare noise.
 POTENTIAL_ROUNDOFF = 1e-13
@@ -96,6 +92,10 @@ NOISE_DAMPING = 10.0
 # to zero). The rods' 1e-6 moved it by 1e-2 δ, straddled the foot, and Newton cycled there for
 # 30,000 iterations (docs/design.md §5). Round-off ε|x|/h: ~3e-8 of the largest entry.
 CONTACT_FD_STEP = 1e-8
+# A step never moves a node further than the model's reach (one tile of a periodic model, the rest
+# configuration's extent otherwise): a Newton step beyond it means the quadratic model has failed,
+# and the contact search along it would have to map that many tiles (a HYLC satin at r = 1 mm, in a
+# halved continuation step, proposed a step that overflowed the image count).
 # Levenberg–Marquardt damping bounds, relative to diag(H). The floor is far below the Hessian's
 # own error (~1e-10 relative); it only regularises exactly singular directions.
 INITIAL_DAMPING = 1e-8
@@ -663,9 +663,12 @@ class QuasiStaticSolver:
         g_dot_d = float(ev.gradient[self._free] @ direction)
         scale = max(abs(start), abs(ev.internal), 1e-300)
 
+        def below_roundoff(alpha: float) -> bool:
+            # The step's predicted decrease is below the potential's round-off: Armijo compares noise.
+            return abs(alpha * g_dot_d) < POTENTIAL_ROUNDOFF * scale
+
         def acceptable(trial: float, alpha: float) -> bool:
-            # Below round-off of the potential the Armijo test is noise: such a step is taken.
-            return abs(alpha * g_dot_d) < POTENTIAL_ROUNDOFF * scale or trial <= start + ARMIJO_SLOPE * alpha * g_dot_d
+            return below_roundoff(alpha) or trial <= start + ARMIJO_SLOPE * alpha * g_dot_d
 
         def accept(point, trial: float, alpha: float, damping: float):
             work.position, work.quaternion, work.moment_work = point
@@ -679,9 +682,8 @@ class QuasiStaticSolver:
 
         point = self._moved(work.point, moment, alpha_max * dx, alpha_max * dtheta)
         trial = assess(point)
-        if abs(alpha_max * g_dot_d) < POTENTIAL_ROUNDOFF * scale:
-            # Below round-off of the potential the Armijo test is noise: the step is taken whole,
-            # and the imbalance judges the model instead (see NOISE_DAMPING).
+        if below_roundoff(alpha_max):
+            # The step is taken whole, and the imbalance judges the model instead (see NOISE_DAMPING).
             rose = _imbalance(trial) >= _imbalance(ev)
             return accept(point, trial.potential, alpha_max, damping * NOISE_DAMPING if rose else next_damping(alpha_max))
         if acceptable(trial.potential, alpha_max):

@@ -92,7 +92,7 @@ class StripResult:
     clamped_law_n_per_m: float  # clamped_strip_stiffness on the scene's own mesh
     # bool: MuJoCo found no bad accelerations while reaching and holding the level (an unstable
     # step resets the state, and the level's force is then meaningless)
-    stable: np.ndarray | None = None
+    stable: np.ndarray
 
     def summary(self, shell) -> dict:
         """The strip's figures for ``summary.json`` (JSON values, keys carrying units), beside the
@@ -107,7 +107,7 @@ class StripResult:
             "force_per_width_n_per_m": self.force_per_width_n_per_m.tolist(),
             "compression_ratio": self.compression_ratio.tolist(),
             "settled": self.settled.tolist(),
-            "stable": None if self.stable is None else self.stable.tolist(),
+            "stable": self.stable.tolist(),
             "uniaxial_law_n_per_m": stiffness,
             "uniaxial_law_poisson": poisson,
             "small_strain_stiffness_over_law": small_strain / stiffness,
