@@ -214,3 +214,37 @@ def test_parallel_contact_gradient_is_continuous():
     plus, minus = energy_gradient(points(1e-6))[1], energy_gradient(points(-1e-6))[1]
     assert np.abs(plus).max() > 0.0
     assert np.abs(plus - minus).max() <= PARALLEL_CONTINUITY * np.abs(plus).max()
+
+
+def test_pair_out_of_reach_has_only_its_constant():
+    """A pair whose segments are farther apart than every constraint's reach ((λ + δ) / k beyond
+    contact) takes the kernel's shortcut: no force, energy −Σ M(λ) / k (the ramp integral of each
+    multiplier, computed here by hand), gaps at most the true ones."""
+    n = int(CONTACT_SAMPLES.sum())
+    multiplier = np.linspace(0.0, 2e-3, n)
+    energy_gradient, hessian = _contact_pair_terms(multiplier)
+    delta = CONTACT_SMOOTHING * CONTACT_STIFFNESS * 2e-4
+    reach = (multiplier.max() + delta) / CONTACT_STIFFNESS
+    nodes = CONTACT_POINTS.copy()
+    lowest_gap = _contact_kernels.segment_closest_points(*nodes)[2] - 2e-4
+    nodes[2:, 2] += reach - lowest_gap + 1e-6  # lift the second edge just beyond reach
+    energy, gradient, gap = energy_gradient(nodes)
+
+    def ramp_integral(t):
+        return np.where(t >= delta, 0.5 * t * t + delta * delta / 6.0, (t + delta) ** 3 / (12.0 * delta))
+
+    assert energy == pytest.approx(-ramp_integral(multiplier).sum() / CONTACT_STIFFNESS, rel=1e-14)
+    assert not gradient.any()
+    assert not hessian(nodes).any()
+    assert np.ptp(gap) == 0.0  # the shortcut writes the one lower bound for every constraint
+    a0, a1, b0, b1 = nodes
+    for c in range(n):  # every written gap is at most the sampled point's true gap
+        if c < CONTACT_SAMPLES[0]:
+            s = c / (CONTACT_SAMPLES[0] - 1)
+            p, q0, q1 = a0 + s * (a1 - a0), b0, b1
+        else:
+            t = (c - CONTACT_SAMPLES[0]) / (CONTACT_SAMPLES[1] - 1)
+            p, q0, q1 = b0 + t * (b1 - b0), a0, a1
+        u = np.clip(np.dot(p - q0, q1 - q0) / np.dot(q1 - q0, q1 - q0), 0.0, 1.0)
+        assert gap[c] <= np.linalg.norm(p - q0 - u * (q1 - q0)) - 2e-4 + 1e-15
+        assert gap[c] > reach

@@ -448,12 +448,27 @@ def _pair_sample_terms(a0, a1, b0, b1, samples_a, samples_b, radius_sum, multipl
     smoothed ramp of :func:`_smooth_ramp`, ``δ = smoothing · k · (ra + rb)``. Sets the pair's
     gradient ``out_grad (12,)`` over (a0, a1, b0, b1), writes each constraint's gap (m) and force
     (N) from ``first``; returns the energy (J).
+
+    A pair out of reach (every constraint's ``λ − k g ≤ −δ`` already with ``g`` at its lower bound,
+    the segments' distance less ``ra + rb``) exerts no force, and its energy is ``−Σ M(λ) / k``
+    exactly; its constraints' gaps are then written as that lower bound. Most candidate pairs are:
+    4 % of a stockinette sample's ~1700 carry force, and sampling the rest was the kernel's cost.
     """
     for k in range(12):
         out_grad[k] = 0.0
     delta = smoothing * stiffness * radius_sum
     energy = 0.0
     n_samples = samples_a + samples_b
+    largest_multiplier = 0.0
+    for c in range(n_samples):
+        largest_multiplier = max(largest_multiplier, multiplier[first + c])
+    lowest_gap = segment_closest_points(a0, a1, b0, b1)[2] - radius_sum
+    if largest_multiplier - stiffness * lowest_gap <= -delta:
+        for c in range(n_samples):
+            out_gap[first + c] = lowest_gap
+            out_force[first + c] = 0.0
+            energy -= _smooth_ramp(multiplier[first + c], delta)[1] / stiffness
+        return energy
     for c in range(n_samples):
         if c < samples_a:
             s = c / (samples_a - 1)

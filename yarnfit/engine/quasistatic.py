@@ -9,7 +9,9 @@ solver here is a damped Newton method on the exact energy of :mod:`yarnfit.engin
 - degrees of freedom: free node positions and world rotation vectors of free edge frames
   (``q ← exp(θ) ⊗ q``);
 - Hessian: analytic for stretch–shear elements, central differences of the analytic gradient for
-  bend–twist and contact elements; assembled sparse and factorised with SuperLU;
+  bend–twist and contact elements; assembled sparse and factorised symmetrically with a
+  fill-reducing ordering, constraints eliminated by their Schur complement
+  (:mod:`yarnfit.engine.linear`);
   Levenberg–Marquardt damping ``μ diag(H)`` keeps every step a descent direction where the
   Hessian is indefinite or singular (a rod held only by points can spin its frames freely);
 - backtracking (Armijo) line search on the total potential, then a few chord steps with the same
@@ -51,12 +53,12 @@ from typing import Callable
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from . import _contact_kernels, _kernels
 from .contact import ContactPairs
 from .contact_lagrangian import ContactLagrangian, ContactSet
 from .energy import EnergyTerms, internal_forces
+from .linear import SingularSystemError, SymmetricSolve
 from .model import RodModel, quaternion_d3
 from .state import Loads, RodState
 
@@ -603,22 +605,15 @@ class QuasiStaticSolver:
         floor = 1e-12 * max(float(np.abs(diag).max(initial=0.0)), 1e-300)
         scale = sp.diags(np.maximum(np.abs(diag), floor))
         a = self._step_constraints(work.quaternion)
-        rhs = g if a is None else np.concatenate([g, np.zeros(a.shape[0])])
         for _ in range(20):
-            matrix = hessian + damping * scale
-            if a is not None:
-                # KKT system [H Aᵀ; A 0] [d; ν] = [−g; 0]: steps keep A x fixed.
-                matrix = sp.bmat([[matrix, a.T], [a, None]])
             try:
-                lu = spla.splu(matrix.tocsc())
-                d = -lu.solve(rhs)[:n]
-            except RuntimeError:  # exactly singular: damp harder
+                solve = SymmetricSolve(hessian + damping * scale, a)
+                d = solve(-g)
+            except SingularSystemError:  # exactly singular: damp harder
                 damping *= 100.0
                 continue
             if np.all(np.isfinite(d)) and float(g @ d) < 0.0:
-                if a is None:
-                    return d, lu.solve, damping
-                return d, (lambda b, lu=lu: lu.solve(np.concatenate([b, np.zeros(a.shape[0])]))[:n]), damping
+                return d, solve, damping
             damping *= 100.0
         return None, None, damping
 
