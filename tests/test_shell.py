@@ -466,3 +466,67 @@ def test_a_stiffening_material_reads_back_and_old_files_still_read():
     assert ShellMaterial.from_dict(MATERIAL.to_dict()).nonlinear is None
     with pytest.raises(ValueError, match="nonlinear.model must be 'green-polynomial'"):
         ShellMaterial.from_dict({**data, "nonlinear": {**data["nonlinear"], "model": "ogden"}})
+
+
+# A uniaxial pull at 1e-6 strain: its force over the small-strain stiffness times λ − 1 is
+# λ (1 + λ)/2 ≈ 1 + 1.5e-6 (Green against engineering strain), the stiffening terms add ~k₂ ε / s
+# ≤ 5e-5 (STIFF's largest k₂ over its shear stiffness; at 1e-4 they made 0.5 %), and the width
+# contraction is the Poisson ratio's to O(strain): 1e-3 holds all with margin.
+SMALL_PULL = 1e-6
+SMALL_PULL_REL = 1e-3
+
+
+@pytest.mark.parametrize("material", [MATERIAL, STIFF], ids=["linear", "stiffening"])
+@pytest.mark.parametrize("angle", [0.0, 0.3, math.pi / 4, 1.2, math.pi / 2])
+def test_uniaxial_pull_at_small_strain_is_the_rotated_compliance(material, angle):
+    stiffness, poisson = material.uniaxial_stiffness(angle)
+    pull = material.uniaxial_pull(angle, 1.0 + SMALL_PULL)
+    assert pull.force_n_per_m == pytest.approx(stiffness * SMALL_PULL, rel=SMALL_PULL_REL)
+    assert (1.0 - pull.width_ratio) == pytest.approx(poisson * SMALL_PULL, rel=SMALL_PULL_REL)
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_uniaxial_pull_along_a_yarn_is_the_uniaxial_tension(axis):
+    """Along weft or warp the pull needs no shear: its force is the derivative of
+    :meth:`uniaxial_tension`'s minimum energy (central differences) and its width that minimum's."""
+    stretch, step = 1.12, 1e-6
+    pull = STIFF.uniaxial_pull(axis * math.pi / 2, stretch)
+    force = (STIFF.uniaxial_tension(axis, stretch + step)[1] - STIFF.uniaxial_tension(axis, stretch - step)[1]) / (2 * step)
+    I, _ = STIFF.uniaxial_tension(axis, stretch)
+    assert pull.force_n_per_m == pytest.approx(force, rel=FD_REL)
+    assert pull.width_ratio == pytest.approx(math.sqrt(I[1 - axis, 1 - axis]), rel=MINIMISED_REL)
+    # Both solves balance the transverse stress to ~1e-9 of the stiffest stress (brentq there,
+    # Newton here), which leaves the free strain within ~1e-10.
+    np.testing.assert_allclose(pull.first_form, I, rtol=0, atol=1e-9)
+
+
+def test_uniaxial_pull_on_the_bias_is_the_free_minimum():
+    """At 45° the pull's free strains (transverse and shear, in the pull's frame) minimise W: an
+    independent minimiser over both finds the same energy, and its force is dW/dλ."""
+    from scipy.optimize import minimize
+
+    angle, stretch = math.pi / 4, 1.08
+    c, s = math.cos(angle), math.sin(angle)
+    q = np.array([[c, -s], [s, c]])
+
+    def energy(free, lam=stretch):
+        green = np.array([[0.5 * (lam**2 - 1.0), free[1]], [free[1], free[0]]])
+        return STIFF.energy_density(np.eye(2) + 2.0 * q @ green @ q.T, np.zeros((2, 2)))
+
+    pull = STIFF.uniaxial_pull(angle, stretch)
+    best = minimize(energy, np.zeros(2), method="Nelder-Mead", options={"xatol": 1e-12, "fatol": 1e-16,
+                                                                         "maxiter": 4000})
+    assert STIFF.energy_density(pull.first_form, np.zeros((2, 2))) == pytest.approx(best.fun, rel=MINIMISED_REL)
+    step = 1e-6
+    plus = minimize(lambda f: energy(f, stretch + step), best.x, method="Nelder-Mead",
+                    options={"xatol": 1e-12, "fatol": 1e-16, "maxiter": 4000}).fun
+    minus = minimize(lambda f: energy(f, stretch - step), best.x, method="Nelder-Mead",
+                     options={"xatol": 1e-12, "fatol": 1e-16, "maxiter": 4000}).fun
+    assert pull.force_n_per_m == pytest.approx((plus - minus) / (2 * step), rel=1e-4)
+
+
+def test_uniaxial_pull_rejects_bad_input():
+    with pytest.raises(ValueError, match="stretch"):
+        MATERIAL.uniaxial_pull(0.0, 0.0)
+    with pytest.raises(ValueError, match="angle"):
+        MATERIAL.uniaxial_pull(float("nan"), 1.1)

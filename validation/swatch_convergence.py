@@ -9,16 +9,24 @@ node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what say
 has to be.
 
     python validation/swatch_convergence.py MATERIAL.json [--sizes 2x1.5,4x3,8x6] \\
-        [--directions weft,warp,bias] [--json OUT.json]
+        [--directions weft,warp,bias] [--json OUT.json] [--from-json A.json,B.json]
 
 The force and width measured at mid-length converge as the cut loops at the long sides and the
 jaws' constraint become a smaller part of the strip; the table shows how fast.
+
+Then the material's shell, nonlinear and linear, against the largest strip of each direction
+(issue 14's acceptance): a long strip of the shell pulled at the strip's angle with every other
+stress free (:meth:`yarnfit.shell.ShellMaterial.uniaxial_pull`), force per width and width ratio
+at each strain, with a verdict (force within SHELL_FORCE_RTOL, width within
+SHELL_COMPRESSION_ATOL). ``--from-json`` reads curves written by earlier runs instead of solving
+(runs of several sizes or directions made in parallel).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 
@@ -38,6 +46,10 @@ MAX_ITERATIONS = 3000
 
 
 OPTIONS = QuasiStaticOptions(**{**SWATCH_OPTIONS, "max_iterations": MAX_ITERATIONS})
+# Issue 14's criteria for the shell against the yarn-level swatch: force per width within 20 %,
+# compression ratio within 0.05.
+SHELL_FORCE_RTOL = 0.2
+SHELL_COMPRESSION_ATOL = 0.05
 
 
 def parse_sizes(text: str) -> list[tuple[float, float]]:
@@ -53,46 +65,109 @@ def parse_sizes(text: str) -> list[tuple[float, float]]:
     return sizes
 
 
+def solve_curves(file: MaterialFile, sizes, directions) -> tuple[object, dict]:
+    """``(relaxed repeat, {label: curve})``: each direction's strips at each size, pulled to
+    STRAINS on one core; prints each strip's row as it finishes."""
+    relaxed = file.relaxed_repeat()
+    if relaxed is None:
+        print(f"keeps no relaxed repeat: relaxing {file.fabric().name} again", flush=True)
+        relaxed = relax(file.fabric())
+    repeat = float(max(relaxed.repeat_size))
+    section = relaxed.yarn.section()
+    curves = {}
+    for direction in directions:
+        for gauge, width in sizes:
+            swatch = cut_swatch(relaxed.model, relaxed.state.node_position, section, direction=direction,
+                                gauge=gauge * repeat, width=width * repeat, clamp=CLAMP_REPEATS * repeat)
+            start = time.perf_counter()
+            curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, progress=lambda text: print("   ", text, flush=True))
+            curve["repeats"] = [gauge, width]
+            curves[f"{direction} {gauge:g}x{width:g}"] = curve
+            print(convergence_row(curve), f"({time.perf_counter() - start:.0f} s)", flush=True)
+    return relaxed, curves
+
+
+def convergence_row(curve: dict) -> str:
+    points = curve["points"][1:]
+    gauge, width = curve["repeats"]
+    return (f"| {curve['direction']} | {gauge:g} × {width:g} | {curve['nodes']} | "
+            + " | ".join(f"{p['force_n_per_m']:.4g}" for p in points) + " | "
+            + " | ".join(f"{p['compression_ratio']:.3f}" for p in points) + " | "
+            + f"{max(p['seconds'] for p in points):.1f} | {'yes' if curve['converged'] else 'NO'} |")
+
+
+def shell_rows(file: MaterialFile, curves: dict) -> tuple[list[str], bool]:
+    """Table rows of the shell (nonlinear and linear) against the largest strip per direction,
+    and whether every converged point of the nonlinear shell meets both criteria."""
+    largest = {}
+    for curve in curves.values():
+        if curve["nodes"] > largest.get(curve["direction"], {"nodes": -1})["nodes"]:
+            largest[curve["direction"]] = curve
+    shells = {"nonlinear": file.shell, "linear": file.shell.linear}
+    rows, passed = [], True
+    for direction, curve in largest.items():
+        angle = math.radians(curve["angle_deg"])
+        gauge, width = curve["repeats"]
+        for point in curve["points"][1:]:
+            strain = point["strain"]
+            cells, verdicts = [], {}
+            for name, shell in shells.items():
+                pull = shell.uniaxial_pull(angle, 1.0 + strain)
+                ratio = pull.force_n_per_m / point["force_n_per_m"] if point["force_n_per_m"] > 0 else math.inf
+                within = (abs(ratio - 1.0) <= SHELL_FORCE_RTOL
+                          and abs(pull.width_ratio - point["compression_ratio"]) <= SHELL_COMPRESSION_ATOL)
+                verdicts[name] = within
+                cells.append(f"{pull.force_n_per_m:.4g} ({100 * (ratio - 1.0):+.0f} %) | {pull.width_ratio:.3f}")
+            converged = point["converged"]
+            if converged:
+                passed &= verdicts["nonlinear"]
+            verdict = ("not converged" if not converged else
+                       "within" if verdicts["nonlinear"] else "MISSED")
+            rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * strain:g} % | {point['force_n_per_m']:.4g} | "
+                        f"{point['compression_ratio']:.3f} | " + " | ".join(cells) + f" | {verdict} |")
+    return rows, passed
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("material", help="a material file written by `yarnfit fit`")
     parser.add_argument("--sizes", default="2x1.5,4x3,8x6", help="gauge x width between the jaws, in repeats")
     parser.add_argument("--directions", default="weft,warp", help="comma-separated: weft, warp, bias")
     parser.add_argument("--json", help="also write the curves to this file")
+    parser.add_argument("--from-json", help="comma-separated curve files of earlier runs: compare, do not solve")
     args = parser.parse_args(argv)
     numba.set_num_threads(1)  # one core, as the bench figures
     file = MaterialFile.read(args.material)
-    relaxed = file.relaxed_repeat()
-    if relaxed is None:
-        print(f"{args.material} keeps no relaxed repeat: relaxing {file.fabric().name} again", flush=True)
-        relaxed = relax(file.fabric())
-    repeat = float(max(relaxed.repeat_size))
-    section = relaxed.yarn.section()
-    rows, curves = [], {}
-    for direction in args.directions.split(","):
-        for gauge, width in parse_sizes(args.sizes):
-            swatch = cut_swatch(relaxed.model, relaxed.state.node_position, section, direction=direction,
-                                gauge=gauge * repeat, width=width * repeat, clamp=CLAMP_REPEATS * repeat)
-            start = time.perf_counter()
-            curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, progress=lambda text: print("   ", text, flush=True))
-            label = f"{direction} {gauge:g}x{width:g}"
-            curves[label] = curve
-            points = curve["points"][1:]
-            row = (f"| {direction} | {gauge:g} × {width:g} | {curve['nodes']} | "
-                   + " | ".join(f"{p['force_n_per_m']:.4g}" for p in points) + " | "
-                   + " | ".join(f"{p['compression_ratio']:.3f}" for p in points) + " | "
-                   + f"{max(p['seconds'] for p in points):.1f} | {'yes' if curve['converged'] else 'NO'} |")
-            rows.append(row)
-            print(row, f"({time.perf_counter() - start:.0f} s)", flush=True)
+    if args.from_json:
+        curves = {}
+        for path in args.from_json.split(","):
+            with open(path) as source:
+                for label, curve in json.load(source)["curves"].items():
+                    # Labels are "DIRECTION GAUGExWIDTH" (curves written before "repeats" was kept).
+                    curve.setdefault("repeats", parse_sizes(label.split()[1])[0])
+                    curves[label] = curve
+        name = file.fabric().name
+    else:
+        relaxed, curves = solve_curves(file, parse_sizes(args.sizes), args.directions.split(","))
+        name = relaxed.name
+        print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
     strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
-    print(f"\n{relaxed.name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm\n")
-    print(f"| direction | repeats (gauge × width) | nodes | N/m at {strains} | compression at {strains} "
+    print(f"\n| direction | repeats (gauge × width) | nodes | N/m at {strains} | compression at {strains} "
           f"| slowest strain (s) | converged |")
     print("|" + "---|" * 11)
+    order = sorted(curves.values(), key=lambda c: (c["direction"], c["nodes"]))
+    print("\n".join(convergence_row(curve) for curve in order))
+    rows, passed = shell_rows(file, curves)
+    print(f"\n{name}: shell against the largest strip per direction (force within {SHELL_FORCE_RTOL:.0%}, "
+          f"compression within {SHELL_COMPRESSION_ATOL})\n")
+    print("| direction | repeats | strain | swatch N/m | swatch compression | nonlinear N/m | nonlinear compression "
+          "| linear N/m | linear compression | verdict (nonlinear) |")
+    print("|" + "---|" * 10)
     print("\n".join(rows))
+    print(f"\nshell (nonlinear) vs largest swatch: {'within' if passed else 'MISSED'}")
     if args.json:
         with open(args.json, "w") as out:
-            json.dump({"material": relaxed.name, "curves": curves}, out, indent=1)
+            json.dump({"material": name, "curves": curves}, out, indent=1)
     return 0
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import brentq
@@ -313,6 +314,25 @@ class NonlinearMembrane:
             raise ValueError(f"{where}: {exc}") from None
 
 
+# Largest transverse or shear stress left by a uniaxial pull's solve, relative to the stress its
+# strain makes in the stiffest direction: Newton reaches ~1e-13 in a few steps; 1e-9 flags one
+# that did not converge.
+UNIAXIAL_STRESS_RTOL = 1e-9
+# Newton steps of a uniaxial pull's solve at most (a convex 2-variable problem takes 3–8), and the
+# difference step of its Jacobian as a fraction of the pulled strain.
+UNIAXIAL_NEWTON_STEPS = 50
+UNIAXIAL_FD_STEP = 1e-6
+
+
+class UniaxialPull(NamedTuple):
+    """A strip pulled along one direction with every other stress free
+    (:meth:`ShellMaterial.uniaxial_pull`)."""
+
+    force_n_per_m: float  # pulling force per reference width (N/m)
+    width_ratio: float  # deformed over reference width
+    first_form: np.ndarray  # I (2, 2) in the weft/warp frame
+
+
 @dataclass(frozen=True)
 class ShellMaterial:
     """Orthotropic StVK shell: thickness and the membrane and bending stiffness matrices.
@@ -567,6 +587,77 @@ class ShellMaterial:
         free = brentq(transverse_stress, low, high, xtol=1e-15, rtol=4.0 * np.finfo(float).eps)
         I = form(free)
         return I, float(self.energy_density(I, np.zeros((2, 2))))
+
+    def uniaxial_pull(self, angle: float, stretch: float) -> UniaxialPull:
+        """A long strip pulled to ``stretch`` at ``angle`` (rad) from weft, every other stress
+        free: in the frame of the pull the Green strain is ``[[e, γ], [γ, f]]`` with
+        ``e = (stretch² − 1)/2`` and ``f``, ``γ`` such that the transverse and shear stresses
+        vanish (``Qᵀ (dW/dI) Q`` zero but for its first entry). The force per reference width is
+        ``dW/dλ = 2 λ (Qᵀ (dW/dI) Q)₀₀`` (N/m) and the width ratio ``√det I / λ`` (the distance
+        between the strip's long edges, which stay lines along the pull). At 0 and π/2 this is
+        :meth:`uniaxial_tension` (no shear there for an orthotropic membrane); at small strain the
+        force is ``uniaxial_stiffness(angle)[0] · (λ − 1)``. Needs a positive-definite membrane."""
+        angle = finite_number(angle, "angle")
+        stretch = finite_number(stretch, "stretch")
+        if stretch <= 0.0:
+            raise ValueError(f"stretch must be positive, got {stretch!r}")
+        self._require_positive_definite("uniaxial pulls", membrane=True, bending=False)
+        c, s = math.cos(angle), math.sin(angle)
+        q = np.array([[c, -s], [s, c]])  # columns: the pull direction and its normal
+        strain = 0.5 * (stretch**2 - 1.0)
+        flat = np.zeros((2, 2))
+
+        def first_form(free: np.ndarray) -> np.ndarray:
+            green = np.array([[strain, free[1]], [free[1], free[0]]])
+            return np.eye(2) + 2.0 * q @ green @ q.T
+
+        def rotated_gradient(free: np.ndarray) -> np.ndarray:
+            return q.T @ self.energy_gradient(first_form(free), flat)[0] @ q
+
+        def free_stresses(free: np.ndarray) -> np.ndarray:
+            g = rotated_gradient(free)
+            return np.array([g[1, 1], g[0, 1]])
+
+        # Newton on (f, γ), whose residuals are W's derivatives (∂W/∂f = 2 g₁₁, ∂W/∂γ = 4 g₀₁), with
+        # a central-difference Jacobian and steps halved until W or the residual falls (W is convex
+        # in them for a convex membrane; near the root its changes are below W's round-off), from the
+        # small-strain Poisson contraction.
+        def energy(free: np.ndarray) -> float:
+            return float(self.energy_density(first_form(free), flat))
+
+        def gradient(free: np.ndarray) -> np.ndarray:
+            return np.array([2.0, 4.0]) * free_stresses(free)
+
+        free = np.array([-self.uniaxial_stiffness(angle)[1] * strain, 0.0])
+        # Residuals are judged against the stress the pulled strain makes in the stiffest
+        # direction: a bias pull of a satin (s22 ~ 1e-5 s00) has a pulling stress below the
+        # round-off of its weft and warp stresses.
+        scale = max(self.thickness * float(np.abs(self.S).max()) * abs(strain), 1e-300)
+        step = UNIAXIAL_FD_STEP * max(abs(strain), 1e-6)
+        for _ in range(UNIAXIAL_NEWTON_STEPS):
+            g = gradient(free)
+            if np.abs(g).max() <= UNIAXIAL_STRESS_RTOL * scale:
+                break
+            jacobian = np.column_stack([(gradient(free + step * e) - gradient(free - step * e)) / (2.0 * step)
+                                        for e in np.eye(2)])
+            direction = -np.linalg.solve(0.5 * (jacobian + jacobian.T), g)
+            if not float(g @ direction) < 0.0:
+                direction = -g  # an indefinite difference Jacobian: steepest descent instead
+            alpha, start, imbalance = 1.0, energy(free), float(np.abs(g).max())
+            while alpha > 1e-12 and not (energy(free + alpha * direction) < start
+                                         or float(np.abs(gradient(free + alpha * direction)).max()) < imbalance):
+                alpha *= 0.5
+            free = free + alpha * direction
+        if np.abs(gradient(free)).max() > UNIAXIAL_STRESS_RTOL * scale:
+            raise ValueError(f"uniaxial pull at {math.degrees(angle):g}° to stretch {stretch!r}: no free width and "
+                             f"shear balance the transverse stresses (is the membrane convex?)")
+        solution = type("Solution", (), {"x": free})
+        I = first_form(solution.x)
+        return UniaxialPull(
+            force_n_per_m=2.0 * stretch * float(rotated_gradient(solution.x)[0, 0]),
+            width_ratio=math.sqrt(float(np.linalg.det(I))) / stretch,
+            first_form=I,
+        )
 
     def energy_gradient(self, I: object, II: object) -> tuple[np.ndarray, np.ndarray]:
         """``(dW/dI, dW/dII)``: derivative of :meth:`energy_density` with respect to each matrix entry.
