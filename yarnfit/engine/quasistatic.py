@@ -298,6 +298,9 @@ class _Work:
     quaternion: np.ndarray
     moment_work: float = 0.0
     contacts: ContactSet = field(default_factory=ContactSet.none)
+    # The line search's swept contacts when the iterate lies on its segment (no chord step): a
+    # superset of the pairs near it, which the next evaluation uses instead of a new search.
+    swept: ContactSet | None = None
     contact_force: np.ndarray = field(default_factory=lambda: np.empty(0))
     # Full gradient (every DOF, pinned ones included) of the last evaluation: the solve always
     # ends on an evaluation at the returned state, so this gives the reactions there.
@@ -500,8 +503,12 @@ class QuasiStaticSolver:
     # -- evaluation ---------------------------------------------------------------------------
 
     def _evaluate(self, work: _Work, lagrangian: ContactLagrangian, node_force, moment, energy_change) -> _Evaluation:
-        """Detect contacts at the current iterate and assess it."""
-        work.contacts = lagrangian.query(work.position)
+        """Detect contacts at the current iterate and assess it. After a line search that ended on
+        its own segment, its swept pairs are those contacts: every pair within reach of a point on
+        the segment is among them, and a pair out of reach adds no force (only its multipliers'
+        constant, the same at every point the potential is compared at)."""
+        work.contacts = work.swept if work.swept is not None else lagrangian.query(work.position)
+        work.swept = None
         ev = self._assess(work.point, work.contacts, node_force, moment, energy_change)
         work.contact_force = ev.contact_force
         work.gradient = ev.gradient
@@ -665,8 +672,9 @@ class QuasiStaticSolver:
         def acceptable(trial: float, alpha: float) -> bool:
             return below_roundoff(alpha) or trial <= start + ARMIJO_SLOPE * alpha * g_dot_d
 
-        def accept(point, trial: float, alpha: float, damping: float):
+        def accept(point, trial: float, alpha: float, damping: float, on_segment: bool = True):
             work.position, work.quaternion, work.moment_work = point
+            work.swept = contacts if on_segment and opt.contact else None
             change = abs(trial - start) / max(abs(trial), abs(start), abs(ev.internal), 1e-300)
             return alpha, change, damping
 
@@ -682,8 +690,9 @@ class QuasiStaticSolver:
             rose = _imbalance(trial) >= _imbalance(ev)
             return accept(point, trial.potential, alpha_max, damping * NOISE_DAMPING if rose else next_damping(alpha_max))
         if acceptable(trial.potential, alpha_max):
+            whole = point
             point, trial = self._chord_steps(point, trial, solve, assess, moment)
-            return accept(point, trial.potential, alpha_max, next_damping(alpha_max))
+            return accept(point, trial.potential, alpha_max, next_damping(alpha_max), on_segment=point is whole)
         alpha = 0.5 * alpha_max
         while alpha > 1e-12 * alpha_max:
             point = self._moved(work.point, moment, alpha * dx, alpha * dtheta)
