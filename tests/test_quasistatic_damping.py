@@ -87,3 +87,17 @@ def test_holding_the_spin_gauge_does_not_move_the_equilibrium():
     assert first.converged and middle.converged
     assert len(first.contact_force) > 0
     np.testing.assert_allclose(first.state.node_position, middle.state.node_position, rtol=0.0, atol=1e-12)
+
+
+def test_damping_stays_finite_under_a_long_run_of_cut_steps():
+    # Each cut doubles the raise factor: 2, 4, 8, ... would overflow after ~45 cuts without a ceiling.
+    from yarnfit.engine.quasistatic import MAX_DAMPING
+
+    damping = _Damping()
+    with np.errstate(over="raise"):
+        for _ in range(2000):
+            damping.failed()
+        damping.harden()
+    assert damping.value == MAX_DAMPING
+    damping.succeeded(1.0)
+    assert damping.value == pytest.approx(MAX_DAMPING * DAMPING_DECREASE_LIMIT)
