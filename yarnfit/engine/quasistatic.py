@@ -9,8 +9,8 @@ solver here is a damped Newton method on the exact energy of :mod:`yarnfit.engin
 - degrees of freedom: free node positions and world rotation vectors of free edge frames
   (``q ← exp(θ) ⊗ q``);
 - Hessian: analytic for stretch–shear elements, central differences of the analytic gradient for
-  bend–twist and contact elements; assembled sparse and factorised symmetrically with a
-  fill-reducing ordering, constraints eliminated by their Schur complement
+  bend–twist and contact elements; assembled sparse with the step constraints' rows into a
+  saddle-point system, equilibrated and factorised symmetrically with a fill-reducing ordering
   (:mod:`yarnfit.engine.linear`);
   Levenberg–Marquardt damping ``μ diag(H)`` keeps every step a descent direction where the
   Hessian is indefinite or singular (a rod held only by points can spin its frames freely);
@@ -95,9 +95,9 @@ TUNNELING_FRACTION = 0.9
 POTENTIAL_ROUNDOFF = 1e-13
 # There Newton steps are taken whole and the imbalance (the larger relative force or torque
 # residual) judges the model: a step that did not lower it multiplies the damping by this (a cut
-# step raises it too). Contacts resting at the foot of the contact ramp's smoothing band, where both their
-# force and their stiffness go to zero, made undamped whole steps hop across the band's edge for
-# good: HYLC's stockinette, settled rest state, weft bend at -6.5 /m, cycled between force
+# step raises it too). Contacts resting at the foot of the contact ramp's smoothing band, where
+# both their force and their stiffness go to zero, made undamped whole steps hop across the band's
+# edge for good: HYLC's stockinette, settled rest state, weft bend at -6.5 /m, cycled between force
 # imbalances of 3e-8 and 2e-7 N (6.6e-5 relative) for 29,000 iterations at damping 1e-12.
 NOISE_DAMPING = 10.0
 # Central-difference step of the contact Hessian, relative to the pair's sum of radii: it moves a
