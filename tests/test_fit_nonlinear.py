@@ -110,17 +110,21 @@ def test_a_side_without_enough_samples_extrapolates_with_the_tangent():
     assert few.material.nonlinear is None
 
 
-def test_softening_beyond_convexity_ends_on_the_convexity_bound():
-    # Weft tension that softens too fast for any convex quartic: the stress k2 y² with k3 = 0. The
-    # membrane is coupled, so the constrained fit keeps every φ'' >= 0 (fit._constrained_nonlinear_solve):
-    # the independent solve below searches the same set.
-    base = FABRIC
+def _over_softening_samples() -> list[SampleResult]:
+    """The design's samples of FABRIC with weft tension that softens too fast for any convex
+    quartic: the stress k2 y² with k3 = 0 (fit._constrained_nonlinear_solve must bound it)."""
     wanted = NonlinearMembrane(NonlinearMembrane.from_keys({"s00p2": -4.0 * FABRIC.s00}).coefficients, COUPLING)
     samples = []
     for spec in sample_design(RANGES, LEVELS):
-        eps = membrane_strain(spec.I)
-        energy = float(base.energy_density(spec.I, spec.II)) + H * float(wanted.energy(eps))
+        energy = float(FABRIC.energy_density(spec.I, spec.II)) + H * float(wanted.energy(membrane_strain(spec.I)))
         samples.append(SampleResult(spec, energy, True, Residual(1e-10, 1e-10, 0.0, 0.0)))
+    return samples
+
+
+def test_softening_beyond_convexity_ends_on_the_convexity_bound():
+    # The membrane is coupled, so the constrained fit keeps every φ'' >= 0
+    # (fit._constrained_nonlinear_solve): the independent solve below searches the same set.
+    samples = _over_softening_samples()
     fit = fit_shell(samples, H)
     fit.material.check_positive_definite()  # convex at every strain
     assert any("convexity" in note for note in fit.notes)
@@ -234,12 +238,7 @@ def test_a_constrained_fit_stopped_at_its_evaluation_limit_keeps_its_feasible_it
     from yarnfit import fit as fit_module
 
     monkeypatch.setattr(fit_module, "CONSTRAINED_SOLVE_ITERATIONS", 10)
-    wanted = NonlinearMembrane(NonlinearMembrane.from_keys({"s00p2": -4.0 * FABRIC.s00}).coefficients, COUPLING)
-    samples = []
-    for spec in sample_design(RANGES, LEVELS):
-        eps = membrane_strain(spec.I)
-        energy = float(FABRIC.energy_density(spec.I, spec.II)) + H * float(wanted.energy(eps))
-        samples.append(SampleResult(spec, energy, True, Residual(1e-10, 1e-10, 0.0, 0.0)))
+    samples = _over_softening_samples()
     fit = fit_shell(samples, H)
     assert fit.material.nonlinear is not None
     fit.material.check_positive_definite()

@@ -21,6 +21,11 @@ def _dense_kkt_solution(matrix, constraints, b):
     return np.linalg.solve(dense, np.concatenate([b, np.zeros(m)]))[: matrix.shape[0]]
 
 
+def _assert_matches_dense(matrix, constraints, b, x) -> None:
+    ref = _dense_kkt_solution(matrix, constraints, b)
+    assert np.linalg.norm(x - ref) <= DENSE_AGREEMENT * np.linalg.norm(ref)
+
+
 def _indefinite_banded(n: int, rng) -> sp.csc_matrix:
     """A symmetric, indefinite, banded matrix whose diagonal spans six orders (as positions and
     rotations of a slender yarn do)."""
@@ -40,8 +45,7 @@ def test_unconstrained_indefinite_matches_dense():
     b = rng.standard_normal(80)
     solve = SymmetricSolve(matrix)
     x = solve(b)
-    ref = _dense_kkt_solution(matrix, None, b)
-    assert np.linalg.norm(x - ref) <= DENSE_AGREEMENT * np.linalg.norm(ref)
+    _assert_matches_dense(matrix, None, b, x)
     assert not solve.pivoted
 
 
@@ -65,8 +69,7 @@ def test_constraints_along_a_null_space():
     b -= b.mean()
     solve = SymmetricSolve(matrix, constraints)
     x = solve(b)
-    ref = _dense_kkt_solution(matrix, constraints, b)
-    assert np.linalg.norm(x - ref) <= DENSE_AGREEMENT * np.linalg.norm(ref)
+    _assert_matches_dense(matrix, constraints, b, x)
     assert abs(x.sum()) <= DENSE_AGREEMENT * np.abs(x).sum()
 
 
@@ -77,8 +80,7 @@ def test_several_dense_constraint_rows():
     b = rng.standard_normal(90)
     solve = SymmetricSolve(matrix, constraints)
     x = solve(b)
-    ref = _dense_kkt_solution(matrix, constraints, b)
-    assert np.linalg.norm(x - ref) <= DENSE_AGREEMENT * np.linalg.norm(ref)
+    _assert_matches_dense(matrix, constraints, b, x)
     assert np.abs(constraints @ x).max() <= DENSE_AGREEMENT * np.abs(x).max()
 
 
@@ -99,8 +101,7 @@ def test_falls_back_to_partial_pivoting(monkeypatch):
     solve = SymmetricSolve(matrix, constraints)
     x = solve(b)
     assert solve.pivoted
-    ref = _dense_kkt_solution(matrix, constraints, b)
-    assert np.linalg.norm(x - ref) <= DENSE_AGREEMENT * np.linalg.norm(ref)
+    _assert_matches_dense(matrix, constraints, b, x)
 
 
 def test_singular_system_raises():

@@ -614,10 +614,6 @@ class ShellMaterial:
         def rotated_gradient(free: np.ndarray) -> np.ndarray:
             return q.T @ self.energy_gradient(first_form(free), flat)[0] @ q
 
-        def free_stresses(free: np.ndarray) -> np.ndarray:
-            g = rotated_gradient(free)
-            return np.array([g[1, 1], g[0, 1]])
-
         # Newton on (f, γ), whose residuals are W's derivatives (∂W/∂f = 2 g₁₁, ∂W/∂γ = 4 g₀₁), with
         # a central-difference Jacobian and steps halved until W or the residual falls (W is convex
         # in them for a convex membrane; near the root its changes are below W's round-off), from the
@@ -626,7 +622,8 @@ class ShellMaterial:
             return float(self.energy_density(first_form(free), flat))
 
         def gradient(free: np.ndarray) -> np.ndarray:
-            return np.array([2.0, 4.0]) * free_stresses(free)
+            g = rotated_gradient(free)
+            return np.array([2.0 * g[1, 1], 4.0 * g[0, 1]])
 
         free = np.array([-self.uniaxial_stiffness(angle)[1] * strain, 0.0])
         # Residuals are judged against the stress the pulled strain makes in the stiffest
@@ -651,10 +648,9 @@ class ShellMaterial:
         if np.abs(gradient(free)).max() > UNIAXIAL_STRESS_RTOL * scale:
             raise ValueError(f"uniaxial pull at {math.degrees(angle):g}° to stretch {stretch!r}: no free width and "
                              f"shear balance the transverse stresses (is the membrane convex?)")
-        solution = type("Solution", (), {"x": free})
-        I = first_form(solution.x)
+        I = first_form(free)
         return UniaxialPull(
-            force_n_per_m=2.0 * stretch * float(rotated_gradient(solution.x)[0, 0]),
+            force_n_per_m=2.0 * stretch * float(rotated_gradient(free)[0, 0]),
             width_ratio=math.sqrt(float(np.linalg.det(I))) / stretch,
             first_form=I,
         )

@@ -55,7 +55,7 @@ class SymmetricSolve:
 
     def __init__(self, matrix: sp.spmatrix, constraints: sp.spmatrix | None = None):
         matrix = sp.csc_matrix(matrix)
-        n = matrix.shape[0]
+        self._n = matrix.shape[0]
         diagonal = np.abs(matrix.diagonal())
         weight = 1.0 / np.sqrt(np.where(diagonal > 0.0, diagonal, 1.0))
         self._n_constraints = 0
@@ -74,7 +74,6 @@ class SymmetricSolve:
             self._lu = spla.splu(sp.csc_matrix(sp.diags(weight) @ system @ sp.diags(weight)), **_SYMMETRIC)
         except RuntimeError:  # a zero pivot even with threshold pivoting
             self._use_pivoted()
-        self._n = n
 
     def __call__(self, b: np.ndarray) -> np.ndarray:
         rhs = np.concatenate([b, np.zeros(self._n_constraints)]) if self._n_constraints else b
