@@ -33,7 +33,6 @@ import time
 import numba
 
 from yarnfit.material_file import MaterialFile
-from yarnfit.relax import relax
 from yarnfit.engine import QuasiStaticOptions
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, stretch_swatch
 
@@ -68,10 +67,7 @@ def parse_sizes(text: str) -> list[tuple[float, float]]:
 def solve_curves(file: MaterialFile, sizes, directions) -> tuple[object, dict]:
     """``(relaxed repeat, {label: curve})``: each direction's strips at each size, pulled to
     STRAINS on one core; prints each strip's row as it finishes."""
-    relaxed = file.relaxed_repeat()
-    if relaxed is None:
-        print(f"keeps no relaxed repeat: relaxing {file.fabric().name} again", flush=True)
-        relaxed = relax(file.fabric())
+    relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
     repeat = float(max(relaxed.repeat_size))
     section = relaxed.yarn.section()
     curves = {}

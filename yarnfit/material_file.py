@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -238,6 +238,20 @@ class MaterialFile:
     def fabric(self) -> "Fabric":
         """The :class:`~yarnfit.fabric.Fabric` the material was fitted for (``inputs``)."""
         return fabric_from_inputs(self.data.get("inputs"), self.where)
+
+    def relaxed_or_relaxed_again(self, progress: Callable[[str], None] | None = None) -> "RelaxedRepeat":
+        """:meth:`relaxed_repeat`, or for a file written before it was kept the fabric of its
+        ``inputs`` relaxed again (said through ``progress``)."""
+        relaxed = self.relaxed_repeat()
+        if relaxed is None:
+            from .relax import relax
+
+            fabric = self.fabric()
+            if progress is not None:
+                progress(f"{self.where} keeps no relaxed repeat (written before yarnfit kept it): relaxing "
+                         f"{fabric.name} again")
+            relaxed = relax(fabric)
+        return relaxed
 
     def relaxed_repeat(self) -> "RelaxedRepeat | None":
         """The relaxed repeat the material was fitted from (``relaxed_repeat``), or ``None`` for a

@@ -370,16 +370,10 @@ def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Ca
     each to 2, 5 and 10 %. ``recording_path`` defaults to
     ``logs/<material>/yarn.rrd`` (``False``: no recording). ``size`` overrides the strip size
     (see :func:`stretch_repeat`)."""
-    from ..relax import relax
-
     file = MaterialFile.read(material)
     where, fabric = file.where, file.fabric()
     start = time.perf_counter()
-    relaxed = file.relaxed_repeat()
-    if relaxed is None:
-        if progress is not None:
-            progress(f"{where} keeps no relaxed repeat (written before yarnfit kept it): relaxing {fabric.name} again")
-        relaxed = relax(fabric)
+    relaxed = file.relaxed_or_relaxed_again(progress)
     relax_seconds = time.perf_counter() - start
     if not relaxed.valid:
         raise ValueError(f"{where}: the relaxation of {fabric.name!r} is not usable ({relaxed.residual})")
