@@ -119,12 +119,22 @@ def test_split_covers_half_the_material_with_least_trace(material):
 @pytest.mark.parametrize("material", [FABRIC, *random_materials(3, seed=5)], ids=lambda m: f"s00={m.s00:.3g}")
 def test_split_written_to_mjcf_is_representable_and_still_covers_half(material):
     split = builtin_elasticity(material)
-    for value in split:
+    for value in (split.young_pa, split.poisson, split.thickness_m):
         assert float(f"{value:.{MJCF_DIGITS}g}") == value  # what spec.to_xml() writes, read back
     # h_b E_b C(ν_b) ⪰ h S/2 (per area: the thicknesses differ by the rounding).
     builtin = split.thickness_m * isotropic_stiffness(split.young_pa, split.poisson)
     half = material.thickness * material.S / 2
     assert np.linalg.eigvalsh(builtin - half).min() >= -PSD_ATOL * np.abs(half).max()
+    # Its hinge bending ½ D (κ00² + κ11² + 2 κ01²) at least the material's ½ h³ κᵀ B κ in every mode.
+    assert split.bending and split.elastic2d == "both"
+    hinge = split.bending_rigidity_nm * np.diag([1.0, 1.0, 0.5])
+    full = material.thickness**3 * material.B
+    assert np.linalg.eigvalsh(hinge - full).min() >= -PSD_ATOL * np.abs(full).max()
+    # Without the bending share the built-in part is the material's thickness and stretches only.
+    stretch_only = builtin_elasticity(material, bending=False)
+    assert not stretch_only.bending and stretch_only.elastic2d == "stretch"
+    assert stretch_only.bending_rigidity_nm == 0.0
+    assert stretch_only.thickness_m == float(f"{material.thickness:.{MJCF_DIGITS}g}")
 
 
 # -- the fallback ------------------------------------------------------------------------------
@@ -193,7 +203,7 @@ def test_scene_exports_reloads_and_runs_stably(scene, material_file, tmp_path):
         [built.young_pa, built.poisson, built.thickness_m]
     flex = mujoco.MjSpec.from_file(str(path)).flexes[0]
     assert (flex.young, flex.poisson, flex.thickness, flex.elastic2d) == \
-        (built.young_pa, built.poisson, built.thickness_m, 2)
+        (built.young_pa, built.poisson, built.thickness_m, 3)  # both: the built-in part bends too
     # The cloth's mass is its area times the areal density (pinned vertices' share aside).
     report = run_scene(path, SECONDS)
     assert report.stable, report

@@ -462,14 +462,21 @@ def export_summary(built, material, output, args) -> str:
     lines = [f"{material.name}: {built.scene} scene{' (isotropic fallback, no plugin)' if built.fallback else ''}, "
              f"{spec.flexes[0].name} flex of {len(spec.flexes[0].vertbody)} vertices, "
              f"{material.areal_density_kg_m2 * 1e3:.4g} g/m², {args.integrator} Δt = {args.timestep:g} s"]
-    part = "elastic2d both: stretch and bending" if built.fallback else "elastic2d stretch: implicit under discrete"
+    if built.fallback:
+        part = "elastic2d both: stretch and bending"
+    elif spec.flexes[0].elastic2d == 3:
+        part = "elastic2d both: isotropic stretch and bending shares, implicit under discrete"
+    else:
+        part = "elastic2d stretch: implicit under discrete"
     lines.append(f"  built-in        E = {built.young_pa:.6g} Pa, ν = {built.poisson:.6g}, "
                  f"h = {built.thickness_m * 1e3:.4g} mm ({part})")
     if not built.fallback:
         membrane = ("strain-stiffening membrane" if material.shell.nonlinear is not None
                     else "linear membrane (--linear)" if args.linear else "linear membrane")
-        lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, all "
-                     f"bending), weft at {args.angle:g}° from x")
+        bending = ("its own bending, the built-in hinge forces removed" if spec.flexes[0].elastic2d == 3
+                   else "all bending")
+        lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, "
+                     f"{bending}), weft at {args.angle:g}° from x")
     if not built.fallback and material.shell.nonlinear is not None and args.check is None:
         lines.append("  note            the strain-stiffening forces are explicit and can need a step below 1 ms "
                      "(plugins/README.md): check the scene with --check SECONDS, or export --linear")

@@ -34,7 +34,11 @@
 // Split with MuJoCo's built-in elasticity: the configuration is always the full material. When
 // the flex also carries <elasticity elastic2d="stretch" young poisson thickness>, the keys
 // builtin_young, builtin_poisson, builtin_thickness repeat it; init checks them against the
-// compiled flex stiffness and the plugin adds only h S - t_b S_iso, so the total is h S.
+// compiled flex stiffness and the plugin adds only h S - t_b S_iso, so the total is h S. When it
+// carries built-in bending too (elastic2d="both"), MuJoCo's hinge operator is linear in the vertex
+// positions (f = -K x - beta K v per interior edge, K the 4x4 blocks of mjModel.flex_bending), so
+// the plugin adds back exactly that force: the total bending is the plugin's own, to round-off,
+// while MuJoCo integrates its isotropic share implicitly.
 
 #include <math.h>
 #include <stdio.h>
@@ -48,6 +52,10 @@
 // Doubles per element in mjModel.flex_stiffness for MuJoCo 4.0 (the upper triangle of a 6x6
 // edge-edge matrix; a triangle uses its first 6 entries, measured against our own formula).
 #define YF_STIFFNESS_STRIDE 21
+// Doubles per edge in mjModel.flex_bending for 2D flexes in MuJoCo 4.0: the 4x4 hinge operator
+// over (edge v0, edge v1, flap 0, flap 1), then the curved-reference coefficient (0 for a flat rest).
+// Measured: qfrc_passive = -sum_e K_e x_e to 1e-16, and -damping K_e v_e for the damping force.
+#define YF_BENDING_STRIDE 17
 // Relative agreement demanded between the builtin_* keys and the compiled built-in stiffness:
 // both are the same closed form in double precision, so they agree to ~1e-15; a mismatch a user
 // makes (a different modulus or Poisson ratio) is far larger.
@@ -101,6 +109,12 @@ typedef struct {
   double* theta;        // (nhinge) dihedral angles, then theta + damping * d(theta)/dt
   double* torque;       // (nhinge) dW / d theta
   double* hinge_grad;   // (nhinge x 12) d theta / d (x1, x2, o0, o1)
+  // MuJoCo's built-in bending on this flex (elastic2d "bend" or "both"), which compute removes:
+  int nbuiltin_hinge;
+  int* builtin_hinge;       // (nbuiltin_hinge x 4) flex-local vertices: edge v0 v1, flaps
+  const double* builtin_k;  // per built-in hinge, its 16 operator entries (into mjModel.flex_bending)
+  int* builtin_edge;        // (nbuiltin_hinge) flex-local edge of each, for builtin_k
+  double builtin_damping;   // the flex's damping (s): MuJoCo's bending damping force is -damping K v
 } Shell;
 
 // Configuration errors use mju_error: during compilation (where MuJoCo first runs init) it becomes
@@ -297,6 +311,8 @@ static void shell_free(Shell* s) {
   free(s->theta);
   free(s->torque);
   free(s->hinge_grad);
+  free(s->builtin_hinge);
+  free(s->builtin_edge);
   free(s);
 }
 
@@ -321,11 +337,6 @@ static void strain_basis(const double Dinv[4], double G[3][4]) {
 // flex_elemedge order (upper triangle), lambda* = E nu / (1 - nu^2) the plane-stress Lame constant.
 static int check_builtin(const mjModel* m, const Shell* s, const int* tri_edge_local) {
   int f = s->flex;
-  if (m->flex_bendingadr[f] >= 0) {
-    mju_error(YF_NAME ": flex %d has built-in bending (elastic2d='bend' or 'both'); yarnfit.shell "
-              "carries all the bending: use elastic2d='stretch' or 'none'", f);
-    return -1;
-  }
   double E = s->builtin_young, nu = s->builtin_poisson, t = s->builtin_thickness;
   if (m->flex_stiffnessadr[f] < 0) {  // no built-in stretch elasticity on this flex
     if (E > 0) {
@@ -370,6 +381,56 @@ static int check_builtin(const mjModel* m, const Shell* s, const int* tri_edge_l
     }
   }
   return 0;
+}
+
+// MuJoCo's own bending on the flex, if it has any: the interior edges' 4x4 operators, which
+// compute adds back with the opposite sign. A nonzero curved-reference coefficient would mean a
+// bent rest shape, which init has already refused; it is checked anyway, since the removal
+// assumes f = -K x exactly.
+static int collect_builtin_bending(const mjModel* m, Shell* s) {
+  int f = s->flex;
+  if (m->flex_bendingadr[f] < 0) return 0;
+  int nedge = m->flex_edgenum[f], eadr = m->flex_edgeadr[f];
+  const double* coefficients = m->flex_bending + m->flex_bendingadr[f];
+  s->builtin_hinge = malloc(sizeof(int) * 4 * (nedge > 0 ? nedge : 1));
+  s->builtin_edge = malloc(sizeof(int) * (nedge > 0 ? nedge : 1));
+  if (!s->builtin_hinge || !s->builtin_edge) return -1;
+  s->builtin_k = coefficients;
+  s->builtin_damping = m->flex_damping[f];
+  for (int e = 0; e < nedge; e++) {
+    const int* edge = m->flex_edge + 2 * (eadr + e);
+    const int* flap = m->flex_edgeflap + 2 * (eadr + e);
+    const double* k = coefficients + YF_BENDING_STRIDE * e;
+    if (flap[0] < 0 || flap[1] < 0) continue;  // a boundary edge: MuJoCo stores zeros
+    if (k[16] != 0) {
+      mju_error(YF_NAME ": flex %d's built-in bending has a curved reference (edge %d); the plugin "
+                "needs a flat rest shape", f, e);
+      return -1;
+    }
+    int* h = s->builtin_hinge + 4 * s->nbuiltin_hinge;
+    h[0] = edge[0]; h[1] = edge[1]; h[2] = flap[0]; h[3] = flap[1];
+    s->builtin_edge[s->nbuiltin_hinge++] = e;
+  }
+  return 0;
+}
+
+// Remove MuJoCo's built-in bending from the plugin's total: add K x + damping K v per built-in
+// hinge to the force, i.e. subtract it from s->grad. xdot may be NULL (no built-in damping).
+static void remove_builtin_bending(Shell* s, const double* x, const double* xdot) {
+  for (int e = 0; e < s->nbuiltin_hinge; e++) {
+    const int* v = s->builtin_hinge + 4 * e;
+    const double* k = s->builtin_k + YF_BENDING_STRIDE * s->builtin_edge[e];
+    double y[4][3];
+    for (int j = 0; j < 4; j++) {
+      for (int i = 0; i < 3; i++) {
+        y[j][i] = x[3 * v[j] + i] + (xdot ? s->builtin_damping * xdot[3 * v[j] + i] : 0);
+      }
+    }
+    for (int a = 0; a < 4; a++) {
+      double* g = s->grad + 3 * v[a];
+      for (int b = 0; b < 4; b++) mju_addToScl3(g, y[b], -k[4 * a + b]);
+    }
+  }
 }
 
 // Hinges: each interior edge with its two opposite vertices, oriented by its first triangle; and
@@ -591,6 +652,7 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
   int status = build_hinges(m, s, rest2d, tri_edge_local);
   free(rest2d);
   if (status == 0) status = check_builtin(m, s, tri_edge_local);
+  if (status == 0) status = collect_builtin_bending(m, s);
   free(tri_edge_local);
   if (status) {
     shell_free(s);
@@ -782,7 +844,7 @@ static void shell_compute(const mjModel* m, mjData* d, int instance, int capabil
 
   // Vertex velocities, only for damping: sum of slide axes times joint speeds, or the Jacobian.
   mjtNum* xdot = NULL;
-  if (s->damping > 0) {
+  if (s->damping > 0 || (s->nbuiltin_hinge > 0 && s->builtin_damping > 0)) {
     xdot = s->xdot;
     for (int v = 0; v < nvert; v++) {
       mjtNum* out = xdot + 3 * v;
@@ -810,6 +872,7 @@ static void shell_compute(const mjModel* m, mjData* d, int instance, int capabil
     for (int k = 0; k < 3; k++) mju_addTo3(grad + 3 * v[k], gt + 3 * k);
   }
   if (s->nhinge > 0) bending_forces(s, x, xdot);
+  if (s->nbuiltin_hinge > 0) remove_builtin_bending(s, x, s->builtin_damping > 0 ? xdot : NULL);
 
   // Forces (minus the gradient) into joint space: slide-only chains directly, others through the
   // vertex Jacobian.

@@ -80,6 +80,8 @@ DROP_GAP = 0.02
 CLAMP_MASS = 0.1
 SERVO_STIFFNESS_RATIO = 100.0
 MESHES = ("grid", "crisscross")
+# MJCF elastic2d names to mjtElastic2D values (none, bend, stretch, both).
+ELASTIC2D = {"none": 0, "bend": 1, "stretch": 2, "both": 3}
 
 # MuJoCo 4.0.0 warns "flex ... is not rigid and has no equality constraints or passive forces" for a
 # flex whose only elasticity is elastic2d="stretch", although it has passive forces (measured: the
@@ -179,6 +181,7 @@ def build_scene(
     width: float = DEFAULT_STRIP_WIDTH,
     max_strain: float = DEFAULT_MAX_STRAIN,
     mesh: str = "grid",
+    implicit_bending: bool = True,
 ) -> BuiltScene:
     """Build one of :data:`SCENES` for ``material`` (see the module docstring).
 
@@ -197,6 +200,9 @@ def build_scene(
         max_strain: upper end of the pull actuator's range as engineering strain, stretch only.
         mesh: one of :data:`MESHES`: ``grid`` (one diagonal per cell) or ``crisscross`` (both
             diagonals and a centre vertex; no locking, twice the vertices): :func:`grid_mesh`.
+        implicit_bending: the built-in part also bends (``elastic2d="both"``, integrated
+            implicitly; the plugin removes it and bends with the material); ``False``: the plugin
+            carries all the bending explicitly (``elastic2d="stretch"``, as before issue 15).
 
     Raises:
         ValueError: an unknown scene, integrator or mesh, a non-positive resolution, size, timestep,
@@ -233,13 +239,13 @@ def build_scene(
         young, poisson, thickness, notes = iso.young_pa, iso.poisson, iso.thickness_m, iso.notes
         plugin = None
     else:
-        split = builtin_elasticity(material.shell)
+        split = builtin_elasticity(material.shell, bending=implicit_bending)
         young, poisson, thickness, notes = split.young_pa, split.poisson, split.thickness_m, ()
         plugin = _plugin(spec, material.shell, split, angle, damping)
 
     flex = _cloth(spec, layout, material.areal_density_kg_m2, plugin)
     flex.young, flex.poisson, flex.thickness, flex.damping = young, poisson, thickness, damping
-    flex.elastic2d = 3 if fallback else 2  # both / stretch (mjtElastic2D: none, bend, stretch, both)
+    flex.elastic2d = ELASTIC2D["both" if fallback else split.elastic2d]
     flex.friction = [friction, 0.005, 0.0001]
     flex.contype = flex.conaffinity = 1 if layout.collide else 0
     flex.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_AUTO if self_collision else mujoco.mjtFlexSelf.mjFLEXSELF_NONE
@@ -450,18 +456,19 @@ def _clamp(spec: mujoco.MjSpec, shell: ShellMaterial, length: float, width: floa
 
 def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles: np.ndarray,
                    material: ClothMaterial, *, damping: float = DEFAULT_DAMPING, friction: float = DEFAULT_FRICTION,
-                   angle: float = 0.0, contype: int = 1, conaffinity: int = 1) -> mujoco.MjsFlex:
+                   angle: float = 0.0, contype: int = 1, conaffinity: int = 1,
+                   implicit_bending: bool = True) -> mujoco.MjsFlex:
     """One free 2D flex ``name`` with rest positions ``points (n, 3)`` (m) and ``triangles (m, 3)``,
     built as :func:`build_scene` builds its cloth (vertex bodies ``<name>_<v>`` with three slide
-    joints, the split's built-in ``elastic2d="stretch"`` and a ``yarnfit.shell`` instance
+    joints, the split's built-in ``<elasticity>`` and a ``yarnfit.shell`` instance
     ``<name>_shell`` with the full material). The plugin's rest shape is the flex at ``qpos0`` in
     the frame of triangle 0's plane: give it a flat (planar) panel."""
-    split = builtin_elasticity(material.shell)
+    split = builtin_elasticity(material.shell, bending=implicit_bending)
     plugin = _plugin(spec, material.shell, split, angle, damping, name=f"{name}_shell")
     layout = _Layout(np.asarray(points, float), np.asarray(triangles, int), {}, collide=True)
     flex = _cloth(spec, layout, material.areal_density_kg_m2, plugin, name=name)
     flex.young, flex.poisson, flex.thickness, flex.damping = split.young_pa, split.poisson, split.thickness_m, damping
-    flex.elastic2d = 2  # stretch
+    flex.elastic2d = ELASTIC2D[split.elastic2d]
     flex.friction = [friction, 0.005, 0.0001]
     flex.contype, flex.conaffinity = contype, conaffinity
     flex.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_NONE

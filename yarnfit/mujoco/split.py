@@ -45,6 +45,7 @@ __all__ = [
     "BuiltinElasticity",
     "IsotropicFallback",
     "IsotropicPart",
+    "builtin_bending_rigidity",
     "builtin_elasticity",
     "builtin_isotropic",
     "isotropic_fallback",
@@ -82,11 +83,23 @@ class IsotropicPart(NamedTuple):
 
 
 class BuiltinElasticity(NamedTuple):
-    """``<elasticity young poisson thickness>`` of the split, exactly representable in an MJCF file."""
+    """``<elasticity young poisson thickness elastic2d>`` of the split, exactly representable in an
+    MJCF file. ``bending``: the built-in part also bends (``elastic2d="both"``), its rigidity
+    ``young thickness³ / (12 (1 − poisson²))``; else it only stretches (``"stretch"``)."""
 
     young_pa: float
     poisson: float
     thickness_m: float
+    bending: bool = False
+
+    @property
+    def elastic2d(self) -> str:
+        return "both" if self.bending else "stretch"
+
+    @property
+    def bending_rigidity_nm(self) -> float:
+        """D (N·m) of the built-in hinge bending, 0 without it."""
+        return self.young_pa * self.thickness_m**3 / (12.0 * (1.0 - self.poisson**2)) if self.bending else 0.0
 
 
 class IsotropicFallback(NamedTuple):
@@ -141,17 +154,53 @@ def builtin_isotropic(material: ShellMaterial) -> IsotropicPart:
     return IsotropicPart(_least_young(half, _unit_stiffness(poisson)), poisson)
 
 
-def builtin_elasticity(material: ShellMaterial, digits: int = MJCF_DIGITS) -> BuiltinElasticity:
-    """:func:`builtin_isotropic` with every value exactly representable in ``digits`` significant
-    digits, so the ``<elasticity>`` attributes and the plugin's ``builtin_*`` keys written to an
-    MJCF file are the same numbers. Thickness and ν are rounded to nearest, then E is the least
-    admissible modulus for them (``h_b E_b C(ν_b) ⪰ h S/2``), rounded **up**: rounding keeps the
-    built-in part at least half the material."""
+def builtin_bending_rigidity(material: ShellMaterial) -> float:
+    """Least isotropic hinge rigidity D (N·m) at least as stiff as the material's bending in every
+    mode: ``D diag(1, 1, ½) ⪰ h³ B``, i.e. ``D = h³ max(λ_max(B_normal), 2 b22)``.
+
+    MuJoCo's 2D hinge bending stores ``½ D (κ00² + κ11² + 2 κ01²)`` per area (measured on a 21 × 21
+    grid: a cylinder, a sphere and a saddle at 0.95, 1.9 and 1.9 times ``½ D κ²``, the 5 % the free
+    edges' missing hinges), ours ``½ h³ κᵀ B κ`` with ``κ = (κ00, κ11, 2 κ01)``.
+
+    Raises:
+        ValueError: ``B`` is not positive definite.
+    """
+    if not material.bending_positive_definite:
+        material.check_positive_definite()  # raises, naming the entries
+    normal = np.array([[material.b00, material.b01], [material.b01, material.b11]])
+    return material.thickness**3 * max(float(eigvalsh(normal)[-1]), 2.0 * material.b22)
+
+
+def builtin_elasticity(material: ShellMaterial, digits: int = MJCF_DIGITS, *,
+                       bending: bool = True) -> BuiltinElasticity:
+    """The split's built-in part (:func:`builtin_isotropic`, and with ``bending`` an isotropic
+    hinge bending :func:`builtin_bending_rigidity`), every value exactly representable in
+    ``digits`` significant digits so that the ``<elasticity>`` attributes and the plugin's
+    ``builtin_*`` keys written to an MJCF file are the same numbers.
+
+    MuJoCo ties the built-in bending to the membrane, ``D_b = E_b t_b³/(12(1 − ν²))`` with the same
+    ``E_b t_b`` as its membrane stiffness (N/m), so the thickness is what sets the bending share:
+    ``t_b = √(12 (1 − ν²) D / (E_b t_b))``. Without bending ``t_b`` is the material's thickness.
+    Thickness (with bending) is rounded **up**, ν to nearest, then ``E_b`` is the least admissible
+    modulus for them (``t_b E_b C(ν_b) ⪰ h S/2``), rounded **up**: rounding keeps the built-in
+    membrane at least half the material's and its bending at least the material's in every mode.
+
+    Why at least the material's, where the membrane needs half: the plugin removes MuJoCo's hinge
+    forces exactly (its own operator is what the total bends with), so the explicit remainder is
+    ``K_plugin(B) − K_hinge(D)``; one degree of freedom stays stable at every step while that lies
+    between ``−K_hinge`` and ``+K_hinge``, and the two discrete operators differ by up to 1.8× on
+    some meshes (plugins/README.md), which a full share covers and a half share does not.
+    """
     part = builtin_isotropic(material)
-    thickness = _round(material.thickness, digits)
     poisson = min(_round(part.poisson, digits), _round_down(POISSON_LIMIT, digits))
+    if bending:
+        stretch = part.young_pa * material.thickness  # E_b t_b (N/m)
+        thickness = _round_up(math.sqrt(12.0 * (1.0 - poisson**2) * builtin_bending_rigidity(material) / stretch),
+                              digits)
+    else:
+        thickness = _round(material.thickness, digits)
     young = _least_young(0.5 * material.S * (material.thickness / thickness), _unit_stiffness(poisson))
-    return BuiltinElasticity(_round_up(young, digits), poisson, thickness)
+    return BuiltinElasticity(_round_up(young, digits), poisson, thickness, bending)
 
 
 def isotropic_fallback(material: ShellMaterial) -> IsotropicFallback:
