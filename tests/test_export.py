@@ -3,6 +3,7 @@ isotropic elasticity and the plugin, the isotropic fallback, the four scenes (bu
 written as MJCF, reloaded with plain mujoco.MjModel.from_xml_path and stepped), and `yarnfit
 export`."""
 
+import dataclasses
 import json
 import math
 import subprocess
@@ -16,10 +17,10 @@ import pytest
 from fabric_shell import FABRIC
 from yarnfit.mujoco import SCENES
 from yarnfit.mujoco.run import run_scene
-from yarnfit.mujoco.scenes import FLEX_RADIUS, ClothMaterial, build_scene, export_scene
+from yarnfit.mujoco.scenes import FLEX_RADIUS, ClothMaterial, build_scene, compile_quietly, export_scene
 from yarnfit.mujoco.split import (MJCF_DIGITS, POISSON_LIMIT, builtin_elasticity, builtin_isotropic,
                                   isotropic_fallback, isotropic_stiffness)
-from yarnfit.shell import ShellMaterial
+from yarnfit.shell import NonlinearMembrane, ShellMaterial
 
 # The split's minimisation stops within 1e-10 in ν (POISSON_XATOL) at a kink of the objective; E
 # and ν then agree with the closed form to ~1e-9. 1e-7 leaves room without hiding a wrong answer
@@ -135,6 +136,23 @@ def test_split_written_to_mjcf_is_representable_and_still_covers_half(material):
     assert not stretch_only.bending and stretch_only.elastic2d == "stretch"
     assert stretch_only.bending_rigidity_nm == 0.0
     assert stretch_only.thickness_m == float(f"{material.thickness:.{MJCF_DIGITS}g}")
+
+
+def test_split_with_a_stiffening_bound_covers_half_the_largest_tangent():
+    """With ``stiffening_bound`` the built-in membrane covers half the stiffening membrane's
+    largest tangent up to that stiffening strain, more than without it, and exactly the linear
+    split for a material without stiffening terms."""
+    s = FABRIC
+    stiff = dataclasses.replace(s, nonlinear=NonlinearMembrane(NonlinearMembrane.from_keys(
+        {"s00p3": 400.0 * s.s00, "s11p3": 400.0 * s.s11}).coefficients, NonlinearMembrane.coupling_of(s.s00, s.s01, s.s11)))
+    bound = 0.05
+    split = builtin_elasticity(stiff, stiffening_bound=bound)
+    builtin = split.thickness_m * isotropic_stiffness(split.young_pa, split.poisson)
+    half = stiff.thickness * stiff.nonlinear.largest_tangent(s.s00, s.s01, s.s11, s.s22, bound) / 2
+    assert np.linalg.eigvalsh(builtin - half).min() >= -PSD_ATOL * np.abs(half).max()
+    plain = builtin_elasticity(stiff, stiffening_bound=0.0)
+    assert split.young_pa * split.thickness_m > 1.5 * plain.young_pa * plain.thickness_m
+    assert builtin_elasticity(s, stiffening_bound=bound) == builtin_elasticity(s)
 
 
 # -- the fallback ------------------------------------------------------------------------------
@@ -335,3 +353,13 @@ def test_cli_export_bad_input_is_one_line_and_status_2(args, message, material_f
     assert out.returncode == 2
     assert message in out.stderr and len(out.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "x.xml").exists()
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_the_cloth_flex_is_named_cloth(scene, material_file):
+    """Every scene's flex (and its vertex bodies) is found by the name ``cloth``, whatever holds
+    its pinned vertices (the world, a clamp)."""
+    model = compile_quietly(build_scene(ClothMaterial.from_file(material_file), scene, resolution=RESOLUTION).spec)
+    assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "cloth") == 0
+    names = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in model.flex_vertbodyid}
+    assert all(name.startswith("cloth_") for name in names - {"world", "clamp"})

@@ -530,3 +530,32 @@ def test_uniaxial_pull_rejects_bad_input():
         MATERIAL.uniaxial_pull(0.0, 0.0)
     with pytest.raises(ValueError, match="angle"):
         MATERIAL.uniaxial_pull(float("nan"), 1.1)
+
+
+def test_largest_tangent_bounds_every_tangent_within_the_strain_bound():
+    """``stiffest(b)`` is the largest ``φ_d''`` over ``|y_d| <= b``: no sampled stiffening strain
+    exceeds it, and it is reached at the bound. ``largest_tangent`` lies above the tangent at every
+    strain whose stiffening strains stay within the bound."""
+    s = MATERIAL
+    terms = NonlinearMembrane(NonlinearMembrane.from_keys({
+        "s00p2": 8.0 * s.s00, "s00p3": 40.0 * s.s00, "s11n2": -3.0 * s.s11, "s11n3": 20.0 * s.s11,
+        "s22p2": -2.0 * s.s22, "s22p3": 300.0 * s.s22}).coefficients,
+        NonlinearMembrane.coupling_of(s.s00, s.s01, s.s11))
+    bound = 0.08
+    largest = terms.stiffest(bound)
+    grid = np.linspace(-bound, bound, 401)
+    table = terms.table
+    for d in range(3):
+        k2 = np.where(grid < 0, table[d, 1, 0], table[d, 0, 0])
+        k3 = np.where(grid < 0, table[d, 1, 1], table[d, 0, 1])
+        second = 2.0 * k2 * grid + 3.0 * k3 * grid**2
+        assert second.max() <= largest[d] * (1 + 1e-12)
+        assert max(second.max(), 0.0) == pytest.approx(largest[d], rel=1e-12)
+    upper = terms.largest_tangent(s.s00, s.s01, s.s11, s.s22, bound)
+    rng = np.random.default_rng(4)
+    eps = rng.uniform(-1.0, 1.0, (500, 3)) @ np.linalg.inv(terms.map).T * bound  # y uniform in the box
+    assert np.abs(terms.stiffening_strain(eps)).max() <= bound * (1 + 1e-12)
+    gaps = np.linalg.eigvalsh(upper - (s.S + terms.hessian(eps)))
+    assert gaps.min() >= -1e-9 * np.abs(upper).max()
+    with pytest.raises(ValueError, match="bound must be >= 0"):
+        terms.stiffest(-0.1)

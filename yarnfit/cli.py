@@ -143,12 +143,13 @@ def build_parser() -> argparse.ArgumentParser:
                         help="then step the scene this long and report stability and ms/step (exit 1 if unstable)")
     validate = commands.add_parser(
         "validate",
-        help="run the validation suite on a fitted material (stretch tests, drapes, yarn swatch, body)",
+        help="run the validation suite on a fitted material (stretch tests, drapes, Cusick test, yarn swatch, body)",
         description=(
             "Run the validation scenes on a material file: stretch (FAB strips 8x5 and 2x5 cm along weft, warp "
             "and bias in MuJoCo), yarn (the same pull on an explicit yarn swatch), sphere and wall (drapes), "
-            "body (garments on a moving humanoid). Each scene is recorded to <logs>/<fabric>/<scene>.rrd and "
-            "every figure goes to <logs>/<fabric>/summary.json, in SI units."
+            "cusick (the Cusick drape test, BS 5058 / ISO 9073-9), body (garments on a moving humanoid). Each "
+            "scene is recorded to <logs>/<fabric>/<scene>.rrd and every figure goes to "
+            "<logs>/<fabric>/summary.json, in SI units."
         ),
     )
     validate.add_argument("material", metavar="MATERIAL.json", help="a material file written by `yarnfit fit`")

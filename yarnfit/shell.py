@@ -37,7 +37,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
-from .checks import check_keys, finite_number
+from .checks import check_keys, finite_number, non_negative_number
 
 __all__ = [
     "BENDING_PARAMETERS",
@@ -280,6 +280,24 @@ class NonlinearMembrane:
         D = self.map
         S = np.array([[s00, s01, 0.0], [s01, s11, 0.0], [0.0, 0.0, s22]])
         return S + D.T @ np.diag(m) @ D
+
+    def stiffest(self, bound: float) -> np.ndarray:
+        """``(3,)`` largest ``φ_d''`` (Pa, >= 0) over stiffening strains ``|y_d| <= bound`` on both
+        sides: ``φ''`` is convex in y (every ``k3 >= 0``), so its largest value on each side is at
+        zero (0) or at the bound (``2 k2 b + 3 k3 b²``, ``−2 k2 b + 3 k3 b²`` below zero)."""
+        bound = non_negative_number(bound, "bound")
+        largest = np.zeros(3)
+        for d, ((k2p, k3p), (k2n, k3n)) in enumerate(self.table):
+            largest[d] = max(0.0, 2.0 * k2p * bound + 3.0 * k3p * bound**2,
+                             -2.0 * k2n * bound + 3.0 * k3n * bound**2)
+        return largest
+
+    def largest_tangent(self, s00: float, s01: float, s11: float, s22: float, bound: float) -> np.ndarray:
+        """``S + Dᵀ diag(stiffest(bound)) D`` ``(3, 3)`` (Pa): above every tangent the membrane has
+        while each stiffening strain stays within ``±bound``."""
+        D = self.map
+        S = np.array([[s00, s01, 0.0], [s01, s11, 0.0], [0.0, 0.0, s22]])
+        return S + D.T @ np.diag(self.stiffest(bound)) @ D
 
     def convexity_problems(self, s00: float, s01: float, s11: float, s22: float) -> list[str]:
         """Why :meth:`least_tangent` is not positive definite with this ``S`` (empty if it is):

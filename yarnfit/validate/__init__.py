@@ -1,6 +1,6 @@
 """The validation suite (``yarnfit validate``, issue 6): a fitted material in FAB-style stretch
-tests, against an explicit yarn-level swatch, in sphere and wall drapes and in garments on a moving
-body, each scene recorded to ``logs/<material>/<scene>.rrd`` and summarised in ``summary.json``.
+tests, against an explicit yarn-level swatch, in sphere, wall and Cusick drapes and in garments on a
+moving body, each scene recorded to ``logs/<material>/<scene>.rrd`` and summarised in ``summary.json``.
 
 One module per scene, each of one shape: build the scene, run it, return a typed result (a
 :class:`SceneResult`), record it through a :class:`yarnfit.record.Recording`. Each exposes
@@ -17,7 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-SCENES = ("stretch", "yarn", "sphere", "wall", "body")
+# The scenes of yarnfit.validate.drape.
+DRAPES = ("sphere", "wall", "cusick")
+SCENES = ("stretch", "yarn", *DRAPES, "body")
 # The directions a strip is pulled in: the pull axis's angle from the weft, in degrees.
 DIRECTIONS = {"weft": 0.0, "warp": 90.0, "bias": 45.0}
 

@@ -19,7 +19,7 @@ from typing import Callable
 
 from .. import __version__
 from ..material_file import MaterialFile
-from . import SCENES, jsonable
+from . import DRAPES, SCENES, jsonable
 from .verdicts import verdicts
 
 
@@ -40,7 +40,7 @@ def _runner(scene: str) -> Callable:
     if scene == "stretch":
         from .stretch import run_stretch
         return run_stretch
-    if scene in ("sphere", "wall"):
+    if scene in DRAPES:
         from .drape import run_drape
         return lambda material, **options: run_drape(material, scene, **options)
     if scene == "yarn":
