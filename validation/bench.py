@@ -466,6 +466,119 @@ def bench_plugin_nonlinear_stable_step() -> None:
                 report(f"{key}_search_seconds", time.perf_counter() - start_time, "s")
 
 
+# -- drape_stable_step ----------------------------------------------------------------------------
+
+# Cell sizes (m) of the 0.3 m sphere drape (the validate scene's swatch on its 9 cm sphere): 16, 31
+# and 61 vertices per side.
+DRAPE_CELLS = (0.02, 0.01, 0.005)
+# Steps tried (s), from the export's 1 ms up while stable, down while not.
+DRAPE_STEPS = (0.25e-3, 0.5e-3, 1e-3, 2e-3, 4e-3, 8e-3, 16e-3)
+# Simulated time per trial (s). Failures seen come within 0.35 s (bending modes blow up in free
+# fall, or the landing); 0.5 cm trials run 1 s, since a step costs ~0.2 s there with implicit bending.
+DRAPE_SECONDS = {0.02: 2.0, 0.01: 2.0, 0.005: 1.0}
+# A trial fails on bad QACC, a non-finite position, or a gain of mechanical energy (kinetic plus
+# gravitational; the elastic part only stores) beyond semi-implicit Euler's own free-fall drift
+# (½ g² Δt t per unit mass) by more than the energy of a 5 mm drop: a diverging run gains metres.
+DRAPE_GAIN_DROP = 5e-3  # m
+
+
+class _Drape(NamedTuple):
+    """One drape trial: stable, what failed, centre-of-mass height at the end (m), ms per step."""
+
+    stable: bool
+    failure: str
+    height: float
+    ms_per_step: float
+
+
+def _drape_trial(material, cell: float, timestep: float, seconds: float, split: dict) -> _Drape:
+    import mujoco
+
+    from yarnfit.mujoco.scenes import build_scene, compile_quietly
+
+    size = 0.3
+    built = build_scene(material, "sphere", resolution=round(size / cell) + 1, size=size, timestep=timestep, **split)
+    model = compile_quietly(built.spec)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    bodies = np.unique(model.flex_vertbodyid)
+    bodies = bodies[model.body_dofnum[bodies] == 3]
+    dofs = model.body_dofadr[bodies][:, None] + np.arange(3)
+    mass = model.body_mass[bodies]
+    g = 9.81
+
+    def energy() -> float:
+        return float(0.5 * (mass * (data.qvel[dofs] ** 2).sum(1)).sum() + g * (mass * data.xpos[bodies, 2]).sum())
+
+    start_energy, steps = energy(), round(seconds / timestep)
+    start = time.perf_counter()
+    for step in range(1, steps + 1):
+        mujoco.mj_step(model, data)
+        when = f"at {step * timestep:.2f} s"
+        if data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+            return _Drape(False, f"bad QACC {when}", math.nan, math.nan)
+        if not np.all(np.isfinite(data.qpos)):
+            return _Drape(False, f"non-finite {when}", math.nan, math.nan)
+        allowed = mass.sum() * g * (0.5 * g * timestep * step * timestep + DRAPE_GAIN_DROP)
+        if energy() - start_energy > allowed:
+            return _Drape(False, f"energy gain {when}", math.nan, math.nan)
+    elapsed = time.perf_counter() - start
+    height = float((mass * data.xpos[bodies, 2]).sum() / mass.sum())
+    return _Drape(True, "", height, 1e3 * elapsed / steps)
+
+
+def bench_drape_stable_step() -> None:
+    """Largest stable step of the sphere drape (0.3 m swatch, 9 cm sphere, discrete, Newton) of the
+    five presets at 2, 1 and 0.5 cm cells, before issue 15 (all bending explicit in the plugin, the
+    built-in part covering half of S) and now (the built-in part also bends, and covers the
+    stiffening up to split.DEFAULT_STIFFENING_BOUND), with ms per step and per simulated second at
+    that step and the centre of mass's height at the end (a step that drags the drape shows as a
+    higher cloth). Long: hours at 0.5 cm."""
+    import tempfile
+    import warnings
+    from pathlib import Path
+
+    from yarnfit.fabric import PRESETS, Fabric
+    from yarnfit.fabric_fit import fit_fabric
+    from yarnfit.mujoco.scenes import ClothMaterial
+
+    variants = {"before": {"implicit_bending": False, "stiffening_bound": 0.0}, "now": {}}
+    for name in PRESETS:
+        with warnings.catch_warnings(), tempfile.TemporaryDirectory() as folder:
+            warnings.simplefilter("ignore")
+            # Through the material file, as `yarnfit export` reads it (shell and areal density).
+            material = ClothMaterial.from_file(fit_fabric(Fabric.preset(name)).write(Path(folder) / f"{name}.json"))
+        for cell in DRAPE_CELLS:
+            for variant, split in variants.items():
+                key = f"drape_{name.replace('-', '_')}_{cell * 100:g}cm_{variant}"
+                k = DRAPE_STEPS.index(1e-3)
+                trials = {}
+
+                def trial(index):
+                    if index not in trials:
+                        trials[index] = _drape_trial(material, cell, DRAPE_STEPS[index], DRAPE_SECONDS[cell], split)
+                        print(f"  {key}: {DRAPE_STEPS[index] * 1e3:g} ms {trials[index].failure or 'stable'}",
+                              file=sys.stderr, flush=True)  # progress
+                    return trials[index]
+
+                if trial(k).stable:
+                    while k + 1 < len(DRAPE_STEPS) and trial(k + 1).stable:
+                        k += 1
+                else:
+                    while k >= 0 and not trial(k).stable:
+                        k -= 1
+                if k < 0:
+                    report(f"{key}_stable_step", 0.0, f"ms (none down to {DRAPE_STEPS[0] * 1e3:g} ms)")
+                    continue
+                best, step = trials[k], DRAPE_STEPS[k]
+                above = trials.get(k + 1)
+                report(f"{key}_stable_step", step * 1e3,
+                       f"ms ({above.failure if above else 'largest step tried'} above)")
+                report(f"{key}_ms_per_step", best.ms_per_step, "ms")
+                report(f"{key}_s_per_simulated_s", best.ms_per_step / (step * 1e3), "s")
+                report(f"{key}_final_height", best.height, f"m (centre of mass after {DRAPE_SECONDS[cell]:g} s)")
+
+
 # -- swatch ---------------------------------------------------------------------------------------
 
 
@@ -500,7 +613,8 @@ def bench_swatch() -> None:
 
 
 SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco,
-            "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step, "swatch": bench_swatch}
+            "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step, "swatch": bench_swatch,
+            "drape_stable_step": bench_drape_stable_step}
 
 
 def main(argv: list[str] | None = None) -> int:
