@@ -157,55 +157,111 @@ def test_patch_uniaxial_stretch(direction, angle):
     assert -(contraction - 1) / STRAIN == pytest.approx(poisson, rel=PATCH_RTOL)
 
 
-def cylinder(rest, curvature, axis):
-    """Positions of a flat grid (rest, (V, 3), in z = 0) wrapped isometrically around a cylinder of
-    the given curvature (1/m) whose curvature direction is world ``axis`` (0: x, 1: y): each grid
-    line across the bend keeps its spacing as a chord, so every triangle keeps its edge lengths."""
-    u = rest[:, axis]
-    grid = np.unique(np.round(u, 12))
-    spacing = grid[1] - grid[0]
-    index = np.round((u - grid[0]) / spacing)
-    if curvature == 0:
-        return rest.copy()
-    radius = 1.0 / curvature
-    step = 2 * math.asin(spacing * curvature / 2)  # chord `spacing` on the circle
-    phi = (index - (len(grid) - 1) / 2) * step
-    x = rest.copy()
-    x[:, axis] = radius * np.sin(phi)
-    x[:, 2] = radius * (1 - np.cos(phi))
+# Bent-strip energy against ½ bending κ² with the consistent operator (exact for a constant
+# curvature to first order in the hinge angles) at 32 cells along the strip (the issue's 1/32):
+# measured 1e-9 (grid), 1.7e-4 (criss-cross), 6e-5 (panel); 1e-3 still fails the grid operator on
+# a free end (−3.1 % at 32 cells) and on criss-cross cells (+41 to +73 %). At 8 cells (a 2 cm strip
+# two or three cells wide) the free ends' extrapolation costs up to 3.2 % on the panel mesh: held
+# to BENDING_RTOL.
+CONSISTENT_BENDING_RTOL = 1e-3
+MESH_KINDS = ("grid", "crisscross", "panel")
+
+
+def strip_mesh(kind, length, width, cell):
+    """A ``length × width`` strip centred at the origin, cells about ``cell`` (m): a grid with one
+    diagonal per cell, criss-cross cells, or an unstructured panel mesh."""
+    from yarnfit.mujoco.scenes import grid_mesh, panel_mesh
+
+    if kind == "panel":
+        half = np.array([0.5 * length, 0.5 * width])
+        return panel_mesh(np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half, cell)
+    nx, ny = max(2, round(length / cell) + 1), max(2, round(width / cell) + 1)
+    return grid_mesh(nx, ny, length, width, crisscross=kind == "crisscross")
+
+
+def wrapped(points, curvature, axis):
+    """The flat strip ``points (V, 3)`` wrapped isometrically (as a continuum) around a cylinder
+    whose curvature (1/m) runs along world ``axis``."""
+    u = points[:, axis]
+    x = points.copy()
+    x[:, axis] = np.sin(curvature * u) / curvature
+    x[:, 2] = (1 - np.cos(curvature * u)) / curvature
     return x
 
 
-def bending_energy(model, curvature, axis, points=8):
-    """Work done by the plugin's forces along the path of cylinders 0 → curvature (J), by
-    Gauss–Legendre quadrature (the integrand is a smooth function of the curvature)."""
+def wrapped_bending_energy(model, points, curvature, axis, nodes=8):
+    """Work (J) done by the plugin's forces along the wraps 0 → curvature of the sheet ``model``
+    whose rest vertices are ``points``, by Gauss–Legendre quadrature."""
     strip = Sheet(model)
-    nodes, weights = np.polynomial.legendre.leggauss(points)
     energy = 0.0
-    for node, weight in zip(nodes, weights):
+    for node, weight in zip(*np.polynomial.legendre.leggauss(nodes)):
         k = 0.5 * curvature * (node + 1)
         dk = 1e-6 * curvature
-        velocity = (cylinder(strip.rest, k + dk, axis) - cylinder(strip.rest, k - dk, axis)) / (2 * dk)
-        energy -= 0.5 * curvature * weight * np.sum(strip.forces(cylinder(strip.rest, k, axis)) * velocity)
+        velocity = (wrapped(points, k + dk, axis) - wrapped(points, k - dk, axis)) / (2 * dk)
+        energy -= 0.5 * curvature * weight * np.sum(strip.forces(wrapped(points, k, axis)) * velocity)
     return energy
 
 
-@pytest.mark.parametrize("direction, axis, angle", [("weft", 0, 0.0), ("warp", 1, 0.0), ("bias", 0, math.pi / 4)])
-def test_bending_a_strip_into_a_cylinder(direction, axis, angle):
-    """Energy per area of the bent strip against ½ bending κ², for three meshes: within 5 % on the
-    finest, and falling as the mesh is refined (the free ends' triangles have no hinge across the
-    bend, a fraction 1/n of the strip)."""
-    length, width, curvature = 0.1, 0.02, 20.0  # m, m, 1/m: a bend of about 115° over the strip
+def bent_strip_error(kind, direction, cells, length=0.1, width=0.02, curvature=20.0):
+    """Relative error of a ``length × width`` strip's bending energy per area, wrapped to
+    ``curvature`` (1/m; 20 /m is about 115° over 0.1 m) along (weft, bias) or across (warp) it at
+    ``cells`` cells along it, against ½ bending κ² (membrane negligible)."""
+    from test_plugin import mesh_model
+
+    axis, angle = {"weft": (0, 0.0), "warp": (1, 0.0), "bias": (0, math.pi / 4)}[direction]
+    points, triangles = strip_mesh(kind, length, width, length / cells)
+    if axis == 1:  # the strip along y
+        points, triangles = points[:, [1, 0, 2]], triangles[:, ::-1]
+    soft = {**FABRIC.parameters, "thickness": FABRIC.thickness, "angle": angle,
+            "s00": 1e-6, "s01": 0.0, "s11": 1e-6, "s22": 1e-6}
+    model = mesh_model(points, triangles, soft)
     expected = 0.5 * FABRIC.engineering()[f"bending_{direction}_nm"] * curvature**2
-    errors = []
-    for cells in (8, 16, 32):
-        count, spacing = [3, 3], [width / 2, width / 2]
-        count[axis], spacing[axis] = cells + 1, length / cells
-        model = sheet(FABRIC, count, spacing, angle)
-        per_area = bending_energy(model, curvature, axis) / (length * width)
-        errors.append(abs(per_area / expected - 1))
-    assert errors[-1] < BENDING_RTOL
-    assert errors[0] > errors[1] > errors[2]
+    return wrapped_bending_energy(model, points, curvature, axis) / (length * width) / expected - 1
+
+
+@pytest.mark.filterwarnings("ignore:.*is not rigid")
+def uniform_patch(kind, angle, strain, length=0.16, width=0.08, cell=0.01):
+    """A ``length × width`` strip (mesh ``kind``, weft at ``angle`` from its axis) held in the
+    shell law's uniaxial state at ``strain`` along its axis (every other stress free): the relative
+    error of the pulled end's force per width against the law, and the largest force on any other
+    vertex over the end's force per vertex. Linear triangles carry a uniform strain exactly on any
+    mesh, so both are round-off."""
+    from test_plugin import mesh_model
+
+    points, triangles = strip_mesh(kind, length, width, cell)
+    model = mesh_model(points, triangles, {**FABRIC.parameters, "thickness": FABRIC.thickness, "angle": angle})
+    pull = FABRIC.uniaxial_pull(-angle, 1 + strain)  # the strip's axis is at −angle from the weft
+    # The first form, weft/warp frame → the strip's, and the symmetric stretch with that metric.
+    rotation = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    values, vectors = np.linalg.eigh(rotation @ pull.first_form @ rotation.T)
+    x = points.copy()
+    x[:, :2] = points[:, :2] @ (vectors @ np.diag(np.sqrt(values)) @ vectors.T).T
+    strip = Sheet(model)
+    forces = strip.forces(x)
+    end = np.isclose(points[:, 0], 0.5 * length)
+    tension = -forces[end, 0].sum() / width  # the sheet pulls the end back
+    others = np.abs(forces[~end & ~np.isclose(points[:, 0], -0.5 * length)]).max()
+    return tension / pull.force_n_per_m - 1, others / (abs(tension) * width / end.sum())
+
+
+@pytest.mark.parametrize("kind", MESH_KINDS)
+@pytest.mark.parametrize("direction, angle", [("weft", 0.0), ("warp", math.pi / 2), ("bias", math.pi / 4)])
+def test_uniform_strain_patch_on_every_mesh_kind(kind, direction, angle):
+    """Linear triangles carry a uniform strain exactly whatever the mesh: the uniaxial state's end
+    force matches the law, and no other vertex is loaded, to round-off (measured ≤ 2e-9)."""
+    tension_error, other_forces = uniform_patch(kind, angle, STRAIN)
+    assert abs(tension_error) < EXACT_RTOL
+    assert other_forces < EXACT_RTOL
+
+
+@pytest.mark.parametrize("kind", MESH_KINDS)
+@pytest.mark.parametrize("direction", ["weft", "warp", "bias"])
+def test_bending_a_strip_into_a_cylinder(kind, direction):
+    """Energy per area of the bent strip against ½ bending κ², on a grid, criss-cross cells and an
+    unstructured panel mesh, coarse to fine: the consistent operator, with the free ends' triangles
+    bending with their interior neighbours' curvature."""
+    assert abs(bent_strip_error(kind, direction, 32)) < CONSISTENT_BENDING_RTOL
+    assert abs(bent_strip_error(kind, direction, 8)) < BENDING_RTOL
 
 
 def test_a_flat_unloaded_sheet_stays_at_rest():

@@ -8,15 +8,14 @@
 //   kappa = (II00, II11, 2 II01)  second fundamental form, B = [[b00, b01, 0], [b01, b11, 0], [0, 0, b22]].
 //
 // Membrane: per linear triangle, constant deformation gradient F (3x2) from the rest edges.
-// Bending: per triangle, a discrete shape operator from the dihedral angles theta_e of its three
-// edges (hinges shared with the neighbouring triangles),
-//
-//   II_t = sum_e theta_e l_e / (2 A_t) n_e n_e^T,
-//
-// with l_e the rest edge length, A_t the rest area and n_e the in-plane unit normal of the edge
-// in the rest material frame. It is exact for a cylinder on a regular grid in any direction and
-// converges to (h^3/2) kappa^T B kappa; a boundary edge has no hinge (a free edge carries no
-// moment). See plugins/README.md.
+// Bending: per triangle, a curvature kappa_t from the dihedral angles theta_e of its three edges
+// (hinges shared with the neighbouring triangles). A constant-curvature surface makes, across edge
+// e, theta_e = r_e . kappa exactly (to first order in the angles): the jump of its linear
+// interpolants' slope, from the two opposite vertices' rest positions along and off the edge. init
+// inverts each triangle's three rows (the consistent operator: exact for every constant curvature
+// on any mesh); a triangle with a free edge bends with an interior neighbour's kappa; with none,
+// or an ill-conditioned map, it keeps the grid operator II_t = sum_e theta_e l_e / (2 A_t) n_e n_e^T
+// (what the inverse is on a regular grid). See plugins/README.md.
 //
 // Strain stiffening (optional keys s00p2 ... s22n3 in Pa, c01 and c10, default 0): each direction
 // stiffens with its stiffening strain y = D eps = (eps0 + c01 eps1, eps1 + c10 eps0, eps2) (yarnfit
@@ -63,6 +62,10 @@
 // Out-of-plane offset of a rest triangle's edges, relative to their length, still called flat:
 // round-off of body frames composed at qpos0 is ~1e-16; a bent mesh is off by its angle.
 #define YF_FLAT_RTOL 1e-9
+// Largest condition number of a triangle's 3x3 map from its curvature to its three hinge angles
+// that the consistent bending operator inverts; beyond it the triangle keeps the grid operator.
+// Well-shaped triangles measure 2-20; a sliver's map is near singular.
+#define YF_OPERATOR_CONDITION 1e4
 
 // The strain-stiffening keys, per Voigt direction d (s00: eps_0, s11: eps_1, s22: eps_2) and side
 // of zero strain: the coefficient k2 of x^2 and k3 of x^3 in the stress for x >= 0, then for x < 0.
@@ -94,12 +97,16 @@ typedef struct {
   int nvert;
   int ntri;
   int nhinge;
+  int consistent_tri;   // triangles bending with the consistent operator (all three edges hinges)
   int* tri;             // (ntri x 3) flex-local vertex ids
   double* rest_inv;     // (ntri x 4) inverse of the rest edge matrix [e1 e2] in the material frame
   double* area;         // (ntri) rest areas (m^2)
   int* hinge;           // (nhinge x 4) x1 x2 o0 o1: edge x1->x2 as its first triangle (x1 x2 o0) runs
   int* tri_hinge;       // (ntri x 3) hinge of each edge of a triangle, -1 on the boundary
-  double* tri_weight;   // (ntri x 9) d kappa / d theta for each edge: l/(2A) (n0^2, n1^2, 2 n0 n1)
+  double* tri_weight;   // (ntri x 9) d kappa / d theta for each edge (the consistent operator, or
+                        // on boundary triangles without a source the grid one l/(2A) n n)
+  int* tri_source;      // (ntri) triangle whose curvature this one bends with: itself, or for a
+                        // boundary triangle an interior neighbour's (constant curvature extrapolated)
   int* vert_dof;        // (nvert) last dof of the vertex body's kinematic chain, -1 if none
   unsigned char* slide_only;  // (nvert) 1 if that chain has only slide joints (Jacobian = axes)
   // Scratch for compute (plugin data is per mjData, so one thread each): kept off the mjData
@@ -304,6 +311,7 @@ static void shell_free(Shell* s) {
   free(s->hinge);
   free(s->tri_hinge);
   free(s->tri_weight);
+  free(s->tri_source);
   free(s->vert_dof);
   free(s->slide_only);
   free(s->grad);
@@ -433,6 +441,34 @@ static void remove_builtin_bending(Shell* s, const double* x, const double* xdot
   }
 }
 
+// Rest coordinates (2) of flex-local vertex `vertex` of triangle `tri` (3 vertex ids) from its
+// rest2d entry (6: the three vertices' material coordinates, the first at the origin).
+static void tri_point(const double* rest, const int* tri, int vertex, double out[2]) {
+  int k = vertex == tri[0] ? 0 : vertex == tri[1] ? 1 : 2;
+  out[0] = rest[2 * k];
+  out[1] = rest[2 * k + 1];
+}
+
+// Inverse of the row-major 3x3 matrix a into out; returns -1 (out untouched) if its condition
+// number in the max-row-sum norm exceeds `condition`.
+static int invert3(const double a[9], double out[9], double condition) {
+  double c[9] = {
+    a[4] * a[8] - a[5] * a[7], a[2] * a[7] - a[1] * a[8], a[1] * a[5] - a[2] * a[4],
+    a[5] * a[6] - a[3] * a[8], a[0] * a[8] - a[2] * a[6], a[2] * a[3] - a[0] * a[5],
+    a[3] * a[7] - a[4] * a[6], a[1] * a[6] - a[0] * a[7], a[0] * a[4] - a[1] * a[3],
+  };
+  double det = a[0] * c[0] + a[1] * c[3] + a[2] * c[6];
+  if (!(fabs(det) > 0)) return -1;
+  double norm_a = 0, norm_inv = 0;
+  for (int i = 0; i < 3; i++) {
+    norm_a = fmax(norm_a, fabs(a[3 * i]) + fabs(a[3 * i + 1]) + fabs(a[3 * i + 2]));
+    norm_inv = fmax(norm_inv, (fabs(c[3 * i]) + fabs(c[3 * i + 1]) + fabs(c[3 * i + 2])) / fabs(det));
+  }
+  if (norm_a * norm_inv > condition) return -1;
+  for (int i = 0; i < 9; i++) out[i] = c[i] / det;
+  return 0;
+}
+
 // Hinges: each interior edge with its two opposite vertices, oriented by its first triangle; and
 // per triangle edge the hinge and d kappa / d theta. Needs s->tri, s->area and the rest edges in
 // the material frame `rest2d` (ntri x 6: the three vertices' material coordinates relative to the
@@ -484,18 +520,100 @@ static int build_hinges(const mjModel* m, Shell* s, const double* rest2d, int* t
   for (int e = 0; e < nedge; e++) {
     if (edge_hinge[e] >= 0) memcpy(s->hinge + 4 * edge_hinge[e], side + 4 * e, sizeof(int) * 4);
   }
+  // Opposite vertex of each hinge side relative to the edge, in that triangle's rest frame:
+  // (s along x1 -> x2 from the edge's midpoint, d > 0 its distance from the edge line).
+  double* apex = malloc(sizeof(double) * 4 * (s->nhinge > 0 ? s->nhinge : 1));  // sA dA sB dB
+  int* hinge_tri = malloc(sizeof(int) * 2 * (s->nhinge > 0 ? s->nhinge : 1));   // its two triangles
+  if (!apex || !hinge_tri) { free(apex); free(hinge_tri); free(side); free(edge_hinge); free(tri_edge); return -1; }
   for (int t = 0; t < s->ntri; t++) {
-    const double* r = rest2d + 6 * t;  // material coordinates of vertices 0, 1, 2 (vertex 0 at 0)
     for (int k = 0; k < 3; k++) {
-      s->tri_hinge[3 * t + k] = edge_hinge[tri_edge[3 * t + k]];
+      int h = edge_hinge[tri_edge[3 * t + k]];
+      if (h < 0) continue;
+      double p1[2], p2[2], po[2], t_e[2], mid[2];
+      const int* hv = s->hinge + 4 * h;
+      int first = s->tri[3 * t + (k + 2) % 3] == hv[2];  // the hinge's first triangle (x1 x2 o0)
+      tri_point(rest2d + 6 * t, s->tri + 3 * t, hv[0], p1);
+      tri_point(rest2d + 6 * t, s->tri + 3 * t, hv[1], p2);
+      tri_point(rest2d + 6 * t, s->tri + 3 * t, s->tri[3 * t + (k + 2) % 3], po);
+      double length = hypot(p2[0] - p1[0], p2[1] - p1[1]);
+      t_e[0] = (p2[0] - p1[0]) / length; t_e[1] = (p2[1] - p1[1]) / length;
+      mid[0] = 0.5 * (p1[0] + p2[0]); mid[1] = 0.5 * (p1[1] + p2[1]);
+      double rx = po[0] - mid[0], ry = po[1] - mid[1];
+      hinge_tri[2 * h + (first ? 0 : 1)] = t;
+      apex[4 * h + (first ? 0 : 2)] = rx * t_e[0] + ry * t_e[1];
+      apex[4 * h + (first ? 1 : 3)] = fabs(rx * t_e[1] - ry * t_e[0]);
+    }
+  }
+  s->consistent_tri = 0;
+  for (int t = 0; t < s->ntri; t++) {
+    s->tri_source[t] = -1;
+    const double* r = rest2d + 6 * t;  // material coordinates of vertices 0, 1, 2 (vertex 0 at 0)
+    double rows[9];                      // theta_k = rows[3k..3k+2] . kappa (consistent operator)
+    int interior = 1;
+    for (int k = 0; k < 3; k++) {
+      int h = edge_hinge[tri_edge[3 * t + k]];
+      s->tri_hinge[3 * t + k] = h;
       double d0 = r[2 * ((k + 1) % 3)] - r[2 * k], d1 = r[2 * ((k + 1) % 3) + 1] - r[2 * k + 1];
       double length = sqrt(d0 * d0 + d1 * d1);
       double n0 = d1 / length, n1 = -d0 / length, scale = length / (2 * s->area[t]);
+      // The hinge operator of a regular grid (fallback, and boundary triangles).
       s->tri_weight[9 * t + 3 * k + 0] = scale * n0 * n0;
       s->tri_weight[9 * t + 3 * k + 1] = scale * n1 * n1;
       s->tri_weight[9 * t + 3 * k + 2] = scale * 2 * n0 * n1;
+      if (h < 0) { interior = 0; continue; }
+      // This triangle's side of the hinge: its opposite vertex and the other side's.
+      const int* hv = s->hinge + 4 * h;
+      int self_first = s->tri[3 * t + (k + 2) % 3] == hv[2];
+      double s_self = apex[4 * h + (self_first ? 0 : 2)], d_self = apex[4 * h + (self_first ? 1 : 3)];
+      double s_other = apex[4 * h + (self_first ? 2 : 0)], d_other = apex[4 * h + (self_first ? 3 : 1)];
+      // Edge tangent along x1 -> x2 and the in-plane normal pointing away from this triangle, in its
+      // material frame. The local edge k runs v[k] -> v[k+1]; the triangle is counter-clockwise in
+      // its rest frame only up to a reflection, so the normal's side is taken from the opposite vertex.
+      double tx = d0 / length, ty = d1 / length;
+      if (s->tri[3 * t + k] != hv[0]) { tx = -tx; ty = -ty; }
+      double ox = r[2 * ((k + 2) % 3)] - 0.5 * (r[2 * k] + r[2 * ((k + 1) % 3)]);
+      double oy = r[2 * ((k + 2) % 3) + 1] - 0.5 * (r[2 * k + 1] + r[2 * ((k + 1) % 3) + 1]);
+      double nx = -ty, ny = tx;
+      if (nx * ox + ny * oy > 0) { nx = -nx; ny = -ny; }
+      double quarter = 0.25 * length * length;
+      double c_nn = 0.5 * (d_self + d_other);
+      double c_tt = 0.5 * ((s_self * s_self - quarter) / d_self + (s_other * s_other - quarter) / d_other);
+      double c_tn = s_other - s_self;
+      // II_nn, II_tt and II_tn as functions of kappa = (II00, II11, 2 II01).
+      rows[3 * k + 0] = c_nn * nx * nx + c_tt * tx * tx + c_tn * tx * nx;
+      rows[3 * k + 1] = c_nn * ny * ny + c_tt * ty * ty + c_tn * ty * ny;
+      rows[3 * k + 2] = c_nn * nx * ny + c_tt * tx * ty + c_tn * 0.5 * (tx * ny + ty * nx);
     }
+    if (!interior) continue;
+    double inverse[9];
+    if (invert3(rows, inverse, YF_OPERATOR_CONDITION)) continue;  // ill-conditioned: keep the grid operator
+    for (int k = 0; k < 3; k++) {
+      for (int i = 0; i < 3; i++) s->tri_weight[9 * t + 3 * k + i] = inverse[3 * i + k];
+    }
+    s->tri_source[t] = t;
+    s->consistent_tri++;
   }
+  // A triangle on a free edge has no hinge there, so its own angles cannot tell its curvature:
+  // it bends with an interior neighbour's (across one of its hinges), which extrapolates a constant
+  // curvature to the edge (a strip bent into a cylinder is uniformly curved up to its free ends).
+  // With no consistent neighbour (a corner, a one-triangle-wide strip) it keeps the grid operator
+  // over its own hinges.
+  for (int t = 0; t < s->ntri; t++) {
+    if (s->tri_source[t] == t) continue;  // solved its own angles
+    int source = t;
+    for (int k = 0; k < 3 && source == t; k++) {
+      int h = s->tri_hinge[3 * t + k];
+      if (h < 0) continue;
+      int other = hinge_tri[2 * h] == t ? hinge_tri[2 * h + 1] : hinge_tri[2 * h];
+      if (s->tri_source[other] == other) source = other;  // a neighbour that solved its own
+    }
+    s->tri_source[t] = -2 - source;  // marked, so a later triangle does not take it for solved
+  }
+  for (int t = 0; t < s->ntri; t++) {
+    if (s->tri_source[t] < 0) s->tri_source[t] = -2 - s->tri_source[t];
+  }
+  free(apex);
+  free(hinge_tri);
   free(side);
   free(edge_hinge);
   free(tri_edge);
@@ -546,12 +664,13 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
   s->area = malloc(sizeof(double) * s->ntri);
   s->tri_hinge = malloc(sizeof(int) * 3 * s->ntri);
   s->tri_weight = malloc(sizeof(double) * 9 * s->ntri);
+  s->tri_source = malloc(sizeof(int) * s->ntri);
   s->vert_dof = malloc(sizeof(int) * s->nvert);
   s->slide_only = malloc(s->nvert);
   double* x0 = malloc(sizeof(double) * 3 * s->nvert);
   double* rest2d = malloc(sizeof(double) * 6 * s->ntri);
   int* tri_edge_local = malloc(sizeof(int) * 3 * s->ntri);
-  if (!s->tri || !s->rest_inv || !s->area || !s->tri_hinge || !s->tri_weight || !s->vert_dof ||
+  if (!s->tri || !s->rest_inv || !s->area || !s->tri_hinge || !s->tri_weight || !s->tri_source || !s->vert_dof ||
       !s->slide_only || !x0 || !rest2d || !tri_edge_local) {
     free(x0); free(rest2d); free(tri_edge_local);
     shell_free(s);
@@ -807,10 +926,12 @@ static void bending_forces(Shell* s, const double* x, const double* xdot) {
     }
     s->torque[h] = 0;
   }
-  // dW/dtheta_e = sum over the triangles of e of A (h^3 B kappa) . d kappa / d theta_e.
+  // dW/dtheta_e = sum over the triangles t bending with e (through their source triangle's
+  // operator) of A_t (h^3 B kappa_t) . d kappa_t / d theta_e.
   for (int t = 0; t < s->ntri; t++) {
-    const int* hinge = s->tri_hinge + 3 * t;
-    const double* w = s->tri_weight + 9 * t;
+    int src = s->tri_source[t];
+    const int* hinge = s->tri_hinge + 3 * src;
+    const double* w = s->tri_weight + 9 * src;
     if (hinge[0] < 0 && hinge[1] < 0 && hinge[2] < 0) continue;
     double kappa[3] = {0, 0, 0};
     for (int k = 0; k < 3; k++) {

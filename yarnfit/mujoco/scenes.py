@@ -371,6 +371,73 @@ def grid_mesh(nx: int, ny: int, lx: float, ly: float, crisscross: bool = False) 
     return np.vstack([points, centres]), triangles
 
 
+# Unstructured panel meshes (panel_mesh): interior points on a hexagonal lattice moved by up to this
+# fraction of the cell (seeded, so a mesh is reproducible), and kept at least this fraction of a
+# cell from the outline, where the outline's own points are.
+PANEL_JITTER = 0.15
+PANEL_MARGIN = 0.5
+
+
+def panel_mesh(outline: np.ndarray, cell: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """An unstructured triangulation of the flat panel inside the closed polygon ``outline (k, 2)``
+    (m, counter-clockwise or not; convex or not), about ``cell`` (m) between vertices: points every
+    ``≤ cell`` along the outline and on a jittered hexagonal lattice inside (:data:`PANEL_JITTER`,
+    seeded by ``seed``), Delaunay-triangulated, triangles whose centroid lies outside dropped.
+    Returns vertices ``(n, 3)`` (z = 0) and triangles ``(m, 3)``, counter-clockwise seen from +z.
+    Edges run in every direction: a mesh with no preferred lines, like a garment panel's.
+
+    Raises:
+        ValueError: fewer than 3 outline points, a non-positive cell.
+    """
+    from scipy.spatial import Delaunay
+
+    outline = np.asarray(outline, dtype=float)
+    if outline.ndim != 2 or outline.shape[1] != 2 or len(outline) < 3:
+        raise ValueError(f"outline must be (k >= 3, 2) points, got shape {outline.shape}")
+    positive_number(cell, "cell")
+    boundary = []
+    for a, b in zip(outline, np.roll(outline, -1, axis=0)):
+        count = max(1, math.ceil(np.linalg.norm(b - a) / cell))
+        boundary.append(a + (b - a) * (np.arange(count)[:, None] / count))
+    boundary = np.vstack(boundary)
+    low, high = outline.min(0), outline.max(0)
+    rows = np.arange(low[1], high[1] + cell, cell * math.sqrt(3) / 2)
+    lattice = np.vstack([np.column_stack([np.arange(low[0] + (0.5 * cell if k % 2 else 0.0), high[0] + cell, cell),
+                                          np.full(len(np.arange(low[0] + (0.5 * cell if k % 2 else 0.0),
+                                                                high[0] + cell, cell)), y)])
+                         for k, y in enumerate(rows)])
+    lattice += np.random.default_rng(seed).uniform(-PANEL_JITTER, PANEL_JITTER, lattice.shape) * cell
+    keep = _inside(lattice, outline) & (_distance_to_outline(lattice, outline) > PANEL_MARGIN * cell)
+    xy = np.vstack([boundary, lattice[keep]])
+    triangles = Delaunay(xy).simplices.astype(int)
+    triangles = triangles[_inside(xy[triangles].mean(axis=1), outline)]
+    a, b, c = (xy[triangles[:, i]] for i in range(3))
+    clockwise = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]) < 0
+    triangles[clockwise] = triangles[clockwise][:, [0, 2, 1]]
+    used = np.unique(triangles)
+    index = np.full(len(xy), -1)
+    index[used] = np.arange(len(used))
+    return np.column_stack([xy[used], np.zeros(len(used))]), index[triangles]
+
+
+def _inside(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """``(n,)`` whether each point ``(n, 2)`` lies inside the polygon ``outline (k, 2)`` (even-odd)."""
+    x, y = points[:, 0:1], points[:, 1:2]
+    a, b = outline, np.roll(outline, -1, axis=0)
+    crosses = (a[:, 1] > y) != (b[:, 1] > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        at = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+    return (np.count_nonzero(crosses & (x < at), axis=1) % 2) == 1
+
+
+def _distance_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """``(n,)`` distance (m) of each point ``(n, 2)`` to the polygon's edges."""
+    a, b = outline[None], np.roll(outline, -1, axis=0)[None]
+    p = points[:, None]
+    edge = b - a
+    t = np.clip(((p - a) * edge).sum(-1) / (edge**2).sum(-1), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[..., None] * edge), axis=-1).min(axis=1)
+
 def disc_mesh(radius: float, cell: float, rings_at=()) -> tuple[np.ndarray, np.ndarray]:
     """An unstructured triangulation of a disc of ``radius`` (m) centred at the origin in the plane
     z = 0: vertices ``(n, 3)`` (m) and triangles ``(m, 3)``, counter-clockwise seen from +z.
