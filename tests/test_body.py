@@ -7,6 +7,7 @@ import re
 
 import mujoco
 import numpy as np
+import pytest
 import rerun as rr
 
 import yarnfit.validate.body as body
@@ -94,3 +95,9 @@ def test_humanoid_is_human_sized():
               if model.geom(g).name == "head")
     assert 1.70 < top < 1.80  # about 1.75 m tall
     assert 50 < model.body_subtreemass[0] < 100
+
+
+def test_an_unknown_solver_is_refused():
+    material = ClothMaterial("woven", FABRIC, 0.2)
+    with pytest.raises(ValueError, match="unknown solver 'pgs'; solvers: cg, newton"):
+        build_body_scene(material, material, solver="pgs")
