@@ -277,9 +277,7 @@ class NonlinearMembrane:
         m = self.softening()
         if np.any(np.isinf(m)):
             return np.full((3, 3), -np.inf)
-        D = self.map
-        S = np.array([[s00, s01, 0.0], [s01, s11, 0.0], [0.0, 0.0, s22]])
-        return S + D.T @ np.diag(m) @ D
+        return self._tangent_with(m, s00, s01, s11, s22)
 
     def stiffest(self, bound: float) -> np.ndarray:
         """``(3,)`` largest ``φ_d''`` (Pa, >= 0) over stiffening strains ``|y_d| <= bound`` on both
@@ -295,9 +293,13 @@ class NonlinearMembrane:
     def largest_tangent(self, s00: float, s01: float, s11: float, s22: float, bound: float) -> np.ndarray:
         """``S + Dᵀ diag(stiffest(bound)) D`` ``(3, 3)`` (Pa): above every tangent the membrane has
         while each stiffening strain stays within ``±bound``."""
+        return self._tangent_with(self.stiffest(bound), s00, s01, s11, s22)
+
+    def _tangent_with(self, second: np.ndarray, s00: float, s01: float, s11: float, s22: float) -> np.ndarray:
+        """``S + Dᵀ diag(second) D`` ``(3, 3)`` (Pa) for ``φ_d'' = second (3,)``."""
         D = self.map
         S = np.array([[s00, s01, 0.0], [s01, s11, 0.0], [0.0, 0.0, s22]])
-        return S + D.T @ np.diag(self.stiffest(bound)) @ D
+        return S + D.T @ np.diag(second) @ D
 
     def convexity_problems(self, s00: float, s01: float, s11: float, s22: float) -> list[str]:
         """Why :meth:`least_tangent` is not positive definite with this ``S`` (empty if it is):

@@ -97,7 +97,6 @@ typedef struct {
   int nvert;
   int ntri;
   int nhinge;
-  int consistent_tri;   // triangles bending with the consistent operator (all three edges hinges)
   int* tri;             // (ntri x 3) flex-local vertex ids
   double* rest_inv;     // (ntri x 4) inverse of the rest edge matrix [e1 e2] in the material frame
   double* area;         // (ntri) rest areas (m^2)
@@ -410,7 +409,7 @@ static int collect_builtin_bending(const mjModel* m, Shell* s) {
     const int* flap = m->flex_edgeflap + 2 * (eadr + e);
     const double* k = coefficients + YF_BENDING_STRIDE * e;
     if (flap[0] < 0 || flap[1] < 0) continue;  // a boundary edge: MuJoCo stores zeros
-    if (k[16] != 0) {
+    if (k[YF_BENDING_STRIDE - 1] != 0) {
       mju_error(YF_NAME ": flex %d's built-in bending has a curved reference (edge %d); the plugin "
                 "needs a flat rest shape", f, e);
       return -1;
@@ -524,7 +523,11 @@ static int build_hinges(const mjModel* m, Shell* s, const double* rest2d, int* t
   // (s along x1 -> x2 from the edge's midpoint, d > 0 its distance from the edge line).
   double* apex = malloc(sizeof(double) * 4 * (s->nhinge > 0 ? s->nhinge : 1));  // sA dA sB dB
   int* hinge_tri = malloc(sizeof(int) * 2 * (s->nhinge > 0 ? s->nhinge : 1));   // its two triangles
-  if (!apex || !hinge_tri) { free(apex); free(hinge_tri); free(side); free(edge_hinge); free(tri_edge); return -1; }
+  unsigned char* solved = calloc(s->ntri > 0 ? s->ntri : 1, 1);  // the triangle inverted its own map
+  if (!apex || !hinge_tri || !solved) {
+    free(apex); free(hinge_tri); free(solved); free(side); free(edge_hinge); free(tri_edge);
+    return -1;
+  }
   for (int t = 0; t < s->ntri; t++) {
     for (int k = 0; k < 3; k++) {
       int h = edge_hinge[tri_edge[3 * t + k]];
@@ -544,9 +547,7 @@ static int build_hinges(const mjModel* m, Shell* s, const double* rest2d, int* t
       apex[4 * h + (first ? 1 : 3)] = fabs(rx * t_e[1] - ry * t_e[0]);
     }
   }
-  s->consistent_tri = 0;
   for (int t = 0; t < s->ntri; t++) {
-    s->tri_source[t] = -1;
     const double* r = rest2d + 6 * t;  // material coordinates of vertices 0, 1, 2 (vertex 0 at 0)
     double rows[9];                      // theta_k = rows[3k..3k+2] . kappa (consistent operator)
     int interior = 1;
@@ -590,8 +591,7 @@ static int build_hinges(const mjModel* m, Shell* s, const double* rest2d, int* t
     for (int k = 0; k < 3; k++) {
       for (int i = 0; i < 3; i++) s->tri_weight[9 * t + 3 * k + i] = inverse[3 * i + k];
     }
-    s->tri_source[t] = t;
-    s->consistent_tri++;
+    solved[t] = 1;
   }
   // A triangle on a free edge has no hinge there, so its own angles cannot tell its curvature:
   // it bends with an interior neighbour's (across one of its hinges), which extrapolates a constant
@@ -599,21 +599,17 @@ static int build_hinges(const mjModel* m, Shell* s, const double* rest2d, int* t
   // With no consistent neighbour (a corner, a one-triangle-wide strip) it keeps the grid operator
   // over its own hinges.
   for (int t = 0; t < s->ntri; t++) {
-    if (s->tri_source[t] == t) continue;  // solved its own angles
-    int source = t;
-    for (int k = 0; k < 3 && source == t; k++) {
+    s->tri_source[t] = t;
+    for (int k = 0; k < 3 && !solved[t]; k++) {
       int h = s->tri_hinge[3 * t + k];
       if (h < 0) continue;
       int other = hinge_tri[2 * h] == t ? hinge_tri[2 * h + 1] : hinge_tri[2 * h];
-      if (s->tri_source[other] == other) source = other;  // a neighbour that solved its own
+      if (solved[other]) { s->tri_source[t] = other; break; }
     }
-    s->tri_source[t] = -2 - source;  // marked, so a later triangle does not take it for solved
-  }
-  for (int t = 0; t < s->ntri; t++) {
-    if (s->tri_source[t] < 0) s->tri_source[t] = -2 - s->tri_source[t];
   }
   free(apex);
   free(hinge_tri);
+  free(solved);
   free(side);
   free(edge_hinge);
   free(tri_edge);

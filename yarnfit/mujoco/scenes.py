@@ -402,18 +402,17 @@ def panel_mesh(outline: np.ndarray, cell: float, seed: int = 0) -> tuple[np.ndar
     boundary = np.vstack(boundary)
     low, high = outline.min(0), outline.max(0)
     rows = np.arange(low[1], high[1] + cell, cell * math.sqrt(3) / 2)
-    lattice = np.vstack([np.column_stack([np.arange(low[0] + (0.5 * cell if k % 2 else 0.0), high[0] + cell, cell),
-                                          np.full(len(np.arange(low[0] + (0.5 * cell if k % 2 else 0.0),
-                                                                high[0] + cell, cell)), y)])
-                         for k, y in enumerate(rows)])
+    lattice = []
+    for k, y in enumerate(rows):  # every other row shifted by half a cell
+        x = np.arange(low[0] + (0.5 * cell if k % 2 else 0.0), high[0] + cell, cell)
+        lattice.append(np.column_stack([x, np.full(len(x), y)]))
+    lattice = np.vstack(lattice)
     lattice += np.random.default_rng(seed).uniform(-PANEL_JITTER, PANEL_JITTER, lattice.shape) * cell
     keep = _inside(lattice, outline) & (_distance_to_outline(lattice, outline) > PANEL_MARGIN * cell)
     xy = np.vstack([boundary, lattice[keep]])
     triangles = Delaunay(xy).simplices.astype(int)
     triangles = triangles[_inside(xy[triangles].mean(axis=1), outline)]
-    a, b, c = (xy[triangles[:, i]] for i in range(3))
-    clockwise = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]) < 0
-    triangles[clockwise] = triangles[clockwise][:, [0, 2, 1]]
+    triangles = _counter_clockwise(xy, triangles)
     used = np.unique(triangles)
     index = np.full(len(xy), -1)
     index[used] = np.arange(len(used))
@@ -437,6 +436,17 @@ def _distance_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
     edge = b - a
     t = np.clip(((p - a) * edge).sum(-1) / (edge**2).sum(-1), 0.0, 1.0)
     return np.linalg.norm(p - (a + t[..., None] * edge), axis=-1).min(axis=1)
+
+
+def _counter_clockwise(xy: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """``triangles (m, 3)`` over the points ``xy (n, 2)``, each reordered to run counter-clockwise
+    seen from +z (a copy)."""
+    triangles = np.array(triangles)
+    a, b, c = (xy[triangles[:, i]] for i in range(3))
+    clockwise = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]) < 0
+    triangles[clockwise] = triangles[clockwise][:, [0, 2, 1]]
+    return triangles
+
 
 def disc_mesh(radius: float, cell: float, rings_at=()) -> tuple[np.ndarray, np.ndarray]:
     """An unstructured triangulation of a disc of ``radius`` (m) centred at the origin in the plane
@@ -473,9 +483,7 @@ def disc_mesh(radius: float, cell: float, rings_at=()) -> tuple[np.ndarray, np.n
         xy.append(np.column_stack([r * np.cos(turn), r * np.sin(turn)]))
     xy = np.vstack(xy)
     triangles = Delaunay(xy).simplices.astype(int)
-    a, b, c = (xy[triangles[:, i]] for i in range(3))
-    clockwise = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]) < 0
-    triangles[clockwise] = triangles[clockwise][:, [0, 2, 1]]
+    triangles = _counter_clockwise(xy, triangles)
     return np.column_stack([xy, np.zeros(len(xy))]), triangles
 
 
@@ -588,4 +596,3 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
     flex.contype, flex.conaffinity = contype, conaffinity
     flex.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_NONE
     return flex
-

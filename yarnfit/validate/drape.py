@@ -104,10 +104,10 @@ CUSICK_RADIUS = 0.15  # m
 CUSICK_DISC_RADIUS = 0.09  # m
 # The mesh's cell (m): the drapes' grid spacings (RESOLUTION). The disc mesh is unstructured, which
 # still locks in plane (design notes §7: a clamped jersey strip 1.3×, a twill bias strip 1.6× at
-# 1.5 cm), so the Cusick figures carry that stiffening. The figures depend on the mesh (before
-# issue 15's consistent bending, measured by the helper run):
-# measured at 2.5, 2, 1.5, 1.25 and 1 cm, the cotton twill's drape coefficient 0.78, 0.82, 0.84,
-# 0.86, 0.84 (nodes 6, 3, 2, 2, 4), the polyester satin's 0.64, 0.76, 0.75, 0.80, 0.77 (6, 7, 4, 4, 4).
+# 1.5 cm), so the Cusick figures carry that stiffening. The figures depend on the mesh (measured on
+# this disc mesh before the plugin's consistent bending operator) at 2.5, 2, 1.5, 1.25 and 1 cm:
+# the cotton twill's drape coefficient 0.78, 0.82, 0.84, 0.86, 0.84 (nodes 6, 3, 2, 2, 4), the
+# polyester satin's 0.64, 0.76, 0.75, 0.80, 0.77 (6, 7, 4, 4, 4).
 CUSICK_CELL = {False: SIZE / (RESOLUTION[False] - 1), True: SIZE / (RESOLUTION[True] - 1)}
 # Height (m) of the specimen above the floor: more than twice the 6 cm the free annulus can hang,
 # so the hem never reaches the floor.
@@ -148,8 +148,13 @@ def cusick_drape_coefficient(positions: np.ndarray, triangles: np.ndarray) -> fl
     on a disc of :data:`CUSICK_DISC_RADIUS`, vertices ``(n, 3)`` (m), triangles ``(m, 3)``:
     ``(A_shadow − A_disc) / (A_specimen − A_disc)``, the shadow the :func:`projected_area`, the
     areas the nominal circles'."""
+    return _cusick_coefficient(projected_area(positions, triangles))
+
+
+def _cusick_coefficient(shadow_m2: float) -> float:
+    """:func:`cusick_drape_coefficient` of a shadow of ``shadow_m2`` (m²)."""
     disc, specimen = math.pi * CUSICK_DISC_RADIUS**2, math.pi * CUSICK_RADIUS**2
-    return (projected_area(positions, triangles) - disc) / (specimen - disc)
+    return (shadow_m2 - disc) / (specimen - disc)
 
 
 def hem(triangles: np.ndarray) -> np.ndarray:
@@ -276,7 +281,7 @@ def drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = Fal
         wall_face = -0.5 * SIZE - WALL_GAP
         figures = {"drape_coefficient": area / SIZE**2, "max_distance_from_wall_m": float((x[:, 0] - wall_face).max())}
     else:
-        figures = {"drape_coefficient": cusick_drape_coefficient(x, triangles),
+        figures = {"drape_coefficient": _cusick_coefficient(area),
                    "fold_count": fold_count(x, hem(triangles), 2 * CUSICK_RADIUS)}
     result = DrapeResult(
         projected_area_m2=area,
