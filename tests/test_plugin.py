@@ -69,28 +69,32 @@ class ReferenceShell:
     number above 1e4) bends with the κ of its first neighbour that solved its own; with none, with
     II = Σ θ l/(2 A0) n nᵀ over its interior edges (rest edge length l, in-plane edge normal n),
     the same map as the solved one on a regular grid. Rest shape at qpos0, weft = world x in
-    the sheet's plane turned by ``angle``."""
+    the sheet's plane turned by ``angle``; or, given ``corner_uv (T, 3, 2)``, each triangle's own
+    rest corners (a garment's pattern, weft along the first axis turned by ``angle``), a hinge's
+    far vertex placed by its own triangle's rest distances from the shared edge."""
 
-    def __init__(self, model, material, angle=0.0):
-        rest = forces(model, model.qpos0)[1]
+    def __init__(self, model, material, angle=0.0, corner_uv=None):
         self.tri = model.flex_elem.reshape(-1, 3)
-        a, b = rest[self.tri[0, 1]] - rest[self.tri[0, 0]], rest[self.tri[0, 2]] - rest[self.tri[0, 0]]
-        normal = np.cross(a, b) / np.linalg.norm(np.cross(a, b))
-        ref = np.array([1.0, 0.0, 0.0])
-        axis0 = ref - (ref @ normal) * normal
-        axis0 /= np.linalg.norm(axis0)
-        axis1 = np.cross(normal, axis0)
         c, s = math.cos(angle), math.sin(angle)
-        axes = np.array([c * axis0 + s * axis1, -s * axis0 + c * axis1])
-        self.flat = rest @ axes.T  # (V, 2) material coordinates
+        if corner_uv is None:
+            rest = forces(model, model.qpos0)[1]
+            a, b = rest[self.tri[0, 1]] - rest[self.tri[0, 0]], rest[self.tri[0, 2]] - rest[self.tri[0, 0]]
+            normal = np.cross(a, b) / np.linalg.norm(np.cross(a, b))
+            ref = np.array([1.0, 0.0, 0.0])
+            axis0 = ref - (ref @ normal) * normal
+            axis0 /= np.linalg.norm(axis0)
+            axis1 = np.cross(normal, axis0)
+            axes = np.array([c * axis0 + s * axis1, -s * axis0 + c * axis1])
+            self.corner = (rest @ axes.T)[self.tri]  # (T, 3, 2) material coordinates
+        else:
+            self.corner = np.asarray(corner_uv, float) @ np.array([[c, -s], [s, c]])
         h = material["thickness"]
         self.S = h * np.array([[material["s00"], material["s01"], 0], [material["s01"], material["s11"], 0],
                                [0, 0, material["s22"]]])
         self.B = h**3 * np.array([[material["b00"], material["b01"], 0], [material["b01"], material["b11"], 0],
                                   [0, 0, material["b22"]]])
-        self.area = np.array([0.5 * abs(np.linalg.det(np.column_stack([self.flat[t[1]] - self.flat[t[0]],
-                                                                         self.flat[t[2]] - self.flat[t[0]]])))
-                              for t in self.tri])
+        self.area = np.array([0.5 * abs(np.linalg.det(np.column_stack([r[1] - r[0], r[2] - r[0]])))
+                              for r in self.corner])
         # Interior edges: the two triangles on each, oriented by the first.
         sides = {}
         for i, t in enumerate(self.tri):
@@ -107,8 +111,7 @@ class ReferenceShell:
             grid = np.array([self.grid_row(self.hinges[h][0], self.hinges[h][1], t) for _, h in present]).T
             operator, solved = grid, False
             if len(present) == 3:
-                rows = np.array([self.exact_row(tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3],
-                                                self.opposite(h, tri[(k + 2) % 3])) for k, h in present])
+                rows = np.array([self.exact_row(t, h, tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3]) for k, h in present])
                 if np.linalg.cond(rows, np.inf) <= 1e4:
                     operator, solved = np.linalg.inv(rows), True
             own.append(([h for _, h in present], operator, solved))
@@ -124,31 +127,40 @@ class ReferenceShell:
                         break
             self.kappa_maps.append(own[source][:2])
 
-    def opposite(self, h, vertex):
-        """The hinge's opposite vertex on the other side from ``vertex``."""
-        o0, o1 = self.hinges[h][2:4]
-        return o1 if vertex == o0 else o0
+    def point(self, t, v):
+        """Rest material coordinates of vertex ``v`` in triangle ``t``'s frame."""
+        return self.corner[t][list(self.tri[t]).index(v)]
 
     def grid_row(self, x1, x2, t):
         """dκ/dθ of the grid operator: l/(2 A) (n0², n1², 2 n0 n1)."""
-        rest_edge = self.flat[x2] - self.flat[x1]
+        rest_edge = self.point(t, x2) - self.point(t, x1)
         length = np.linalg.norm(rest_edge)
         n = np.array([rest_edge[1], -rest_edge[0]]) / length
         return length / (2 * self.area[t]) * np.array([n[0]**2, n[1]**2, 2 * n[0] * n[1]])
 
-    def exact_row(self, x1, x2, own, other):
-        """r with θ = r · κ across edge x1 x2 for z = ½ pᵀ II p, II from κ = (II00, II11, 2 II01):
-        the slope jump of the linear interpolants, along the normal from ``own``'s side, is
-        ½ [II_nn (d_own + d_other) + II_tt Σ (s² − l²/4)/d + 2 II_tn (s_other − s_own)]."""
-        p1, p2 = self.flat[x1], self.flat[x2]
+    def exact_row(self, tri, h, x1, x2, own):
+        """r with θ = r · κ across edge x1 x2 (hinge ``h``) of triangle ``tri`` whose third vertex is
+        ``own``, for z = ½ pᵀ II p, II from κ = (II00, II11, 2 II01): the slope jump of the linear
+        interpolants, along the normal from ``own``'s side, is
+        ½ [II_nn (d_own + d_other) + II_tt Σ (s² − l²/4)/d + 2 II_tn (s_other − s_own)], s along
+        x1 → x2 from the edge's middle and d off it, each side's in its own triangle's rest frame."""
+        _, _, o0, o1, ta, tb = self.hinges[h]
+        other, tri_other = (o1, tb) if ta == tri else (o0, ta)
+
+        def along_off(t, v):
+            p1, p2 = self.point(t, x1), self.point(t, x2)
+            tangent = (p2 - p1) / np.linalg.norm(p2 - p1)
+            r = self.point(t, v) - 0.5 * (p1 + p2)
+            return r @ tangent, abs(r[0] * tangent[1] - r[1] * tangent[0])
+
+        p1, p2 = self.point(tri, x1), self.point(tri, x2)
         length = np.linalg.norm(p2 - p1)
         t = (p2 - p1) / length
         middle = 0.5 * (p1 + p2)
         n = np.array([-t[1], t[0]])
-        if n @ (self.flat[own] - middle) > 0:
+        if n @ (self.point(tri, own) - middle) > 0:
             n = -n
-        s_own, s_other = ((self.flat[v] - middle) @ t for v in (own, other))
-        d_own, d_other = (abs((self.flat[v] - middle) @ n) for v in (own, other))
+        (s_own, d_own), (s_other, d_other) = along_off(tri, own), along_off(tri_other, other)
         quarter = length**2 / 4
         c_nn = 0.5 * (d_own + d_other)
         c_tt = 0.5 * ((s_own**2 - quarter) / d_own + (s_other**2 - quarter) / d_other)
@@ -163,7 +175,8 @@ class ReferenceShell:
         """(T, 3) membrane strains ε and (T, 3) bending strains κ at positions x (V, 3)."""
         eps = np.zeros((len(self.tri), 3))
         for i, t in enumerate(self.tri):
-            D = np.column_stack([self.flat[t[1]] - self.flat[t[0]], self.flat[t[2]] - self.flat[t[0]]])
+            r = self.corner[i]
+            D = np.column_stack([r[1] - r[0], r[2] - r[0]])
             F = np.column_stack([x[t[1]] - x[t[0]], x[t[2]] - x[t[0]]]) @ np.linalg.inv(D)
             E = 0.5 * (F.T @ F - np.eye(2))
             eps[i] = E[0, 0], E[1, 1], 2 * E[0, 1]

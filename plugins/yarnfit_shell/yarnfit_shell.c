@@ -38,6 +38,18 @@
 // positions (f = -K x - beta K v per interior edge, K the 4x4 blocks of mjModel.flex_bending), so
 // the plugin adds back exactly that force: the total bending is the plugin's own, to round-off,
 // while MuJoCo integrates its isotropic share implicitly.
+//
+// Rest shape: rest="qpos0" (default) takes it from the flex at qpos0, which must be flat (one
+// panel). rest="texcoord" takes each triangle's rest metric and material axes from the texture
+// coordinates of its corners (flex texcoord + elemtexcoord: its material coordinates in its
+// pattern panel, m), so a garment is one flex of several panels, each with its own grain, sewn by
+// shared vertices; qpos0 is only where it starts. MuJoCo computed its built-in elasticity's rest
+// from qpos0, so with rest="texcoord" the plugin removes MuJoCo's built-in membrane and bending
+// forces exactly (its formulas, read from mjModel at every step, curved reference and damping
+// included) and carries the whole material itself; the total is the configured material whatever
+// the built-in part's rest. MuJoCo's implicit treatment of its own part still stabilises the step
+// (its linearisation enters the step's matrix, not the force): yarnfit.mujoco.garment.
+// use_pattern_rest rewrites that part's rest from the pattern, so that it too pulls towards it.
 
 #include <math.h>
 #include <stdio.h>
@@ -80,7 +92,7 @@ static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
   "builtin_young", "builtin_poisson", "builtin_thickness",
   "s00p2", "s00p3", "s00n2", "s00n3", "s11p2", "s11p3", "s11n2", "s11n3", "s22p2", "s22p3", "s22n2", "s22n3",
-  "c01", "c10",
+  "c01", "c10", "rest",
 };
 enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 
@@ -91,6 +103,16 @@ typedef struct {
   double stiffening[3][kNumStiffening];  // k2, k3 for y >= 0, k2, k3 for y < 0, per direction (Pa)
   double c01, c10;      // the stiffening strains' coupling: y0 = eps0 + c01 eps1, y1 = eps1 + c10 eps0
   int stiffens;         // any stiffening key nonzero: else the membrane is exactly StVK
+  int rest_texcoord;    // rest="texcoord": rest metric and material axes from the flex's texture
+                        // coordinates per triangle corner (a garment's panels), not from qpos0
+  // rest="texcoord": MuJoCo's built-in membrane on this flex (elastic2d "stretch" or "both"), which
+  // compute removes exactly whatever its rest (MuJoCo computed it from qpos0 unless
+  // yarnfit.mujoco.garment.use_pattern_rest rewrote it from the pattern):
+  const mjtNum* builtin_metric;  // per triangle its 21 flex_stiffness entries, or NULL
+  const int* builtin_elemedge;   // (ntri x 3) flex-local edges of each triangle, flex_elemedge order
+  const mjtNum* builtin_length0; // (nedge) MuJoCo's rest edge lengths, flexedge_length0
+  double* builtin_delta;         // (nedge) scratch: MuJoCo's elongation per edge
+  int nedge;
   double membrane[4];   // the plugin's membrane stiffness h S - t_b S_iso: c00 c01 c11 c22 (N/m)
   double bending[4];    // h^3 B: d00 d01 d11 d22 (N m)
   int flex;
@@ -231,6 +253,15 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
     if (read_number(m, instance, keys[k].key, keys[k].fallback, keys[k].required, keys[k].value)) return -1;
   }
   if (read_number(m, instance, "c01", 0, 0, &s->c01) || read_number(m, instance, "c10", 0, 0, &s->c10)) return -1;
+  const char* rest = mj_getPluginConfig(m, instance, "rest");
+  if (!rest || !rest[0] || !strcmp(rest, "qpos0")) {
+    s->rest_texcoord = 0;
+  } else if (!strcmp(rest, "texcoord")) {
+    s->rest_texcoord = 1;
+  } else {
+    mju_error(YF_NAME ": config key 'rest' must be 'qpos0' or 'texcoord', got '%s'", rest);
+    return -1;
+  }
   s->stiffens = 0;
   for (int d = 0; d < 3; d++) {
     for (int k = 0; k < kNumStiffening; k++) {
@@ -268,6 +299,12 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
   if ((s->builtin_young > 0) != (s->builtin_thickness > 0)) {
     mju_error(YF_NAME ": config keys 'builtin_young' and 'builtin_thickness' must both be given "
               "(the flex's <elasticity>) or both be absent");
+    return -1;
+  }
+  if (s->rest_texcoord && (s->builtin_young > 0 || s->builtin_poisson > 0)) {
+    mju_error(YF_NAME ": config keys 'builtin_*' are for rest=\"qpos0\"; with rest=\"texcoord\" the plugin "
+              "removes MuJoCo's built-in elasticity exactly, whatever its parameters, and carries the whole "
+              "material itself");
     return -1;
   }
   if (!(s->builtin_poisson >= 0 && s->builtin_poisson < 0.5)) {
@@ -320,6 +357,7 @@ static void shell_free(Shell* s) {
   free(s->hinge_grad);
   free(s->builtin_hinge);
   free(s->builtin_edge);
+  free(s->builtin_delta);
   free(s);
 }
 
@@ -341,7 +379,7 @@ static void strain_basis(const double Dinv[4], double G[3][4]) {
 
 // Check the builtin_* keys against the flex's compiled built-in membrane stiffness. MuJoCo stores,
 // per triangle, K_ab = 4 A t (mu tr(G_a G_b) + lambda*/2 tr G_a tr G_b) for its edges a, b in
-// flex_elemedge order (upper triangle), lambda* = E nu / (1 - nu^2) the plane-stress Lame constant.
+// flex_elemedge order (upper triangle), lambda* = E nu / (1 - nu^2) the plane-stress Lame constant,
 static int check_builtin(const mjModel* m, const Shell* s, const int* tri_edge_local) {
   int f = s->flex;
   double E = s->builtin_young, nu = s->builtin_poisson, t = s->builtin_thickness;
@@ -409,7 +447,7 @@ static int collect_builtin_bending(const mjModel* m, Shell* s) {
     const int* flap = m->flex_edgeflap + 2 * (eadr + e);
     const double* k = coefficients + YF_BENDING_STRIDE * e;
     if (flap[0] < 0 || flap[1] < 0) continue;  // a boundary edge: MuJoCo stores zeros
-    if (k[YF_BENDING_STRIDE - 1] != 0) {
+    if (k[YF_BENDING_STRIDE - 1] != 0 && !s->rest_texcoord) {
       mju_error(YF_NAME ": flex %d's built-in bending has a curved reference (edge %d); the plugin "
                 "needs a flat rest shape", f, e);
       return -1;
@@ -421,8 +459,57 @@ static int collect_builtin_bending(const mjModel* m, Shell* s) {
   return 0;
 }
 
+// rest="texcoord": MuJoCo's built-in membrane on the flex, if it has one, for compute to remove.
+static int collect_builtin_membrane(const mjModel* m, Shell* s) {
+  int f = s->flex;
+  if (m->flex_stiffnessadr[f] < 0 || m->flex_stiffness[m->flex_stiffnessadr[f]] == 0) return 0;
+  s->builtin_metric = m->flex_stiffness + m->flex_stiffnessadr[f];
+  s->builtin_elemedge = m->flex_elemedge + m->flex_elemedgeadr[f];
+  s->builtin_length0 = m->flexedge_length0 + m->flex_edgeadr[f];
+  s->nedge = m->flex_edgenum[f];
+  s->builtin_delta = malloc(sizeof(double) * (s->nedge > 0 ? s->nedge : 1));
+  return s->builtin_delta ? 0 : -1;
+}
+
+// Remove MuJoCo's built-in membrane (rest="texcoord") from the plugin's total: MuJoCo's force is
+// minus the gradient of (1/4) Delta^T K Delta per triangle, Delta_a = l_a^2 - L_a^2 + (l_a^2 -
+// (l_a - h dl_a/dt)^2) damping / h over its edges (K its flex_stiffness block, L flexedge_length0,
+// h the time step: MuJoCo 4.0's Rayleigh damping, measured against qfrc_spring and qfrc_damper to
+// 1e-15), so the plugin adds (1/2) sum_b (K Delta)_b grad(l_b^2) to the force.
+static void remove_builtin_membrane(const mjModel* m, const mjData* d, Shell* s, const double* x) {
+  int f = s->flex, eadr = m->flex_edgeadr[f];
+  double h = m->opt.timestep, rate = m->flex_damping[f] / h;
+  const mjtNum* length = d->flexedge_length + eadr;
+  const mjtNum* speed = d->flexedge_velocity + eadr;
+  const int* edge = m->flex_edge + 2 * eadr;
+  for (int e = 0; e < s->nedge; e++) {
+    double l = length[e], previous = l - speed[e] * h, rest = s->builtin_length0[e];
+    s->builtin_delta[e] = l * l - rest * rest + (l * l - previous * previous) * rate;
+  }
+  for (int t = 0; t < s->ntri; t++) {
+    const mjtNum* k = s->builtin_metric + YF_STIFFNESS_STRIDE * t;
+    const int* slot = s->builtin_elemedge + 3 * t;
+    double K[3][3], delta[3];
+    for (int a = 0, n = 0; a < 3; a++) {
+      delta[a] = s->builtin_delta[slot[a]];
+      for (int b = a; b < 3; b++, n++) K[a][b] = K[b][a] = k[n];
+    }
+    for (int b = 0; b < 3; b++) {
+      double c = K[b][0] * delta[0] + K[b][1] * delta[1] + K[b][2] * delta[2];
+      int p = edge[2 * slot[b]], q = edge[2 * slot[b] + 1];
+      double along[3];
+      mju_sub3(along, x + 3 * q, x + 3 * p);  // (1/2) grad_q (l^2) = x_q - x_p
+      mju_addToScl3(s->grad + 3 * q, along, -c);
+      mju_addToScl3(s->grad + 3 * p, along, c);
+    }
+  }
+}
+
 // Remove MuJoCo's built-in bending from the plugin's total: add K x + damping K v per built-in
-// hinge to the force, i.e. subtract it from s->grad. xdot may be NULL (no built-in damping).
+// hinge to the force, i.e. subtract it from s->grad, and with rest="texcoord" MuJoCo's
+// curved-reference term too: c (e1 x e2, e2 x e0, e0 x e1 and minus their sum on the edge's first
+// vertex), e_i the hinge's vertices from its first, c the 17th coefficient (measured against
+// qfrc_spring to 1e-16). xdot may be NULL (no built-in damping).
 static void remove_builtin_bending(Shell* s, const double* x, const double* xdot) {
   for (int e = 0; e < s->nbuiltin_hinge; e++) {
     const int* v = s->builtin_hinge + 4 * e;
@@ -436,6 +523,18 @@ static void remove_builtin_bending(Shell* s, const double* x, const double* xdot
     for (int a = 0; a < 4; a++) {
       double* g = s->grad + 3 * v[a];
       for (int b = 0; b < 4; b++) mju_addToScl3(g, y[b], -k[4 * a + b]);
+    }
+    double curved = k[YF_BENDING_STRIDE - 1];
+    if (curved != 0) {
+      double e0[3], e1[3], e2[3], c[4][3];
+      mju_sub3(e0, x + 3 * v[1], x + 3 * v[0]);
+      mju_sub3(e1, x + 3 * v[2], x + 3 * v[0]);
+      mju_sub3(e2, x + 3 * v[3], x + 3 * v[0]);
+      mju_cross(c[1], e1, e2);
+      mju_cross(c[2], e2, e0);
+      mju_cross(c[3], e0, e1);
+      for (int i = 0; i < 3; i++) c[0][i] = -(c[1][i] + c[2][i] + c[3][i]);
+      for (int a = 0; a < 4; a++) mju_addToScl3(s->grad + 3 * v[a], c[a], -curved);
     }
   }
 }
@@ -649,6 +748,11 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
     mju_error(YF_NAME ": flex %d is interpolated (dof trilinear/quadratic); needs a plain triangle flex", f);
     return -1;
   }
+  if (config.rest_texcoord && m->flex_texcoordadr[f] < 0) {
+    mju_error(YF_NAME ": config key rest=\"texcoord\" but flex %d has no texture coordinates (give the flex "
+              "texcoord, and elemtexcoord per triangle corner: each panel's material coordinates in m)", f);
+    return -1;
+  }
   Shell* s = calloc(1, sizeof(Shell));
   if (!s) return -1;
   *s = config;
@@ -733,14 +837,29 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
       e1[i] = x0[3 * v[1] + i] - x0[3 * v[0] + i];
       e2[i] = x0[3 * v[2] + i] - x0[3 * v[0] + i];
     }
-    // The rest shape must be flat: the material frame is one plane's, and the bending rest is flat.
-    // A vertex off the plane of triangle 0 by more than YF_FLAT_RTOL of the edge length is an error,
-    // not a silently foreshortened metric.
-    double out = fabs(mju_dot3(e1, normal)) + fabs(mju_dot3(e2, normal));
-    if (out > YF_FLAT_RTOL * (mju_norm3(e1) + mju_norm3(e2))) { bad = t; flat = 0; break; }
-    // Rest edges in the material frame: D = [[e1.a0, e2.a0], [e1.a1, e2.a1]].
-    double D00 = mju_dot3(e1, axis0), D01 = mju_dot3(e2, axis0);
-    double D10 = mju_dot3(e1, axis1), D11 = mju_dot3(e2, axis1);
+    double D00, D01, D10, D11;
+    if (s->rest_texcoord) {
+      // The pattern: each corner's texture coordinates (u, v) are its material coordinates in its
+      // panel (m, weft along u before `angle`); the qpos0 shape is only where the garment starts.
+      const int* corner = m->flex_elemtexcoord + m->flex_elemdataadr[f] + 3 * t;
+      const float* uv = m->flex_texcoord + 2 * m->flex_texcoordadr[f];
+      double c = cos(s->angle), sn = sin(s->angle), du[2], dv[2];
+      for (int k = 0; k < 2; k++) {
+        du[k] = (double)uv[2 * corner[k + 1]] - (double)uv[2 * corner[0]];
+        dv[k] = (double)uv[2 * corner[k + 1] + 1] - (double)uv[2 * corner[0] + 1];
+      }
+      D00 = c * du[0] + sn * dv[0]; D01 = c * du[1] + sn * dv[1];
+      D10 = -sn * du[0] + c * dv[0]; D11 = -sn * du[1] + c * dv[1];
+    } else {
+      // The rest shape must be flat: the material frame is one plane's, and the bending rest is
+      // flat. A vertex off the plane of triangle 0 by more than YF_FLAT_RTOL of the edge length is
+      // an error, not a silently foreshortened metric.
+      double out = fabs(mju_dot3(e1, normal)) + fabs(mju_dot3(e2, normal));
+      if (out > YF_FLAT_RTOL * (mju_norm3(e1) + mju_norm3(e2))) { bad = t; flat = 0; break; }
+      // Rest edges in the material frame: D = [[e1.a0, e2.a0], [e1.a1, e2.a1]].
+      D00 = mju_dot3(e1, axis0); D01 = mju_dot3(e2, axis0);
+      D10 = mju_dot3(e1, axis1); D11 = mju_dot3(e2, axis1);
+    }
     double det = D00 * D11 - D01 * D10;
     if (!(fabs(det) > 0)) { bad = t; break; }
     s->rest_inv[4 * t + 0] = D11 / det;
@@ -765,9 +884,10 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
     return -1;
   }
   int status = build_hinges(m, s, rest2d, tri_edge_local);
-  free(rest2d);
-  if (status == 0) status = check_builtin(m, s, tri_edge_local);
+  if (status == 0 && !s->rest_texcoord) status = check_builtin(m, s, tri_edge_local);
+  if (status == 0 && s->rest_texcoord) status = collect_builtin_membrane(m, s);
   if (status == 0) status = collect_builtin_bending(m, s);
+  free(rest2d);
   free(tri_edge_local);
   if (status) {
     shell_free(s);
@@ -990,6 +1110,7 @@ static void shell_compute(const mjModel* m, mjData* d, int instance, int capabil
   }
   if (s->nhinge > 0) bending_forces(s, x, xdot);
   if (s->nbuiltin_hinge > 0) remove_builtin_bending(s, x, s->builtin_damping > 0 ? xdot : NULL);
+  if (s->builtin_metric) remove_builtin_membrane(m, d, s, x);
 
   // Forces (minus the gradient) into joint space: slide-only chains directly, others through the
   // vertex Jacobian.

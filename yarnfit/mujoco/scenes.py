@@ -530,9 +530,11 @@ def _cloth(spec: mujoco.MjSpec, layout: _Layout, areal_density: float, plugin, n
                          elem=layout.triangles.ravel(), rgba=[0.85, 0.45, 0.3, 1.0])
 
 
-def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damping: float, name: str = "shell"):
-    """The ``yarnfit.shell`` instance ``name``: the full material, its angle and damping, and
-    ``builtin_*`` written exactly as the ``<elasticity>`` attributes are (``MJCF_DIGITS`` digits)."""
+def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damping: float, name: str = "shell",
+            rest: str = "qpos0"):
+    """The ``yarnfit.shell`` instance ``name``: the full material, its angle and damping, its rest
+    (``"qpos0"`` or ``"texcoord"``) and ``builtin_*`` written exactly as the ``<elasticity>``
+    attributes are (``MJCF_DIGITS`` digits)."""
     spec.activate_plugin(PLUGIN_NAME)
     plugin = spec.add_plugin(name=name, plugin_name=PLUGIN_NAME, active=True)
     config = {name: repr(value) for name, value in shell.parameters.items()}
@@ -541,9 +543,12 @@ def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damp
     config["thickness"] = repr(shell.thickness)
     config["angle"] = repr(float(angle))
     config["damping"] = repr(float(damping))
-    for key, value in (("builtin_young", split.young_pa), ("builtin_poisson", split.poisson),
-                       ("builtin_thickness", split.thickness_m)):
-        config[key] = f"{value:.{MJCF_DIGITS}g}"
+    if rest == "qpos0":
+        for key, value in (("builtin_young", split.young_pa), ("builtin_poisson", split.poisson),
+                           ("builtin_thickness", split.thickness_m)):
+            config[key] = f"{value:.{MJCF_DIGITS}g}"
+    else:  # the plugin removes MuJoCo's built-in part exactly and needs no keys for it
+        config["rest"] = rest
     plugin.config = config
     return plugin
 
@@ -577,16 +582,22 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
                    material: ClothMaterial, *, damping: float = DEFAULT_DAMPING, friction: float = DEFAULT_FRICTION,
                    angle: float = 0.0, contype: int = 1, conaffinity: int = 1,
                    implicit_bending: bool = True, pinned: np.ndarray | None = None,
-                   stiffening_bound: float = DEFAULT_STIFFENING_BOUND) -> mujoco.MjsFlex:
+                   stiffening_bound: float = DEFAULT_STIFFENING_BOUND,
+                   rest_uv: np.ndarray | None = None) -> mujoco.MjsFlex:
     """One free 2D flex ``name`` with rest positions ``points (n, 3)`` (m) and ``triangles (m, 3)``,
     built as :func:`build_scene` builds its cloth (vertex bodies ``<name>_<v>`` with three slide
     joints, the split's built-in ``<elasticity>`` and a ``yarnfit.shell`` instance
     ``<name>_shell`` with the full material). The plugin's rest shape is the flex at ``qpos0`` in
-    the frame of triangle 0's plane: give it a flat (planar) panel. The vertices of the mask
+    the frame of triangle 0's plane: give it a flat (planar) panel, or give ``rest_uv (m, 3, 2)``,
+    each triangle corner's material coordinates in its pattern panel (m; a garment,
+    :mod:`yarnfit.mujoco.garment`): they become the flex's texture coordinates, the plugin takes its
+    rest from them (``rest="texcoord"``) and ``points`` are only where the cloth starts; call
+    :func:`yarnfit.mujoco.garment.use_pattern_rest` on the compiled model. The vertices of the mask
     ``pinned (n,)``, if given, are held on the world at their rest positions (a clamp; the world
     then carries the plugin, as in the ``cloth`` scene)."""
     split = builtin_elasticity(material.shell, bending=implicit_bending, stiffening_bound=stiffening_bound)
-    plugin = _plugin(spec, material.shell, split, angle, damping, name=f"{name}_shell")
+    plugin = _plugin(spec, material.shell, split, angle, damping, name=f"{name}_shell",
+                     rest="qpos0" if rest_uv is None else "texcoord")
     holders = {} if pinned is None else {"world": np.asarray(pinned, bool)}
     layout = _Layout(np.asarray(points, float), np.asarray(triangles, int), holders, collide=True)
     flex = _cloth(spec, layout, material.areal_density_kg_m2, plugin, name=name)
@@ -595,4 +606,10 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
     flex.friction = [friction, 0.005, 0.0001]
     flex.contype, flex.conaffinity = contype, conaffinity
     flex.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_NONE
+    if rest_uv is not None:
+        rest_uv = np.asarray(rest_uv, float)
+        if rest_uv.shape != (len(layout.triangles), 3, 2):
+            raise ValueError(f"rest_uv must be (triangles, 3, 2) = ({len(layout.triangles)}, 3, 2), got {rest_uv.shape}")
+        flex.texcoord = rest_uv.astype(np.float32).ravel()
+        flex.elemtexcoord = np.arange(rest_uv.shape[0] * 3)
     return flex
