@@ -583,7 +583,7 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
                    angle: float = 0.0, contype: int = 1, conaffinity: int = 1,
                    implicit_bending: bool = True, pinned: np.ndarray | None = None,
                    stiffening_bound: float = DEFAULT_STIFFENING_BOUND,
-                   rest_uv: np.ndarray | None = None) -> mujoco.MjsFlex:
+                   rest_uv: np.ndarray | None = None, fallback: bool = False) -> mujoco.MjsFlex:
     """One free 2D flex ``name`` with rest positions ``points (n, 3)`` (m) and ``triangles (m, 3)``,
     built as :func:`build_scene` builds its cloth (vertex bodies ``<name>_<v>`` with three slide
     joints, the split's built-in ``<elasticity>`` and a ``yarnfit.shell`` instance
@@ -594,15 +594,22 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
     rest from them (``rest="texcoord"``) and ``points`` are only where the cloth starts; call
     :func:`yarnfit.mujoco.garment.use_pattern_rest` on the compiled model. The vertices of the mask
     ``pinned (n,)``, if given, are held on the world at their rest positions (a clamp; the world
-    then carries the plugin, as in the ``cloth`` scene)."""
-    split = builtin_elasticity(material.shell, bending=implicit_bending, stiffening_bound=stiffening_bound)
-    plugin = _plugin(spec, material.shell, split, angle, damping, name=f"{name}_shell",
-                     rest="qpos0" if rest_uv is None else "texcoord")
+    then carries the plugin, as in the ``cloth`` scene). ``fallback``: no plugin, MuJoCo's own
+    isotropic elasticity alone with :func:`~yarnfit.mujoco.split.isotropic_fallback`'s material
+    (``elastic2d="both"``), as :func:`build_scene` builds it."""
+    if fallback:
+        iso = isotropic_fallback(material.shell)
+        young, poisson, thickness, elastic2d, plugin = iso.young_pa, iso.poisson, iso.thickness_m, "both", None
+    else:
+        split = builtin_elasticity(material.shell, bending=implicit_bending, stiffening_bound=stiffening_bound)
+        young, poisson, thickness, elastic2d = split.young_pa, split.poisson, split.thickness_m, split.elastic2d
+        plugin = _plugin(spec, material.shell, split, angle, damping, name=f"{name}_shell",
+                         rest="qpos0" if rest_uv is None else "texcoord")
     holders = {} if pinned is None else {"world": np.asarray(pinned, bool)}
     layout = _Layout(np.asarray(points, float), np.asarray(triangles, int), holders, collide=True)
     flex = _cloth(spec, layout, material.areal_density_kg_m2, plugin, name=name)
-    flex.young, flex.poisson, flex.thickness, flex.damping = split.young_pa, split.poisson, split.thickness_m, damping
-    flex.elastic2d = ELASTIC2D[split.elastic2d]
+    flex.young, flex.poisson, flex.thickness, flex.damping = young, poisson, thickness, damping
+    flex.elastic2d = ELASTIC2D[elastic2d]
     flex.friction = [friction, 0.005, 0.0001]
     flex.contype, flex.conaffinity = contype, conaffinity
     flex.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_NONE
