@@ -1,6 +1,7 @@
 """Benchmarks of yarnfit, one section per stage.
 
     python validation/bench.py [engine] [relax] [fit] [mujoco] [plugin_nonlinear_stable_step] [swatch]
+                               [drape_stable_step] [body]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -612,9 +613,40 @@ def bench_swatch() -> None:
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
+def bench_body() -> None:
+    """The full-body scene (``yarnfit.validate.body``), quick and full, with the plugin and with
+    MuJoCo's native isotropic elasticity alone (the same garments, sewn on the same way), on the
+    medium woven: milliseconds of stepping per simulated second, the real-time factor, the
+    plugin's cost over the native scene's (measured in the same run), and the sewing's wall time."""
+    from pathlib import Path
+
+    from yarnfit.mujoco.scenes import ClothMaterial
+    from yarnfit.validate.body import run_body
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from fabric_shell import FABRIC  # a realistic medium-weight woven
+
+    material = ClothMaterial("medium woven", FABRIC, 0.2)
+    for quick in (True, False):
+        scale = "quick" if quick else "full"
+        cost = {}
+        for native in (False, True):
+            variant = "native" if native else "plugin"
+            result = run_body(material, quick=quick, native=native)
+            if not result.stable:
+                print(f"warning: body {scale} {variant} was not stable", file=sys.stderr)
+            cost[variant] = 1e3 * result.wall_time_s / result.simulated_s
+            vertices = sum(g["vertices"] for g in result.garments.values())
+            report(f"body_{scale}_{variant}_ms_per_simulated_s", cost[variant],
+                   f"ms ({vertices} garment vertices, {result.timestep_s * 1e3:g} ms steps)")
+            report(f"body_{scale}_{variant}_real_time_factor", result.simulated_s / result.wall_time_s, "x")
+            report(f"body_{scale}_{variant}_sewing_s", result.sewing_wall_time_s, "s")
+        report(f"body_{scale}_plugin_over_native", cost["plugin"] / cost["native"], "x")
+
+
 SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco,
             "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step, "swatch": bench_swatch,
-            "drape_stable_step": bench_drape_stable_step}
+            "drape_stable_step": bench_drape_stable_step, "body": bench_body}
 
 
 def main(argv: list[str] | None = None) -> int:

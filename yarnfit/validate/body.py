@@ -68,16 +68,26 @@ from ..mujoco.scenes import ClothMaterial, add_cloth_flex, compile_quietly
 from ..record import Recording, folded_panels, markdown_table
 from . import OPTIONAL, SceneResult
 
-__all__ = ["BodyResult", "HUMANOID", "MOTION", "build_body_scene", "garment_pattern", "motion_targets", "run_body",
-           "sew_on", "sewn_garment"]
+__all__ = ["BodyResult", "HUMANOID", "MOTION", "build_body_scene", "compile_body_scene", "fold_angles",
+           "garment_pattern", "motion_targets", "run_body", "sew_on", "sewn_garment"]
 
 HUMANOID = Path(__file__).resolve().parents[2] / "mjcf" / "humanoid.xml"
 # m, pattern grid spacing: criss-cross cells, so vertices (corners and centres) lie 0.7 spacing apart.
+# Full: 1420 garment vertices (the earlier one-diagonal 3.5 cm panels had 1730); quick: 690.
 SPACING = 0.05
 QUICK_SPACING = 0.07  # m (quick run)
+# Step and solver (issue 15): the garments' bending is partly implicit, so the step need not resolve
+# the explicit bending of the cells. Measured before the one-flex garments (quick scene, cotton
+# jersey): Newton 26 ms per 1 ms step, 32 ms per 4 ms step; CG 14 ms per 4 ms step, its constraint
+# stage 6 ms against Newton's 24 (the Hessian of the implicit flex metric).
 BODY_TIMESTEP = 4e-3
 SOLVERS = {"cg": mujoco.mjtSolver.mjSOL_CG, "newton": mujoco.mjtSolver.mjSOL_NEWTON}
 BODY_SOLVER = "cg"
+# MuJoCo's solver tolerance (its default 1e-8). Measured on the full scene, cotton twill: CG ran 67
+# iterations a step on average (its cap of 100 often), the constraint stage 11 of 23 ms; at 1e-6 and
+# 1e-5, 36 and 23 iterations, 16.9 and 15.1 ms a step, and the same run to the figures' digits
+# (penetration 3.83 / 3.83 / 3.82 mm, distance 9.7 cm all three, creases 121 and 86-87 hinges).
+BODY_TOLERANCE = 1e-5
 SETTLE_S = 1.0  # s of settling with the body at rest; the checks start after it
 QUICK_SECONDS = 2.0  # s: the quick run stops after the arms come down
 FRAME_S = 1.0 / 30  # s between recorded frames
@@ -207,9 +217,9 @@ def sewn_garment(kind: str, spacing: float) -> Garment:
 def build_body_scene(material_shirt: ClothMaterial, material_pants: ClothMaterial, *, spacing: float = SPACING,
                      timestep: float = BODY_TIMESTEP, solver: str = BODY_SOLVER, native: bool = False,
                      start: dict | None = None, damping: float = DEFAULT_DAMPING,
-                     belt: bool = True) -> tuple[mujoco.MjSpec, dict]:
+                     belt: bool = True, tolerance: float = BODY_TOLERANCE) -> tuple[mujoco.MjSpec, dict]:
     """The humanoid with both garments (see the module docstring), stepped at ``timestep`` (s) by
-    MuJoCo's ``solver`` (``"cg"`` or ``"newton"``); ``native``: MuJoCo's isotropic elasticity
+    MuJoCo's ``solver`` (``"cg"`` or ``"newton"``) to ``tolerance``; ``native``: MuJoCo's isotropic elasticity
     alone, no plugin. ``start`` maps ``"shirt"``/``"pants"`` to the garment's start positions
     ``(V, 3)`` (m; default the flat panels of :func:`sewn_garment`); ``belt``: hold the pants'
     waistband on the pelvis where it starts. Returns the spec and, per
@@ -221,6 +231,7 @@ def build_body_scene(material_shirt: ClothMaterial, material_pants: ClothMateria
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
     spec.option.solver = SOLVERS[solver]
+    spec.option.tolerance = tolerance
     spec.worldbody.add_light(pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     garments = {}
     for kind, material in (("shirt", material_shirt), ("pants", material_pants)):
@@ -352,7 +363,7 @@ class BodyResult(SceneResult):
 
 def run_body(material_shirt, material_pants=None, *, quick: bool = False, recording_path=None,
              progress=None, timestep: float = BODY_TIMESTEP, solver: str = BODY_SOLVER,
-             native: bool = False) -> BodyResult:
+             native: bool = False, tolerance: float = BODY_TOLERANCE) -> BodyResult:
     """Run the full-body scene (module docstring) and return its :class:`BodyResult`.
 
     Args:
@@ -364,6 +375,7 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
         timestep: Δt (s).
         solver: MuJoCo's constraint solver, ``"cg"`` or ``"newton"``.
         native: MuJoCo's native isotropic elasticity alone (no plugin), for comparison.
+        tolerance: MuJoCo's solver tolerance.
     """
     shirt = material_shirt if isinstance(material_shirt, ClothMaterial) else ClothMaterial.from_file(material_shirt)
     pants = shirt if material_pants is None else (
@@ -376,7 +388,7 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
     start, sewing = sew_on(shirt, pants, spacing=spacing, timestep=timestep)
     sewing_s = time.perf_counter() - sew_start
     spec, garments = build_body_scene(shirt, pants, spacing=spacing, timestep=timestep, solver=solver, native=native,
-                                      start=start)
+                                      start=start, tolerance=tolerance)
     model = compile_body_scene(spec, garments)
     data = mujoco.MjData(model)
     actuators = {model.actuator(i).name: i for i in range(model.nu)}
