@@ -270,9 +270,10 @@ def sew_on(material_shirt: ClothMaterial, material_pants: ClothMaterial, *, spac
     """Sew the garments around the body (module docstring): :data:`SEW_S` of MuJoCo's native
     elasticity, damping :data:`SEW_DAMPING`, from the flat panels, the body at rest, without
     gravity or the belt (the garments only close around the body; the run's belt then holds the
-    waistband where the sewing left it). Returns the
-    start positions per garment ``(V, 3)`` (m) and, per garment, the largest stretch and compression
-    of a pattern edge at the end (``{"max_stretch": …, "max_compression": …}``, engineering strain)."""
+    waistband where the sewing left it). Returns the start positions per garment ``(V, 3)`` (m)
+    and, per garment, the largest stretch and compression of a pattern edge at the end
+    (``{"max_stretch": …, "max_compression": …}``, engineering strain). Raises ``RuntimeError`` if
+    a position goes non-finite."""
     spec, garments = build_body_scene(material_shirt, material_pants, spacing=spacing, timestep=timestep,
                                       native=True, damping=SEW_DAMPING, belt=False)
     spec.option.gravity = [0.0, 0.0, 0.0]
