@@ -2,6 +2,7 @@
 curves (yarnfit.validate.reference)."""
 
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -119,6 +120,25 @@ def test_run_writes_the_documented_recording_and_compares_a_reference(tmp_path):
     expected |= {f"/stretch/8x5_{d}/cloth" for d in DIRECTIONS}
     expected |= {f"/stretch/plots/{kind}/8x5_{d}" for kind in ("force", "compression") for d in DIRECTIONS}
     assert expected <= paths
+
+
+def test_strips_pulled_side_by_side_are_the_strips_pulled_one_at_a_time():
+    """run_stretch pulls its strips on several threads: each strip's figures are those of the
+    same strip pulled alone, bit for bit, and in the same order."""
+    together = run_stretch(WOVEN, quick=True, max_strain=0.01).strips
+    for strip in together:
+        direction = strip.name.split("_")[1]
+        alone = pull_strip(WOVEN, "8x5", direction, quick=True, max_strain=0.01)
+        assert strip.name == alone.name
+        for field in ("strain", "force_per_width_n_per_m", "compression_ratio", "settled", "stable"):
+            np.testing.assert_array_equal(getattr(strip, field), getattr(alone, field))
+
+
+def test_a_set_stop_event_interrupts_a_strip():
+    stop = threading.Event()
+    stop.set()
+    with pytest.raises(KeyboardInterrupt):
+        pull_strip(WOVEN, "8x5", "weft", quick=True, max_strain=0.01, stop=stop)
 
 
 BAD_CSV = {
