@@ -223,7 +223,8 @@ def elastic_clamp_force(model, data, still, pull_dof: int) -> float:
     return -float(still.qfrc_passive[pull_dof])
 
 
-def clamped_strip_stiffness(shell, points: np.ndarray, triangles: np.ndarray, angle: float) -> float:
+def clamped_strip_stiffness(shell, points: np.ndarray, triangles: np.ndarray, angle: float,
+                            smoothing: str = "triangle") -> float:
     """Small-strain stiffness (N/m: clamp force per width per unit strain) of a strip clamped on
     its short sides: linear plane-stress finite elements (constant-strain triangles) of the
     shell's membrane law ``N = h S ε`` with the weft at ``angle`` (rad) from the strip's axis x.
@@ -232,10 +233,18 @@ def clamped_strip_stiffness(shell, points: np.ndarray, triangles: np.ndarray, an
     m; ``triangles (m, 3)``) but none of the plugin's or MuJoCo's code. The vertices at the
     smallest x are fixed, those at the largest x move by ``δ`` along x and none across; the width
     is the y extent.
+
+    ``smoothing="node"`` is a study, not the plugin's element: the strain is smoothed over each
+    vertex's share of its triangles (a third of each, the node-based smoothed FEM of Liu et al.),
+    ``ε_k = Σ_t (A_t/3) ε_t / Σ_t (A_t/3)``, energy ``½ Σ_k A_k ε_kᵀ h S ε_k``: as many strain
+    constraints as vertices instead of triangles, which is what frees meshes that lock
+    (plugins/README.md, Discretisation).
     """
-    from scipy.sparse import coo_matrix
+    from scipy.sparse import coo_matrix, diags, kron
     from scipy.sparse.linalg import spsolve
 
+    if smoothing not in ("triangle", "node"):
+        raise ValueError(f"smoothing must be 'triangle' or 'node', got {smoothing!r}")
     xy = np.asarray(points, float)[:, :2]
     tri = np.asarray(triangles)
     # Strain of a triangle from its corner displacements: ∇u = Σ_i u_i ⊗ ∇φ_i, with the barycentric
@@ -256,12 +265,24 @@ def clamped_strip_stiffness(shell, points: np.ndarray, triangles: np.ndarray, an
             for k in range(2):
                 # d(pᵀ sym(∇u) q) / d u_{corner,k} = ½ (p_k (∇φ·q) + q_k (∇φ·p))
                 strain[:, row, 2 * corner + k] = factor * 0.5 * (p[k] * grad[:, corner] @ q + q[k] * grad[:, corner] @ p)
-    stiffness = 0.5 * np.abs(twice_area)[:, None, None] * np.einsum(
-        "eri,rs,esj->eij", strain, shell.thickness * shell.S, strain)
+    area = 0.5 * np.abs(twice_area)
     dofs = (2 * tri[:, :, None] + np.arange(2)).reshape(len(tri), 6)
     n = 2 * len(xy)
-    K = coo_matrix((stiffness.ravel(), (np.repeat(dofs, 6, 1).ravel(), np.tile(dofs, (1, 6)).ravel())),
-                   shape=(n, n)).tocsr()
+    if smoothing == "triangle":
+        stiffness = area[:, None, None] * np.einsum("eri,rs,esj->eij", strain, shell.thickness * shell.S, strain)
+        K = coo_matrix((stiffness.ravel(), (np.repeat(dofs, 6, 1).ravel(), np.tile(dofs, (1, 6)).ravel())),
+                       shape=(n, n)).tocsr()
+    else:
+        share = np.zeros(len(xy))
+        np.add.at(share, tri.ravel(), np.repeat(area / 3, 3))
+        # Rows 3k..3k+2: vertex k's smoothed strain, Σ over its triangles of (A_t/3)/A_k ε_t.
+        weight = (area / 3)[:, None] / share[tri]  # (T, 3): triangle t's weight at its corner
+        rows = 3 * tri[:, :, None, None] + np.arange(3)[None, None, :, None]  # (T, corner, row, 1)
+        values = weight[:, :, None, None] * strain[:, None, :, :]  # (T, corner, row, 6)
+        smoothed = coo_matrix((values.ravel(), (np.broadcast_to(rows, values.shape).ravel(),
+                                                np.broadcast_to(dofs[:, None, None, :], values.shape).ravel())),
+                              shape=(3 * len(xy), n)).tocsr()
+        K = (smoothed.T @ kron(diags(share), shell.thickness * shell.S) @ smoothed).tocsr()
     x = xy[:, 0]
     tol = 1e-9 * (x.max() - x.min())
     left, right = x < x.min() + tol, x > x.max() - tol
