@@ -237,22 +237,13 @@ def build_scene(
     else:
         layout = _square(spec, scene, resolution, size, friction, mesh == "crisscross")
 
-    if fallback:
-        iso = isotropic_fallback(material.shell)
-        young, poisson, thickness, notes = iso.young_pa, iso.poisson, iso.thickness_m, iso.notes
-        plugin = None
-    else:
-        split = builtin_elasticity(material.shell, bending=implicit_bending, stiffening_bound=stiffening_bound)
-        young, poisson, thickness, notes = split.young_pa, split.poisson, split.thickness_m, ()
-        plugin = _plugin(spec, material.shell, split, angle, damping)
-
-    flex = _cloth(spec, layout, material.areal_density_kg_m2, plugin)
-    flex.young, flex.poisson, flex.thickness, flex.damping = young, poisson, thickness, damping
-    flex.elastic2d = ELASTIC2D["both" if fallback else split.elastic2d]
-    flex.friction = [friction, 0.005, 0.0001]
+    elasticity = _Elasticity.of(spec, material, fallback, implicit_bending, stiffening_bound, angle, damping)
+    flex = _cloth(spec, layout, material.areal_density_kg_m2, elasticity.plugin)
+    elasticity.apply(flex, damping, friction)
     flex.contype = flex.conaffinity = 1 if layout.collide else 0
     flex.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_AUTO if self_collision else mujoco.mjtFlexSelf.mjFLEXSELF_NONE
-    return BuiltScene(spec, scene, fallback, young, poisson, thickness, notes)
+    return BuiltScene(spec, scene, fallback, elasticity.young_pa, elasticity.poisson, elasticity.thickness_m,
+                      elasticity.notes)
 
 
 def export_scene(material: ClothMaterial | str | os.PathLike, scene: str, output: str | os.PathLike,
@@ -530,6 +521,38 @@ def _cloth(spec: mujoco.MjSpec, layout: _Layout, areal_density: float, plugin, n
                          elem=layout.triangles.ravel(), rgba=[0.85, 0.45, 0.3, 1.0])
 
 
+@dataclass(frozen=True)
+class _Elasticity:
+    """A cloth flex's elasticity: MuJoCo's built-in ``<elasticity>`` (E Pa, ν, t m, ``elastic2d``)
+    and the ``yarnfit.shell`` instance beside it (None for the isotropic fallback), with the
+    fallback's notes."""
+
+    young_pa: float
+    poisson: float
+    thickness_m: float
+    elastic2d: str
+    plugin: object
+    notes: tuple[str, ...]
+
+    @classmethod
+    def of(cls, spec, material: ClothMaterial, fallback: bool, implicit_bending: bool, stiffening_bound: float,
+           angle: float, damping: float, name: str = "shell", rest: str = "qpos0") -> "_Elasticity":
+        """The split of :func:`~yarnfit.mujoco.split.builtin_elasticity` with its plugin instance
+        ``name`` added to ``spec``, or with ``fallback`` the isotropic fallback alone."""
+        if fallback:
+            iso = isotropic_fallback(material.shell)
+            return cls(iso.young_pa, iso.poisson, iso.thickness_m, "both", None, iso.notes)
+        split = builtin_elasticity(material.shell, bending=implicit_bending, stiffening_bound=stiffening_bound)
+        plugin = _plugin(spec, material.shell, split, angle, damping, name=name, rest=rest)
+        return cls(split.young_pa, split.poisson, split.thickness_m, split.elastic2d, plugin, ())
+
+    def apply(self, flex: mujoco.MjsFlex, damping: float, friction: float) -> None:
+        """Write the built-in part, the damping time (s) and the sliding friction onto ``flex``."""
+        flex.young, flex.poisson, flex.thickness, flex.damping = self.young_pa, self.poisson, self.thickness_m, damping
+        flex.elastic2d = ELASTIC2D[self.elastic2d]
+        flex.friction = [friction, 0.005, 0.0001]
+
+
 def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damping: float, name: str = "shell",
             rest: str = "qpos0"):
     """The ``yarnfit.shell`` instance ``name``: the full material, its angle and damping, its rest
@@ -597,20 +620,12 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
     then carries the plugin, as in the ``cloth`` scene). ``fallback``: no plugin, MuJoCo's own
     isotropic elasticity alone with :func:`~yarnfit.mujoco.split.isotropic_fallback`'s material
     (``elastic2d="both"``), as :func:`build_scene` builds it."""
-    if fallback:
-        iso = isotropic_fallback(material.shell)
-        young, poisson, thickness, elastic2d, plugin = iso.young_pa, iso.poisson, iso.thickness_m, "both", None
-    else:
-        split = builtin_elasticity(material.shell, bending=implicit_bending, stiffening_bound=stiffening_bound)
-        young, poisson, thickness, elastic2d = split.young_pa, split.poisson, split.thickness_m, split.elastic2d
-        plugin = _plugin(spec, material.shell, split, angle, damping, name=f"{name}_shell",
-                         rest="qpos0" if rest_uv is None else "texcoord")
+    elasticity = _Elasticity.of(spec, material, fallback, implicit_bending, stiffening_bound, angle, damping,
+                                name=f"{name}_shell", rest="qpos0" if rest_uv is None else "texcoord")
     holders = {} if pinned is None else {"world": np.asarray(pinned, bool)}
     layout = _Layout(np.asarray(points, float), np.asarray(triangles, int), holders, collide=True)
-    flex = _cloth(spec, layout, material.areal_density_kg_m2, plugin, name=name)
-    flex.young, flex.poisson, flex.thickness, flex.damping = young, poisson, thickness, damping
-    flex.elastic2d = ELASTIC2D[elastic2d]
-    flex.friction = [friction, 0.005, 0.0001]
+    flex = _cloth(spec, layout, material.areal_density_kg_m2, elasticity.plugin, name=name)
+    elasticity.apply(flex, damping, friction)
     flex.contype, flex.conaffinity = contype, conaffinity
     flex.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_NONE
     if rest_uv is not None:
