@@ -3,13 +3,13 @@
 use_pattern_rest against MuJoCo's own compiler, and sewing panels into one mesh."""
 
 import math
-import warnings
 
 import mujoco
 import numpy as np
 import pytest
 
-from test_plugin import GRADIENT_RTOL, MATERIAL, ROUND_OFF_RTOL, ReferenceShell, central_gradient, forces, vertex_forces
+from test_plugin import (GRADIENT_RTOL, MATERIAL, ROUND_OFF_RTOL, ReferenceShell, central_gradient, compile_sheet, forces,
+                         mesh_spec, vertex_forces)
 from yarnfit.mujoco.garment import Panel, Seam, sew, use_pattern_rest
 from yarnfit.mujoco.scenes import grid_mesh, panel_mesh
 
@@ -31,28 +31,13 @@ def garment_model(points, triangles, corner_uv=None, material=MATERIAL, elastic2
     joints per vertex, the plugin with the whole material; with ``corner_uv (T, 3, 2)`` its rest is
     those texture coordinates (``rest="texcoord"``); with ``elastic2d`` MuJoCo's built-in
     elasticity ``builtin`` (:data:`BUILTIN`) too."""
-    spec = mujoco.MjSpec()
-    spec.option.gravity = [0, 0, 0]
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
-    spec.activate_plugin("yarnfit.shell")
-    plugin = spec.add_plugin(name="shell", plugin_name="yarnfit.shell", active=True)
     config = {key: value if isinstance(value, str) else repr(value) for key, value in material.items()}
     if damping:
         config["damping"] = repr(damping)
     if corner_uv is not None:
         config["rest"] = "texcoord"
-    plugin.config = config
-    names = []
-    for v, point in enumerate(points):
-        body = spec.worldbody.add_body(name=f"v{v}", pos=point)
-        body.explicitinertial = True
-        body.mass, body.ipos, body.iquat, body.inertia = 1e-3, [0, 0, 0], [1, 0, 0, 0], [1e-9] * 3
-        for axis in np.eye(3):
-            body.add_joint(type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
-        body.plugin = plugin
-        names.append(body.name)
-    flex = spec.add_flex(name="sheet", dim=2, radius=1e-3, vertbody=names, vert=np.zeros(3 * len(points)),
-                         elem=np.asarray(triangles).ravel())
+    spec, flex = mesh_spec(points, triangles, config)
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
     if corner_uv is not None:
         flex.texcoord = np.asarray(corner_uv, np.float32).ravel()
         flex.elemtexcoord = np.arange(3 * len(triangles))
@@ -60,9 +45,7 @@ def garment_model(points, triangles, corner_uv=None, material=MATERIAL, elastic2
         flex.young, flex.poisson, flex.thickness = builtin["young"], builtin["poisson"], builtin["thickness"]
         flex.damping = builtin["damping"]
         flex.elastic2d = {"stretch": 2, "both": 3, "bend": 1}[elastic2d]
-    with warnings.catch_warnings():  # MuJoCo 4.0's "not rigid ... no passive forces": it has the plugin's
-        warnings.filterwarnings("ignore", message=r"flex '.*' is not rigid")
-        return spec.compile()
+    return compile_sheet(spec)
 
 
 def panel():

@@ -242,11 +242,18 @@ def test_forces_are_minus_the_gradient_of_the_energy(angle):
 def mesh_model(points, triangles, material=MATERIAL) -> mujoco.MjModel:
     """A free sheet on any triangle mesh (``points (V, 3)`` m, ``triangles (T, 3)``): one body with
     three world-axis slide joints per vertex and the plugin carrying the whole material."""
+    spec, _ = mesh_spec(points, triangles, {key: repr(value) for key, value in material.items()})
+    return compile_sheet(spec)
+
+
+def mesh_spec(points, triangles, config: dict) -> tuple[mujoco.MjSpec, mujoco.MjsFlex]:
+    """The spec of :func:`mesh_model` with the plugin's ``config`` (key → text) and its flex
+    ``sheet``, for callers that add to it before :func:`compile_sheet`."""
     spec = mujoco.MjSpec()
     spec.option.gravity = [0, 0, 0]
     spec.activate_plugin("yarnfit.shell")
     plugin = spec.add_plugin(name="shell", plugin_name="yarnfit.shell", active=True)
-    plugin.config = {key: repr(value) for key, value in material.items()}
+    plugin.config = config
     names = []
     for v, point in enumerate(points):
         body = spec.worldbody.add_body(name=f"v{v}", pos=point)
@@ -256,8 +263,12 @@ def mesh_model(points, triangles, material=MATERIAL) -> mujoco.MjModel:
             body.add_joint(type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
         body.plugin = plugin
         names.append(body.name)
-    spec.add_flex(name="sheet", dim=2, radius=1e-3, vertbody=names, vert=np.zeros(3 * len(points)),
-                  elem=np.asarray(triangles).ravel())
+    flex = spec.add_flex(name="sheet", dim=2, radius=1e-3, vertbody=names, vert=np.zeros(3 * len(points)),
+                         elem=np.asarray(triangles).ravel())
+    return spec, flex
+
+
+def compile_sheet(spec: mujoco.MjSpec) -> mujoco.MjModel:
     with warnings.catch_warnings():  # MuJoCo 4.0's "not rigid ... no passive forces": it has the plugin's
         warnings.filterwarnings("ignore", message=r"flex '.*' is not rigid")
         return spec.compile()

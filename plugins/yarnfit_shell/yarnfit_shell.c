@@ -379,7 +379,7 @@ static void strain_basis(const double Dinv[4], double G[3][4]) {
 
 // Check the builtin_* keys against the flex's compiled built-in membrane stiffness. MuJoCo stores,
 // per triangle, K_ab = 4 A t (mu tr(G_a G_b) + lambda*/2 tr G_a tr G_b) for its edges a, b in
-// flex_elemedge order (upper triangle), lambda* = E nu / (1 - nu^2) the plane-stress Lame constant,
+// flex_elemedge order (upper triangle), lambda* = E nu / (1 - nu^2) the plane-stress Lame constant.
 static int check_builtin(const mjModel* m, const Shell* s, const int* tri_edge_local) {
   int f = s->flex;
   double E = s->builtin_young, nu = s->builtin_poisson, t = s->builtin_thickness;

@@ -108,11 +108,6 @@ class Garment:
         e2 = self.corner_uv[:, 2] - self.corner_uv[:, 0]
         return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
-    def texcoords(self) -> tuple[np.ndarray, np.ndarray]:
-        """MuJoCo's ``texcoord (3T, 2)`` (float32) and ``elemtexcoord (T, 3)``: one pair per corner."""
-        return (self.corner_uv.reshape(-1, 2).astype(np.float32),
-                np.arange(3 * len(self.triangles)).reshape(-1, 3))
-
 
 def sew(panels: list[Panel], seams: list[Seam]) -> Garment:
     """Merge the panels' seam vertices into one mesh (vertices numbered panel by panel, each seam
@@ -229,9 +224,10 @@ def builtin_bending_operator(diamond: np.ndarray, young: float, poisson: float, 
     return out
 
 
-def _edge_slots(model: mujoco.MjModel, f: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Flex-local ``triangles (T, 3)``, ``edges (E, 2)`` and per triangle slot ``j`` of
-    ``flex_elemedge`` its local edge ``k`` (vertices k → k+1): ``(T, 3)``."""
+def _edge_slots(model: mujoco.MjModel, f: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Flex-local ``triangles (T, 3)``, ``edges (E, 2)``, each triangle's edges in
+    ``flex_elemedge`` order ``slots (T, 3)`` and per slot ``j`` its local edge ``k`` (vertices
+    k → k+1): ``(T, 3)``."""
     elems = model.flex_elemnum[f]
     triangles = model.flex_elem[model.flex_elemdataadr[f]:model.flex_elemdataadr[f] + 3 * elems].reshape(-1, 3)
     edges = model.flex_edge[model.flex_edgeadr[f]:model.flex_edgeadr[f] + model.flex_edgenum[f]]
@@ -244,7 +240,7 @@ def _edge_slots(model: mujoco.MjModel, f: int) -> tuple[np.ndarray, np.ndarray, 
             local[((p == a) & (q == b)) | ((p == b) & (q == a)), j] = k
     if (local < 0).any():
         raise ValueError(f"flex {f}: an element edge is not an edge of its triangle")
-    return triangles, edges, local
+    return triangles, edges, slots, local
 
 
 def use_pattern_rest(model: mujoco.MjModel, flex: str, young: float, poisson: float, thickness: float) -> None:
@@ -260,9 +256,8 @@ def use_pattern_rest(model: mujoco.MjModel, flex: str, young: float, poisson: fl
     if model.flex_dim[f] != 2:
         raise ValueError(f"flex {flex!r} has dim {model.flex_dim[f]}; a garment is a 2D flex")
     uv = _corner_uv(model, f)
-    triangles, edges, local = _edge_slots(model, f)
+    triangles, edges, slots, local = _edge_slots(model, f)
     # Each triangle's pattern length of each edge, per flex edge (one or two of them).
-    slots = model.flex_elemedge[model.flex_elemedgeadr[f]:model.flex_elemedgeadr[f] + 3 * len(triangles)].reshape(-1, 3)
     k1 = (local + 1) % 3
     rows = np.arange(len(triangles))[:, None]
     lengths = np.linalg.norm(uv[rows, k1] - uv[rows, local], axis=2)

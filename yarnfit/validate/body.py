@@ -405,7 +405,7 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
     warning = int(mujoco.mjtWarning.mjWARN_BADQACC)
     max_pen, max_dist, nonfinite, taken = 0.0, 0.0, False, 0
     series = []
-    folds = {}
+    last_frame = None  # positions at the last frame read: the creases are counted there
     farthest = None
     elapsed = 0.0
     for step in range(steps + 1):
@@ -428,7 +428,7 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
                                 "position_m": points[vert[kind][int(signed[kind].argmax())]].tolist()}
                 max_dist = max(max_dist, dist)
             series.append((t, pen, dist))
-            folds = {kind: np.degrees(fold_angles(points[vert[kind]], h)) for kind, h in hinges.items()}
+            last_frame = points.copy()
             if recording:
                 recording.frame(t, {k: points[idx] for k, idx in vert.items()}, a, r, b, pen, dist)
         if step == steps:
@@ -444,6 +444,8 @@ def run_body(material_shirt, material_pants=None, *, quick: bool = False, record
         if data.warning[warning].number > 0 or not np.all(np.isfinite(data.qpos)):
             nonfinite = nonfinite or not np.all(np.isfinite(data.qpos))
             break
+    folds = {} if last_frame is None else {kind: np.degrees(fold_angles(last_frame[vert[kind]], h))
+                                           for kind, h in hinges.items()}
     bad_qacc = int(data.warning[warning].number)
     stable = bad_qacc == 0 and not nonfinite and taken == steps
     result = BodyResult(
