@@ -175,3 +175,33 @@ def test_texcoord_rest_needs_texture_coordinates_and_no_builtin_keys():
                                                                     "builtin_thickness": 1e-4})
     with pytest.raises(ValueError, match="'rest' must be 'qpos0' or 'texcoord'"):
         garment_model(points, triangles, material={**MATERIAL, "rest": "pattern"})
+@pytest.mark.parametrize("mesh", ["panel", "tube"])
+def test_node_smoothed_membrane_is_minus_the_gradient_of_its_energy(mesh):
+    """membrane="node": strains smoothed over each vertex's third of its triangles, one domain per
+    vertex and panel (on the tube the seam vertices have one in each panel, however alike the
+    panels' texture coordinates): the forces, with MuJoCo's built-in part removed, are minus the
+    gradient of the reference energy over those domains."""
+    material = {**MATERIAL, "membrane": "node"}
+    if mesh == "panel":
+        flat, triangles = panel()
+        points = np.column_stack([flat, np.zeros(len(flat))])
+        model = garment_model(points, triangles, material=material, elastic2d="both")
+        domains = triangles
+        reference = ReferenceShell(model, MATERIAL, domains=domains)
+    else:
+        garment = pillowcase()
+        points = garment.points
+        model = garment_model(points, garment.triangles, garment.corner_uv, material=material, elastic2d="both")
+        use_pattern_rest(model, "sheet", BUILTIN["young"], BUILTIN["poisson"], BUILTIN["thickness"])
+        keys = {}
+        domains = np.array([[keys.setdefault((int(v), int(p)), len(keys)) for v in tri]
+                            for tri, p in zip(garment.triangles, garment.panel_of_triangle)])
+        reference = ReferenceShell(model, MATERIAL, corner_uv=model.flex_texcoord.astype(float).reshape(-1, 3, 2),
+                                   domains=domains)
+    x = points + 0.004 * np.random.default_rng(9).standard_normal(points.shape)
+    qfrc, _ = forces(model, (x - np.array([model.body_pos[b] for b in model.flex_vertbodyid])).ravel())
+    gradient = central_gradient(reference.energy, x)
+    np.testing.assert_allclose(vertex_forces(model, qfrc), -gradient, rtol=0,
+                               atol=GRADIENT_RTOL * np.abs(gradient).max())
+    per_triangle = ReferenceShell(model, MATERIAL, corner_uv=reference.corner if mesh == "tube" else None)
+    assert np.abs(central_gradient(per_triangle.energy, x) - gradient).max() > 1e-3 * np.abs(gradient).max()

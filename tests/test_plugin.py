@@ -73,8 +73,10 @@ class ReferenceShell:
     rest corners (a garment's pattern, weft along the first axis turned by ``angle``), a hinge's
     far vertex placed by its own triangle's rest distances from the shared edge."""
 
-    def __init__(self, model, material, angle=0.0, corner_uv=None):
+    def __init__(self, model, material, angle=0.0, corner_uv=None, domains=None):
         self.tri = model.flex_elem.reshape(-1, 3)
+        # membrane="node": each triangle corner's smoothing domain (T, 3), or None for triangles.
+        self.domains = None if domains is None else np.asarray(domains)
         c, s = math.cos(angle), math.sin(angle)
         if corner_uv is None:
             rest = forces(model, model.qpos0)[1]
@@ -194,8 +196,17 @@ class ReferenceShell:
 
     def energy(self, x):
         eps, kappa = self.strains(x)
-        return 0.5 * float(self.area @ (np.einsum("ti,ij,tj->t", eps, self.S, eps)
-                                        + np.einsum("ti,ij,tj->t", kappa, self.B, kappa)))
+        bending = 0.5 * float(self.area @ np.einsum("ti,ij,tj->t", kappa, self.B, kappa))
+        if self.domains is None:
+            return 0.5 * float(self.area @ np.einsum("ti,ij,tj->t", eps, self.S, eps)) + bending
+        # Node-smoothed membrane: ε_d = Σ over the domain's corners of (A_t/3)/A_d ε_t (the
+        # triangles' Green strains), energy A_d ½ ε_dᵀ S ε_d per domain.
+        share = np.zeros(self.domains.max() + 1)
+        np.add.at(share, self.domains.ravel(), np.repeat(self.area / 3, 3))
+        smoothed = np.zeros((len(share), 3))
+        for k in range(3):
+            np.add.at(smoothed, self.domains[:, k], (self.area / 3 / share[self.domains[:, k]])[:, None] * eps)
+        return 0.5 * float(share @ np.einsum("di,ij,dj->d", smoothed, self.S, smoothed)) + bending
 
 
 def central_gradient(function, x, step=FD_STEP):

@@ -92,7 +92,7 @@ static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
   "builtin_young", "builtin_poisson", "builtin_thickness",
   "s00p2", "s00p3", "s00n2", "s00n3", "s11p2", "s11p3", "s11n2", "s11n3", "s22p2", "s22p3", "s22n2", "s22n3",
-  "c01", "c10", "rest",
+  "c01", "c10", "rest", "membrane", "stabilization",
 };
 enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 
@@ -103,6 +103,17 @@ typedef struct {
   double stiffening[3][kNumStiffening];  // k2, k3 for y >= 0, k2, k3 for y < 0, per direction (Pa)
   double c01, c10;      // the stiffening strains' coupling: y0 = eps0 + c01 eps1, y1 = eps1 + c10 eps0
   int stiffens;         // any stiffening key nonzero: else the membrane is exactly StVK
+  int node_membrane;    // membrane="node": strains smoothed over each vertex's third of its
+                        // triangles (per panel), not constant per triangle; see plugins/README.md
+  int ndomain;          // node membrane: smoothing domains (a vertex, or a vertex and panel)
+  int* corner_domain;   // (ntri x 3) the domain of each triangle corner
+  double* domain_area;  // (ndomain) a third of each of its triangles' rest areas (m^2)
+  double* tri_F;        // (ntri x 12) scratch: F0 F1 and their rates per triangle
+  double* tri_eps;      // (ntri x 6) scratch: each triangle's Green strain and its rate
+  double* tri_sig;      // (ntri x 3) scratch: dW/d(triangle strain), through its domains
+  double* domain_eps;   // (ndomain x 6) scratch: the smoothed strains and rates
+  double* domain_sig;   // (ndomain x 3) scratch: dW/d(smoothed strain)
+  double stabilization; // node membrane: the hourglass penalty's modulus over the shear c22 (0: none)
   int rest_texcoord;    // rest="texcoord": rest metric and material axes from the flex's texture
                         // coordinates per triangle corner (a garment's panels), not from qpos0
   // rest="texcoord": MuJoCo's built-in membrane on this flex (elastic2d "stretch" or "both"), which
@@ -253,6 +264,16 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
     if (read_number(m, instance, keys[k].key, keys[k].fallback, keys[k].required, keys[k].value)) return -1;
   }
   if (read_number(m, instance, "c01", 0, 0, &s->c01) || read_number(m, instance, "c10", 0, 0, &s->c10)) return -1;
+  if (read_number(m, instance, "stabilization", 0, 0, &s->stabilization)) return -1;
+  const char* membrane = mj_getPluginConfig(m, instance, "membrane");
+  if (!membrane || !membrane[0] || !strcmp(membrane, "triangle")) {
+    s->node_membrane = 0;
+  } else if (!strcmp(membrane, "node")) {
+    s->node_membrane = 1;
+  } else {
+    mju_error(YF_NAME ": config key 'membrane' must be 'triangle' or 'node', got '%s'", membrane);
+    return -1;
+  }
   const char* rest = mj_getPluginConfig(m, instance, "rest");
   if (!rest || !rest[0] || !strcmp(rest, "qpos0")) {
     s->rest_texcoord = 0;
@@ -301,10 +322,10 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
               "(the flex's <elasticity>) or both be absent");
     return -1;
   }
-  if (s->rest_texcoord && (s->builtin_young > 0 || s->builtin_poisson > 0)) {
-    mju_error(YF_NAME ": config keys 'builtin_*' are for rest=\"qpos0\"; with rest=\"texcoord\" the plugin "
-              "removes MuJoCo's built-in elasticity exactly, whatever its parameters, and carries the whole "
-              "material itself");
+  if ((s->rest_texcoord || s->node_membrane) && (s->builtin_young > 0 || s->builtin_poisson > 0)) {
+    mju_error(YF_NAME ": config keys 'builtin_*' are for rest=\"qpos0\" with membrane=\"triangle\"; with "
+              "rest=\"texcoord\" or membrane=\"node\" the plugin removes MuJoCo's built-in elasticity exactly, "
+              "whatever its parameters, and carries the whole material itself");
     return -1;
   }
   if (!(s->builtin_poisson >= 0 && s->builtin_poisson < 0.5)) {
@@ -358,6 +379,13 @@ static void shell_free(Shell* s) {
   free(s->builtin_hinge);
   free(s->builtin_edge);
   free(s->builtin_delta);
+  free(s->corner_domain);
+  free(s->domain_area);
+  free(s->tri_F);
+  free(s->tri_eps);
+  free(s->tri_sig);
+  free(s->domain_eps);
+  free(s->domain_sig);
   free(s);
 }
 
@@ -379,7 +407,7 @@ static void strain_basis(const double Dinv[4], double G[3][4]) {
 
 // Check the builtin_* keys against the flex's compiled built-in membrane stiffness. MuJoCo stores,
 // per triangle, K_ab = 4 A t (mu tr(G_a G_b) + lambda*/2 tr G_a tr G_b) for its edges a, b in
-// flex_elemedge order (upper triangle), lambda* = E nu / (1 - nu^2) the plane-stress Lame constant.
+// flex_elemedge order (upper triangle), lambda* = E nu / (1 - nu^2) the plane-stress Lame constant,
 static int check_builtin(const mjModel* m, const Shell* s, const int* tri_edge_local) {
   int f = s->flex;
   double E = s->builtin_young, nu = s->builtin_poisson, t = s->builtin_thickness;
@@ -731,6 +759,8 @@ static void classify_vertices(const mjModel* m, Shell* s) {
   }
 }
 
+static int build_domains(const mjModel* m, Shell* s);
+
 static int shell_init(const mjModel* m, mjData* d, int instance) {
   // Validate before allocating anything: mju_error does not return.
   Shell config = {0};
@@ -884,8 +914,12 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
     return -1;
   }
   int status = build_hinges(m, s, rest2d, tri_edge_local);
-  if (status == 0 && !s->rest_texcoord) status = check_builtin(m, s, tri_edge_local);
-  if (status == 0 && s->rest_texcoord) status = collect_builtin_membrane(m, s);
+  // The split shares the membrane with MuJoCo's isotropic triangles only for triangle strains with
+  // the qpos0 rest; otherwise the plugin removes MuJoCo's part exactly and carries all of it.
+  int exact = s->rest_texcoord || s->node_membrane;
+  if (status == 0 && !exact) status = check_builtin(m, s, tri_edge_local);
+  if (status == 0 && exact) status = collect_builtin_membrane(m, s);
+  if (status == 0 && s->node_membrane) status = build_domains(m, s);
   if (status == 0) status = collect_builtin_bending(m, s);
   free(rest2d);
   free(tri_edge_local);
@@ -932,71 +966,236 @@ static void stiffening_stress(const Shell* s, const double eps[3], const double 
   stress[2] = along[2];
 }
 
-// Membrane force of one triangle: grad (3 x 3, added to) of its energy A0/2 eps^T C eps (plus the
-// stiffening terms A0 h sum_d phi_d(eps_d)), with the damping stress of d(eps)/dt added: C times it
-// (so the quadratic part's stress is evaluated at eps + damping * d(eps)/dt) and the stiffening
-// terms' tangent times it. x, xdot: (3 x 3) vertex positions and velocities (xdot NULL without
-// damping).
-static void membrane_triangle(const Shell* s, int t, const double x[9], const double* xdot, double grad[9]) {
-  const double* Dinv = s->rest_inv + 4 * t;
+// Deformation gradient of one triangle from its rest inverse Dinv and vertex positions x (3 x 3):
+// F (12) = its columns F0 (along weft), F1 (along warp), then their rates from the velocities xdot
+// (zeros when xdot is NULL).
+static void triangle_deformation(const double Dinv[4], const double x[9], const double* xdot, double F[12]) {
+  for (int i = 0; i < 3; i++) {
+    double e1 = x[3 + i] - x[i], e2 = x[6 + i] - x[i];
+    F[i] = e1 * Dinv[0] + e2 * Dinv[2];
+    F[3 + i] = e1 * Dinv[1] + e2 * Dinv[3];
+    double r1 = xdot ? xdot[3 + i] - xdot[i] : 0, r2 = xdot ? xdot[6 + i] - xdot[i] : 0;
+    F[6 + i] = r1 * Dinv[0] + r2 * Dinv[2];
+    F[9 + i] = r1 * Dinv[1] + r2 * Dinv[3];
+  }
+}
+
+// Green strain eps (Voigt: E00, E11, 2 E01) of F (12, columns F0 F1 and their rates), then its
+// rate (zeros unless `damped`): eps (6).
+static void green_strain(const double F[12], int damped, double eps[6]) {
+  const double* F0 = F;
+  const double* F1 = F + 3;
+  eps[0] = 0.5 * (mju_dot3(F0, F0) - 1);
+  eps[1] = 0.5 * (mju_dot3(F1, F1) - 1);
+  eps[2] = mju_dot3(F0, F1);
+  eps[3] = damped ? mju_dot3(F0, F + 6) : 0;
+  eps[4] = damped ? mju_dot3(F1, F + 9) : 0;
+  eps[5] = damped ? mju_dot3(F0, F + 9) + mju_dot3(F1, F + 6) : 0;
+}
+
+// Membrane stress of a reference area `area` (m^2) at strain eps (6, with its rate): sig (3) =
+// area dW/deps for W = (1/2) eps^T C eps (plus the stiffening terms h sum_d phi_d(y_d)), with the
+// damping stress of the rate added: C times it (so the quadratic part's stress is evaluated at
+// eps + damping * rate) and the stiffening terms' tangent times it.
+static void membrane_stress(const Shell* s, double area, const double eps[6], double sig[3]) {
   const double* c = s->membrane;
-  double e1[3], e2[3], F0[3], F1[3];
-  for (int i = 0; i < 3; i++) {
-    e1[i] = x[3 + i] - x[i];
-    e2[i] = x[6 + i] - x[i];
-  }
-  // F = [e1 e2] Dinv: columns F0 (along weft), F1 (along warp).
-  for (int i = 0; i < 3; i++) {
-    F0[i] = e1[i] * Dinv[0] + e2[i] * Dinv[2];
-    F1[i] = e1[i] * Dinv[1] + e2[i] * Dinv[3];
-  }
-  double eps[3] = {0.5 * (mju_dot3(F0, F0) - 1), 0.5 * (mju_dot3(F1, F1) - 1), mju_dot3(F0, F1)};
-  double rate[3] = {0, 0, 0};
-  if (xdot) {
-    double r1[3], r2[3], Fd0[3], Fd1[3];
-    for (int i = 0; i < 3; i++) {
-      r1[i] = xdot[3 + i] - xdot[i];
-      r2[i] = xdot[6 + i] - xdot[i];
-    }
-    for (int i = 0; i < 3; i++) {
-      Fd0[i] = r1[i] * Dinv[0] + r2[i] * Dinv[2];
-      Fd1[i] = r1[i] * Dinv[1] + r2[i] * Dinv[3];
-    }
-    rate[0] = mju_dot3(F0, Fd0);
-    rate[1] = mju_dot3(F1, Fd1);
-    rate[2] = mju_dot3(F0, Fd1) + mju_dot3(F1, Fd0);
-  }
   // The quadratic part with its damping, as StVK: C (eps + damping * rate).
-  double eps0 = eps[0], eps1 = eps[1], eps2 = eps[2];
-  if (xdot) {
-    eps0 += s->damping * rate[0];
-    eps1 += s->damping * rate[1];
-    eps2 += s->damping * rate[2];
-  }
-  double scale = s->area[t];
-  double sig0 = scale * (c[0] * eps0 + c[1] * eps1), sig1 = scale * (c[1] * eps0 + c[2] * eps1);
-  double sig2 = scale * c[3] * eps2;
+  double eps0 = eps[0] + s->damping * eps[3], eps1 = eps[1] + s->damping * eps[4];
+  double eps2 = eps[2] + s->damping * eps[5];
+  sig[0] = area * (c[0] * eps0 + c[1] * eps1);
+  sig[1] = area * (c[1] * eps0 + c[2] * eps1);
+  sig[2] = area * c[3] * eps2;
   if (s->stiffens) {  // skipped without the keys: the membrane is then StVK to the last bit
     double extra[3];
-    stiffening_stress(s, eps, rate, extra);
-    sig0 += scale * extra[0];
-    sig1 += scale * extra[1];
-    sig2 += scale * extra[2];
+    stiffening_stress(s, eps, eps + 3, extra);
+    mju_addToScl3(sig, extra, area);
   }
-  // dW/dF = F P, P = [[sig0, sig2], [sig2, sig1]] (second Piola-Kirchhoff in Voigt order).
-  double G0[3], G1[3];
+}
+
+// G (6) = dW/dF = F P(sig), P = [[sig0, sig2], [sig2, sig1]] (second Piola-Kirchhoff, Voigt order).
+static void stress_gradient(const double F[12], const double sig[3], double G[6]) {
   for (int i = 0; i < 3; i++) {
-    G0[i] = F0[i] * sig0 + F1[i] * sig2;
-    G1[i] = F0[i] * sig2 + F1[i] * sig1;
+    G[i] = F[i] * sig[0] + F[3 + i] * sig[2];
+    G[3 + i] = F[i] * sig[2] + F[3 + i] * sig[1];
   }
-  // dW/de1 = G Dinv^T row 0, dW/de2 = row 1.
+}
+
+// Add dW/dx of one triangle's three vertices to grad (3 x 3) from G = dW/dF (6) and its rest
+// inverse: dW/de1 = G Dinv^T row 0, dW/de2 = row 1.
+static void scatter_gradient(const double Dinv[4], const double G[6], double grad[9]) {
   for (int i = 0; i < 3; i++) {
-    double g1 = G0[i] * Dinv[0] + G1[i] * Dinv[1];
-    double g2 = G0[i] * Dinv[2] + G1[i] * Dinv[3];
+    double g1 = G[i] * Dinv[0] + G[3 + i] * Dinv[1];
+    double g2 = G[i] * Dinv[2] + G[3 + i] * Dinv[3];
     grad[3 + i] += g1;
     grad[6 + i] += g2;
     grad[i] -= g1 + g2;
   }
+}
+
+// Membrane forces, into s->grad: per triangle (membrane="triangle"), or per smoothing domain at
+// its smoothed strain eps_d = sum over its corners of w eps_t, w = (A_t/3)/A_d, whose stress
+// reaches each corner's triangle as w dW/deps_d (membrane="node"). Strains, not deformation
+// gradients, are averaged: an average of F over triangles in different tangent planes would see a
+// vertex's motion along its triangles' normals (plugins/README.md).
+static void membrane_forces(Shell* s, const double* x, const double* xdot) {
+  int damped = xdot != NULL;
+  for (int t = 0; t < s->ntri; t++) {
+    const int* v = s->tri + 3 * t;
+    double xt[9], vt[9], F[12], eps[6], sig[3], G[6], gt[9] = {0};
+    for (int k = 0; k < 3; k++) {
+      mju_copy3(xt + 3 * k, x + 3 * v[k]);
+      if (xdot) mju_copy3(vt + 3 * k, xdot + 3 * v[k]);
+    }
+    double* Ft = s->node_membrane ? s->tri_F + 12 * t : F;
+    triangle_deformation(s->rest_inv + 4 * t, xt, xdot ? vt : NULL, Ft);
+    green_strain(Ft, damped, s->node_membrane ? s->tri_eps + 6 * t : eps);
+    if (s->node_membrane) continue;
+    membrane_stress(s, s->area[t], eps, sig);
+    stress_gradient(F, sig, G);
+    scatter_gradient(s->rest_inv + 4 * t, G, gt);
+    for (int k = 0; k < 3; k++) mju_addTo3(s->grad + 3 * v[k], gt + 3 * k);
+  }
+  if (!s->node_membrane) return;
+  mju_zero(s->domain_eps, 6 * s->ndomain);
+  for (int t = 0; t < s->ntri; t++) {
+    for (int k = 0; k < 3; k++) {
+      int d = s->corner_domain[3 * t + k];
+      mju_addToScl(s->domain_eps + 6 * d, s->tri_eps + 6 * t, s->area[t] / (3 * s->domain_area[d]), 6);
+    }
+  }
+  for (int d = 0; d < s->ndomain; d++) membrane_stress(s, s->domain_area[d], s->domain_eps + 6 * d, s->domain_sig + 3 * d);
+  double kappa = s->stabilization * s->membrane[3];
+  for (int t = 0; t < s->ntri; t++) {
+    double* sig = s->tri_sig + 3 * t;
+    mju_zero3(sig);
+    if (kappa > 0) {
+      // Hourglass penalty (kappa/2) sum_t A_t |eps_t - mean of its corners' eps_d|^2: zero for any
+      // strain field the smoothing reproduces, positive on the modes it does not see.
+      double diff[3];
+      mju_copy3(diff, s->tri_eps + 6 * t);
+      for (int k = 0; k < 3; k++) mju_addToScl3(diff, s->domain_eps + 6 * s->corner_domain[3 * t + k], -1.0 / 3);
+      mju_scl3(sig, diff, kappa * s->area[t]);
+    }
+  }
+  if (kappa > 0) {  // the penalty's stress on each eps_d, added to the domains' before they reach the triangles
+    for (int t = 0; t < s->ntri; t++) {
+      for (int k = 0; k < 3; k++) mju_addToScl3(s->domain_sig + 3 * s->corner_domain[3 * t + k], s->tri_sig + 3 * t, -1.0 / 3);
+    }
+  }
+  for (int t = 0; t < s->ntri; t++) {
+    const int* v = s->tri + 3 * t;
+    double G[6], gt[9] = {0};
+    double* sig = s->tri_sig + 3 * t;
+    for (int k = 0; k < 3; k++) {
+      int d = s->corner_domain[3 * t + k];
+      mju_addToScl3(sig, s->domain_sig + 3 * d, s->area[t] / (3 * s->domain_area[d]));
+    }
+    stress_gradient(s->tri_F + 12 * t, sig, G);
+    scatter_gradient(s->rest_inv + 4 * t, G, gt);
+    for (int k = 0; k < 3; k++) mju_addTo3(s->grad + 3 * v[k], gt + 3 * k);
+  }
+}
+
+// membrane="node": the smoothing domains. With rest="qpos0" every triangle has the flex's one
+// material frame, so a vertex is one domain. With rest="texcoord" a vertex where panels meet is one
+// domain per panel (F of different panels' frames cannot be averaged): two triangles sharing an
+// edge are in one panel when both its vertices have the same texture coordinates in both and
+// their third vertices lie on opposite sides of it in those coordinates (a seam between two
+// panels cut from one pattern has equal coordinates but both panels on the same side).
+static int build_domains(const mjModel* m, Shell* s) {
+  int n = s->ntri, f = s->flex;
+  int* panel = malloc(sizeof(int) * (n > 0 ? n : 1));
+  int* key = malloc(sizeof(int) * 3 * (n > 0 ? n : 1));
+  s->corner_domain = malloc(sizeof(int) * 3 * (n > 0 ? n : 1));
+  s->tri_F = malloc(sizeof(double) * 12 * (n > 0 ? n : 1));
+  if (!panel || !key || !s->corner_domain || !s->tri_F) { free(panel); free(key); return -1; }
+  for (int t = 0; t < n; t++) panel[t] = t;
+  if (s->rest_texcoord) {
+    int nedge = m->flex_edgenum[f];
+    const int* elemedge = m->flex_elemedge + m->flex_elemedgeadr[f];
+    const int* corner = m->flex_elemtexcoord + m->flex_elemdataadr[f];
+    const float* uv = m->flex_texcoord + 2 * m->flex_texcoordadr[f];
+    int* first = malloc(sizeof(int) * (nedge > 0 ? nedge : 1));
+    if (!first) { free(panel); free(key); return -1; }
+    for (int e = 0; e < nedge; e++) first[e] = -1;
+    for (int t = 0; t < n; t++) {
+      for (int j = 0; j < 3; j++) {
+        int e = elemedge[3 * t + j];
+        if (first[e] < 0) { first[e] = t; continue; }
+        int a = first[e], b = t;
+        // The shared vertices' corners in a and b, and each triangle's third corner.
+        const int* va = s->tri + 3 * a;
+        const int* vb = s->tri + 3 * b;
+        int same = 1, ka[2] = {-1, -1}, kb[2] = {-1, -1}, oa = -1, ob = -1, shared = 0;
+        for (int i = 0; i < 3; i++) {
+          int found = -1;
+          for (int l = 0; l < 3; l++) if (vb[l] == va[i]) found = l;
+          if (found < 0) { oa = i; continue; }
+          ka[shared] = i; kb[shared] = found; shared++;
+        }
+        for (int l = 0; l < 3; l++) if (l != kb[0] && l != kb[1]) ob = l;
+        if (shared != 2) continue;
+        for (int q = 0; q < 2; q++) {
+          const float* pa = uv + 2 * corner[3 * a + ka[q]];
+          const float* pb = uv + 2 * corner[3 * b + kb[q]];
+          if (pa[0] != pb[0] || pa[1] != pb[1]) same = 0;
+        }
+        if (!same) continue;
+        const float* p0 = uv + 2 * corner[3 * a + ka[0]];
+        const float* p1 = uv + 2 * corner[3 * a + ka[1]];
+        const float* qa = uv + 2 * corner[3 * a + oa];
+        const float* qb = uv + 2 * corner[3 * b + ob];
+        double ex = (double)p1[0] - p0[0], ey = (double)p1[1] - p0[1];
+        double side_a = ex * ((double)qa[1] - p0[1]) - ey * ((double)qa[0] - p0[0]);
+        double side_b = ex * ((double)qb[1] - p0[1]) - ey * ((double)qb[0] - p0[0]);
+        if (side_a * side_b >= 0) continue;  // folded over the edge: two panels
+        int ra = a, rb = b;
+        while (panel[ra] != ra) ra = panel[ra];
+        while (panel[rb] != rb) rb = panel[rb];
+        if (ra != rb) panel[ra > rb ? ra : rb] = ra > rb ? rb : ra;
+      }
+    }
+    free(first);
+    for (int t = 0; t < n; t++) {
+      int r = t;
+      while (panel[r] != r) r = panel[r];
+      panel[t] = r;
+    }
+  } else {
+    for (int t = 0; t < n; t++) panel[t] = 0;
+  }
+  // A domain per distinct (vertex, panel): sort-free, through a per-vertex list of panels seen.
+  int* head = malloc(sizeof(int) * (s->nvert > 0 ? s->nvert : 1));
+  int* next = malloc(sizeof(int) * 3 * (n > 0 ? n : 1));
+  int* owner = malloc(sizeof(int) * 3 * (n > 0 ? n : 1));  // domain -> its panel
+  if (!head || !next || !owner) { free(panel); free(key); free(head); free(next); free(owner); return -1; }
+  for (int v = 0; v < s->nvert; v++) head[v] = -1;
+  s->ndomain = 0;
+  for (int t = 0; t < n; t++) {
+    for (int k = 0; k < 3; k++) {
+      int v = s->tri[3 * t + k], d = head[v];
+      while (d >= 0 && owner[d] != panel[t]) d = next[d];
+      if (d < 0) {
+        d = s->ndomain++;
+        owner[d] = panel[t];
+        next[d] = head[v];
+        head[v] = d;
+      }
+      s->corner_domain[3 * t + k] = d;
+    }
+  }
+  free(panel); free(key); free(head); free(next); free(owner);
+  int nd = s->ndomain > 0 ? s->ndomain : 1;
+  s->domain_area = calloc(nd, sizeof(double));
+  s->domain_eps = malloc(sizeof(double) * 6 * nd);
+  s->domain_sig = malloc(sizeof(double) * 3 * nd);
+  s->tri_eps = malloc(sizeof(double) * 6 * (n > 0 ? n : 1));
+  s->tri_sig = malloc(sizeof(double) * 3 * (n > 0 ? n : 1));
+  if (!s->domain_area || !s->domain_eps || !s->domain_sig || !s->tri_eps || !s->tri_sig) return -1;
+  for (int t = 0; t < n; t++) {
+    for (int k = 0; k < 3; k++) s->domain_area[s->corner_domain[3 * t + k]] += s->area[t] / 3;
+  }
+  return 0;
 }
 
 // Dihedral angle of hinge (x1 x2 o0 o1), positive when the sheet curves towards its normal, and
@@ -1098,16 +1297,7 @@ static void shell_compute(const mjModel* m, mjData* d, int instance, int capabil
     }
   }
 
-  for (int t = 0; t < s->ntri; t++) {
-    const int* v = s->tri + 3 * t;
-    double xt[9], vt[9], gt[9] = {0};
-    for (int k = 0; k < 3; k++) {
-      mju_copy3(xt + 3 * k, x + 3 * v[k]);
-      if (xdot) mju_copy3(vt + 3 * k, xdot + 3 * v[k]);
-    }
-    membrane_triangle(s, t, xt, xdot ? vt : NULL, gt);
-    for (int k = 0; k < 3; k++) mju_addTo3(grad + 3 * v[k], gt + 3 * k);
-  }
+  membrane_forces(s, x, xdot);
   if (s->nhinge > 0) bending_forces(s, x, xdot);
   if (s->nbuiltin_hinge > 0) remove_builtin_bending(s, x, s->builtin_damping > 0 ? xdot : NULL);
   if (s->builtin_metric) remove_builtin_membrane(m, d, s, x);

@@ -536,14 +536,15 @@ class _Elasticity:
 
     @classmethod
     def of(cls, spec, material: ClothMaterial, fallback: bool, implicit_bending: bool, stiffening_bound: float,
-           angle: float, damping: float, name: str = "shell", rest: str = "qpos0") -> "_Elasticity":
+           angle: float, damping: float, name: str = "shell", rest: str = "qpos0",
+           membrane: str = "triangle") -> "_Elasticity":
         """The split of :func:`~yarnfit.mujoco.split.builtin_elasticity` with its plugin instance
         ``name`` added to ``spec``, or with ``fallback`` the isotropic fallback alone."""
         if fallback:
             iso = isotropic_fallback(material.shell)
             return cls(iso.young_pa, iso.poisson, iso.thickness_m, "both", None, iso.notes)
         split = builtin_elasticity(material.shell, bending=implicit_bending, stiffening_bound=stiffening_bound)
-        plugin = _plugin(spec, material.shell, split, angle, damping, name=name, rest=rest)
+        plugin = _plugin(spec, material.shell, split, angle, damping, name=name, rest=rest, membrane=membrane)
         return cls(split.young_pa, split.poisson, split.thickness_m, split.elastic2d, plugin, ())
 
     def apply(self, flex: mujoco.MjsFlex, damping: float, friction: float) -> None:
@@ -554,9 +555,10 @@ class _Elasticity:
 
 
 def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damping: float, name: str = "shell",
-            rest: str = "qpos0"):
+            rest: str = "qpos0", membrane: str = "triangle"):
     """The ``yarnfit.shell`` instance ``name``: the full material, its angle and damping, its rest
-    (``"qpos0"`` or ``"texcoord"``) and ``builtin_*`` written exactly as the ``<elasticity>``
+    (``"qpos0"`` or ``"texcoord"``), its membrane strains (``"triangle"`` or ``"node"``) and, for the
+    qpos0 rest with triangle strains, ``builtin_*`` written exactly as the ``<elasticity>``
     attributes are (``MJCF_DIGITS`` digits)."""
     spec.activate_plugin(PLUGIN_NAME)
     plugin = spec.add_plugin(name=name, plugin_name=PLUGIN_NAME, active=True)
@@ -566,12 +568,15 @@ def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damp
     config["thickness"] = repr(shell.thickness)
     config["angle"] = repr(float(angle))
     config["damping"] = repr(float(damping))
-    if rest == "qpos0":
+    if rest == "qpos0" and membrane == "triangle":
         for key, value in (("builtin_young", split.young_pa), ("builtin_poisson", split.poisson),
                            ("builtin_thickness", split.thickness_m)):
             config[key] = f"{value:.{MJCF_DIGITS}g}"
-    else:  # the plugin removes MuJoCo's built-in part exactly and needs no keys for it
+    # Otherwise the plugin removes MuJoCo's built-in part exactly and needs no keys for it.
+    if rest != "qpos0":
         config["rest"] = rest
+    if membrane != "triangle":
+        config["membrane"] = membrane
     plugin.config = config
     return plugin
 
@@ -606,7 +611,8 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
                    angle: float = 0.0, contype: int = 1, conaffinity: int = 1,
                    implicit_bending: bool = True, pinned: np.ndarray | None = None,
                    stiffening_bound: float = DEFAULT_STIFFENING_BOUND,
-                   rest_uv: np.ndarray | None = None, fallback: bool = False) -> mujoco.MjsFlex:
+                   rest_uv: np.ndarray | None = None, fallback: bool = False,
+                   membrane: str = "triangle") -> mujoco.MjsFlex:
     """One free 2D flex ``name`` with rest positions ``points (n, 3)`` (m) and ``triangles (m, 3)``,
     built as :func:`build_scene` builds its cloth (vertex bodies ``<name>_<v>`` with three slide
     joints, the split's built-in ``<elasticity>`` and a ``yarnfit.shell`` instance
@@ -619,9 +625,14 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
     ``pinned (n,)``, if given, are held on the world at their rest positions (a clamp; the world
     then carries the plugin, as in the ``cloth`` scene). ``fallback``: no plugin, MuJoCo's own
     isotropic elasticity alone with :func:`~yarnfit.mujoco.split.isotropic_fallback`'s material
-    (``elastic2d="both"``), as :func:`build_scene` builds it."""
+    (``elastic2d="both"``), as :func:`build_scene` builds it. ``membrane``: the plugin's membrane
+    strains, ``"triangle"`` (constant per triangle) or ``"node"`` (smoothed over each vertex's third
+    of its triangles: no locking on unstructured meshes, plugins/README.md)."""
+    if membrane not in ("triangle", "node"):
+        raise ValueError(f"membrane must be 'triangle' or 'node', got {membrane!r}")
     elasticity = _Elasticity.of(spec, material, fallback, implicit_bending, stiffening_bound, angle, damping,
-                                name=f"{name}_shell", rest="qpos0" if rest_uv is None else "texcoord")
+                                name=f"{name}_shell", rest="qpos0" if rest_uv is None else "texcoord",
+                                membrane=membrane)
     holders = {} if pinned is None else {"world": np.asarray(pinned, bool)}
     layout = _Layout(np.asarray(points, float), np.asarray(triangles, int), holders, collide=True)
     flex = _cloth(spec, layout, material.areal_density_kg_m2, elasticity.plugin, name=name)
