@@ -92,7 +92,7 @@ static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
   "builtin_young", "builtin_poisson", "builtin_thickness",
   "s00p2", "s00p3", "s00n2", "s00n3", "s11p2", "s11p3", "s11n2", "s11n3", "s22p2", "s22p3", "s22n2", "s22n3",
-  "c01", "c10", "rest", "membrane", "stabilization",
+  "c01", "c10", "rest", "membrane",
 };
 enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 
@@ -110,10 +110,8 @@ typedef struct {
   double* domain_area;  // (ndomain) a third of each of its triangles' rest areas (m^2)
   double* tri_F;        // (ntri x 12) scratch: F0 F1 and their rates per triangle
   double* tri_eps;      // (ntri x 6) scratch: each triangle's Green strain and its rate
-  double* tri_sig;      // (ntri x 3) scratch: dW/d(triangle strain), through its domains
   double* domain_eps;   // (ndomain x 6) scratch: the smoothed strains and rates
   double* domain_sig;   // (ndomain x 3) scratch: dW/d(smoothed strain)
-  double stabilization; // node membrane: the hourglass penalty's modulus over the shear c22 (0: none)
   int rest_texcoord;    // rest="texcoord": rest metric and material axes from the flex's texture
                         // coordinates per triangle corner (a garment's panels), not from qpos0
   // rest="texcoord": MuJoCo's built-in membrane on this flex (elastic2d "stretch" or "both"), which
@@ -264,7 +262,6 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
     if (read_number(m, instance, keys[k].key, keys[k].fallback, keys[k].required, keys[k].value)) return -1;
   }
   if (read_number(m, instance, "c01", 0, 0, &s->c01) || read_number(m, instance, "c10", 0, 0, &s->c10)) return -1;
-  if (read_number(m, instance, "stabilization", 0, 0, &s->stabilization)) return -1;
   const char* membrane = mj_getPluginConfig(m, instance, "membrane");
   if (!membrane || !membrane[0] || !strcmp(membrane, "triangle")) {
     s->node_membrane = 0;
@@ -383,7 +380,6 @@ static void shell_free(Shell* s) {
   free(s->domain_area);
   free(s->tri_F);
   free(s->tri_eps);
-  free(s->tri_sig);
   free(s->domain_eps);
   free(s->domain_sig);
   free(s);
@@ -1064,28 +1060,9 @@ static void membrane_forces(Shell* s, const double* x, const double* xdot) {
     }
   }
   for (int d = 0; d < s->ndomain; d++) membrane_stress(s, s->domain_area[d], s->domain_eps + 6 * d, s->domain_sig + 3 * d);
-  double kappa = s->stabilization * s->membrane[3];
-  for (int t = 0; t < s->ntri; t++) {
-    double* sig = s->tri_sig + 3 * t;
-    mju_zero3(sig);
-    if (kappa > 0) {
-      // Hourglass penalty (kappa/2) sum_t A_t |eps_t - mean of its corners' eps_d|^2: zero for any
-      // strain field the smoothing reproduces, positive on the modes it does not see.
-      double diff[3];
-      mju_copy3(diff, s->tri_eps + 6 * t);
-      for (int k = 0; k < 3; k++) mju_addToScl3(diff, s->domain_eps + 6 * s->corner_domain[3 * t + k], -1.0 / 3);
-      mju_scl3(sig, diff, kappa * s->area[t]);
-    }
-  }
-  if (kappa > 0) {  // the penalty's stress on each eps_d, added to the domains' before they reach the triangles
-    for (int t = 0; t < s->ntri; t++) {
-      for (int k = 0; k < 3; k++) mju_addToScl3(s->domain_sig + 3 * s->corner_domain[3 * t + k], s->tri_sig + 3 * t, -1.0 / 3);
-    }
-  }
   for (int t = 0; t < s->ntri; t++) {
     const int* v = s->tri + 3 * t;
-    double G[6], gt[9] = {0};
-    double* sig = s->tri_sig + 3 * t;
+    double G[6], gt[9] = {0}, sig[3] = {0, 0, 0};
     for (int k = 0; k < 3; k++) {
       int d = s->corner_domain[3 * t + k];
       mju_addToScl3(sig, s->domain_sig + 3 * d, s->area[t] / (3 * s->domain_area[d]));
@@ -1098,17 +1075,17 @@ static void membrane_forces(Shell* s, const double* x, const double* xdot) {
 
 // membrane="node": the smoothing domains. With rest="qpos0" every triangle has the flex's one
 // material frame, so a vertex is one domain. With rest="texcoord" a vertex where panels meet is one
-// domain per panel (F of different panels' frames cannot be averaged): two triangles sharing an
+// domain per panel (strains in different panels' material frames cannot be averaged): two triangles sharing an
 // edge are in one panel when both its vertices have the same texture coordinates in both and
 // their third vertices lie on opposite sides of it in those coordinates (a seam between two
 // panels cut from one pattern has equal coordinates but both panels on the same side).
 static int build_domains(const mjModel* m, Shell* s) {
   int n = s->ntri, f = s->flex;
   int* panel = malloc(sizeof(int) * (n > 0 ? n : 1));
-  int* key = malloc(sizeof(int) * 3 * (n > 0 ? n : 1));
   s->corner_domain = malloc(sizeof(int) * 3 * (n > 0 ? n : 1));
   s->tri_F = malloc(sizeof(double) * 12 * (n > 0 ? n : 1));
-  if (!panel || !key || !s->corner_domain || !s->tri_F) { free(panel); free(key); return -1; }
+  s->tri_eps = malloc(sizeof(double) * 6 * (n > 0 ? n : 1));
+  if (!panel || !s->corner_domain || !s->tri_F || !s->tri_eps) { free(panel); return -1; }
   for (int t = 0; t < n; t++) panel[t] = t;
   if (s->rest_texcoord) {
     int nedge = m->flex_edgenum[f];
@@ -1116,7 +1093,7 @@ static int build_domains(const mjModel* m, Shell* s) {
     const int* corner = m->flex_elemtexcoord + m->flex_elemdataadr[f];
     const float* uv = m->flex_texcoord + 2 * m->flex_texcoordadr[f];
     int* first = malloc(sizeof(int) * (nedge > 0 ? nedge : 1));
-    if (!first) { free(panel); free(key); return -1; }
+    if (!first) { free(panel); return -1; }
     for (int e = 0; e < nedge; e++) first[e] = -1;
     for (int t = 0; t < n; t++) {
       for (int j = 0; j < 3; j++) {
@@ -1168,7 +1145,7 @@ static int build_domains(const mjModel* m, Shell* s) {
   int* head = malloc(sizeof(int) * (s->nvert > 0 ? s->nvert : 1));
   int* next = malloc(sizeof(int) * 3 * (n > 0 ? n : 1));
   int* owner = malloc(sizeof(int) * 3 * (n > 0 ? n : 1));  // domain -> its panel
-  if (!head || !next || !owner) { free(panel); free(key); free(head); free(next); free(owner); return -1; }
+  if (!head || !next || !owner) { free(panel); free(head); free(next); free(owner); return -1; }
   for (int v = 0; v < s->nvert; v++) head[v] = -1;
   s->ndomain = 0;
   for (int t = 0; t < n; t++) {
@@ -1184,14 +1161,12 @@ static int build_domains(const mjModel* m, Shell* s) {
       s->corner_domain[3 * t + k] = d;
     }
   }
-  free(panel); free(key); free(head); free(next); free(owner);
+  free(panel); free(head); free(next); free(owner);
   int nd = s->ndomain > 0 ? s->ndomain : 1;
   s->domain_area = calloc(nd, sizeof(double));
   s->domain_eps = malloc(sizeof(double) * 6 * nd);
   s->domain_sig = malloc(sizeof(double) * 3 * nd);
-  s->tri_eps = malloc(sizeof(double) * 6 * (n > 0 ? n : 1));
-  s->tri_sig = malloc(sizeof(double) * 3 * (n > 0 ? n : 1));
-  if (!s->domain_area || !s->domain_eps || !s->domain_sig || !s->tri_eps || !s->tri_sig) return -1;
+  if (!s->domain_area || !s->domain_eps || !s->domain_sig) return -1;
   for (int t = 0; t < n; t++) {
     for (int k = 0; k < 3; k++) s->domain_area[s->corner_domain[3 * t + k]] += s->area[t] / 3;
   }
