@@ -80,6 +80,11 @@ DROP_GAP = 0.02
 CLAMP_MASS = 0.1
 SERVO_STIFFNESS_RATIO = 100.0
 MESHES = ("grid", "crisscross")
+# The plugin's membrane strains: smoothed over each vertex's third of its triangles ("node", no
+# locking on any triangulation; the default), or constant per triangle ("triangle", which locks on
+# one-diagonal and unstructured cells); plugins/README.md.
+MEMBRANES = ("node", "triangle")
+DEFAULT_MEMBRANE = "node"
 # MJCF elastic2d names to mjtElastic2D values (none, bend, stretch, both).
 ELASTIC2D = {"none": 0, "bend": 1, "stretch": 2, "both": 3}
 
@@ -183,6 +188,7 @@ def build_scene(
     mesh: str = "grid",
     implicit_bending: bool = True,
     stiffening_bound: float = DEFAULT_STIFFENING_BOUND,
+    membrane: str = DEFAULT_MEMBRANE,
 ) -> BuiltScene:
     """Build one of :data:`SCENES` for ``material`` (see the module docstring).
 
@@ -206,6 +212,9 @@ def build_scene(
             carries all the bending explicitly (``elastic2d="stretch"``, as before issue 15).
         stiffening_bound: the built-in membrane share also covers half the strain-stiffening
             membrane's tangent up to this stiffening strain (:func:`~yarnfit.mujoco.split.builtin_elasticity`).
+        membrane: the plugin's membrane strains, one of :data:`MEMBRANES`: ``"node"`` (smoothed over
+            each vertex's third of its triangles: no locking on any triangulation) or ``"triangle"``
+            (constant per triangle: locks on one-diagonal and unstructured cells); plugins/README.md.
 
     Raises:
         ValueError: an unknown scene, integrator or mesh, a non-positive resolution, size, timestep,
@@ -237,7 +246,8 @@ def build_scene(
     else:
         layout = _square(spec, scene, resolution, size, friction, mesh == "crisscross")
 
-    elasticity = _Elasticity.of(spec, material, fallback, implicit_bending, stiffening_bound, angle, damping)
+    elasticity = _Elasticity.of(spec, material, fallback, implicit_bending, stiffening_bound, angle, damping,
+                                membrane=membrane)
     flex = _cloth(spec, layout, material.areal_density_kg_m2, elasticity.plugin)
     elasticity.apply(flex, damping, friction)
     flex.contype = flex.conaffinity = 1 if layout.collide else 0
@@ -537,9 +547,11 @@ class _Elasticity:
     @classmethod
     def of(cls, spec, material: ClothMaterial, fallback: bool, implicit_bending: bool, stiffening_bound: float,
            angle: float, damping: float, name: str = "shell", rest: str = "qpos0",
-           membrane: str = "triangle") -> "_Elasticity":
+           membrane: str = DEFAULT_MEMBRANE) -> "_Elasticity":
         """The split of :func:`~yarnfit.mujoco.split.builtin_elasticity` with its plugin instance
         ``name`` added to ``spec``, or with ``fallback`` the isotropic fallback alone."""
+        if membrane not in MEMBRANES:
+            raise ValueError(f"unknown membrane {membrane!r}; membranes: {', '.join(MEMBRANES)}")
         if fallback:
             iso = isotropic_fallback(material.shell)
             return cls(iso.young_pa, iso.poisson, iso.thickness_m, "both", None, iso.notes)
@@ -555,7 +567,7 @@ class _Elasticity:
 
 
 def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damping: float, name: str = "shell",
-            rest: str = "qpos0", membrane: str = "triangle"):
+            rest: str = "qpos0", membrane: str = DEFAULT_MEMBRANE):
     """The ``yarnfit.shell`` instance ``name``: the full material, its angle and damping, its rest
     (``"qpos0"`` or ``"texcoord"``), its membrane strains (``"triangle"`` or ``"node"``) and, for the
     qpos0 rest with triangle strains, ``builtin_*`` written exactly as the ``<elasticity>``
@@ -612,7 +624,7 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
                    implicit_bending: bool = True, pinned: np.ndarray | None = None,
                    stiffening_bound: float = DEFAULT_STIFFENING_BOUND,
                    rest_uv: np.ndarray | None = None, fallback: bool = False,
-                   membrane: str = "triangle") -> mujoco.MjsFlex:
+                   membrane: str = DEFAULT_MEMBRANE) -> mujoco.MjsFlex:
     """One free 2D flex ``name`` with rest positions ``points (n, 3)`` (m) and ``triangles (m, 3)``,
     built as :func:`build_scene` builds its cloth (vertex bodies ``<name>_<v>`` with three slide
     joints, the split's built-in ``<elasticity>`` and a ``yarnfit.shell`` instance
@@ -625,11 +637,8 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
     ``pinned (n,)``, if given, are held on the world at their rest positions (a clamp; the world
     then carries the plugin, as in the ``cloth`` scene). ``fallback``: no plugin, MuJoCo's own
     isotropic elasticity alone with :func:`~yarnfit.mujoco.split.isotropic_fallback`'s material
-    (``elastic2d="both"``), as :func:`build_scene` builds it. ``membrane``: the plugin's membrane
-    strains, ``"triangle"`` (constant per triangle) or ``"node"`` (smoothed over each vertex's third
-    of its triangles: no locking on unstructured meshes, plugins/README.md)."""
-    if membrane not in ("triangle", "node"):
-        raise ValueError(f"membrane must be 'triangle' or 'node', got {membrane!r}")
+    (``elastic2d="both"``), as :func:`build_scene` builds it. ``membrane``: as for
+    :func:`build_scene`."""
     elasticity = _Elasticity.of(spec, material, fallback, implicit_bending, stiffening_bound, angle, damping,
                                 name=f"{name}_shell", rest="qpos0" if rest_uv is None else "texcoord",
                                 membrane=membrane)

@@ -49,7 +49,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ..mujoco.scenes import ClothMaterial, build_scene, compile_quietly
+from ..mujoco.scenes import DEFAULT_MEMBRANE, ClothMaterial, build_scene, compile_quietly
 from ..record import Recording, markdown_table
 from . import DIRECTIONS, SceneResult
 
@@ -64,6 +64,8 @@ RESOLUTION = {False: 25, True: 9}
 # times its force on the quick mesh and 3.8 times on the full one, a jersey's strips twice and
 # 1.25 times (locking); criss-cross cells stay within 6 % on the quick mesh.
 MESH = "crisscross"
+# The plugin's membrane strains in the strips, and the same smoothing in their clamped law.
+MEMBRANE = DEFAULT_MEMBRANE
 # Seconds over which the clamp moves from one level to the next: slow against the strip's and the
 # servo's time constants (ms), so the pull is quasi-static.
 RAMP_SECONDS = 0.05
@@ -138,7 +140,7 @@ def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bo
     if not levels:
         raise ValueError(f"max_strain must be at least {STRAIN_LEVELS[0]}, got {max_strain!r}")
     built = build_scene(material, "stretch", resolution=resolution or RESOLUTION[quick], size=length, width=width,
-                        angle=angle, max_strain=levels[-1], mesh=MESH)
+                        angle=angle, max_strain=levels[-1], mesh=MESH, membrane=MEMBRANE)
     model = compile_quietly(built.spec)
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
@@ -202,7 +204,7 @@ def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bo
     wall = time.perf_counter() - start
     return StripResult(f"{strip}_{direction}", length, width, angle, np.array(strains), np.array(forces),
                        np.array(ratios), np.array(settled), wall,
-                       clamped_strip_stiffness(material.shell, rest, triangles, angle), np.array(stable))
+                       clamped_strip_stiffness(material.shell, rest, triangles, angle, MEMBRANE), np.array(stable))
 
 
 def elastic_clamp_force(model, data, still, pull_dof: int) -> float:
@@ -234,11 +236,11 @@ def clamped_strip_stiffness(shell, points: np.ndarray, triangles: np.ndarray, an
     smallest x are fixed, those at the largest x move by ``δ`` along x and none across; the width
     is the y extent.
 
-    ``smoothing="node"`` is a study, not the plugin's element: the strain is smoothed over each
+    ``smoothing="node"``, the plugin's ``membrane="node"``: the strain is smoothed over each
     vertex's share of its triangles (a third of each, the node-based smoothed FEM of Liu et al.),
     ``ε_k = Σ_t (A_t/3) ε_t / Σ_t (A_t/3)``, energy ``½ Σ_k A_k ε_kᵀ h S ε_k``: as many strain
     constraints as vertices instead of triangles, which is what frees meshes that lock
-    (plugins/README.md, Discretisation).
+    (plugins/README.md, Membrane strains).
     """
     from scipy.sparse import coo_matrix, diags, kron
     from scipy.sparse.linalg import spsolve
