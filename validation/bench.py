@@ -531,8 +531,9 @@ def _drape_trial(material, cell: float, timestep: float, seconds: float, split: 
 def bench_drape_stable_step() -> None:
     """Largest stable step of the sphere drape (0.3 m swatch, 9 cm sphere, discrete, Newton) of the
     five presets at 2, 1 and 0.5 cm cells, before issue 15 (all bending explicit in the plugin, the
-    built-in part covering half of S) and now (the built-in part also bends, and covers the
-    stiffening up to split.DEFAULT_STIFFENING_BOUND), with ms per step and per simulated second at
+    built-in part covering half of S, constant-strain triangles), with the built-in part also
+    bending and covering the stiffening up to split.DEFAULT_STIFFENING_BOUND ("triangle"), and now
+    (that, with node-smoothed membrane strains), with ms per step and per simulated second at
     that step and the centre of mass's height at the end (a step that drags the drape shows as a
     higher cloth). Long: hours at 0.5 cm."""
     import tempfile
@@ -543,7 +544,8 @@ def bench_drape_stable_step() -> None:
     from yarnfit.fabric_fit import fit_fabric
     from yarnfit.mujoco.scenes import ClothMaterial
 
-    variants = {"before": {"implicit_bending": False, "stiffening_bound": 0.0}, "now": {}}
+    variants = {"before": {"implicit_bending": False, "stiffening_bound": 0.0, "membrane": "triangle"},
+                "triangle": {"membrane": "triangle"}, "now": {}}
     for name in PRESETS:
         with warnings.catch_warnings(), tempfile.TemporaryDirectory() as folder:
             warnings.simplefilter("ignore")

@@ -105,10 +105,11 @@ def build_parser() -> argparse.ArgumentParser:
             "Write a MuJoCo scene with a material file's cloth: cloth (hanging from two corners), stretch (a FAB "
             "strip between two clamps, the right one driven by the position actuator 'pull'), sphere (dropped on a "
             "sphere) or wall (dropped across a wall's top edge). The flex carries MuJoCo's built-in isotropic "
-            "elasticity (stretch, integrated implicitly under the discrete integrator) at least half as stiff as "
-            "the material in every direction, and the yarnfit.shell plugin adds the orthotropic rest and all the "
-            "bending, with the material's strain-stiffening membrane (--linear: the linear StVK membrane fitted "
-            "from the same samples). --fallback writes a plugin-free scene with one isotropic material instead. "
+            "elasticity (integrated implicitly under the discrete integrator) at least half as stiff as the material "
+            "in every direction, which keeps the step stable; the yarnfit.shell plugin removes its forces exactly and "
+            "carries the whole material on node-smoothed strains (no locking on any triangulation), with the "
+            "material's strain-stiffening membrane (--linear: the linear StVK membrane fitted from the same "
+            "samples). --fallback writes a plugin-free scene with one isotropic material instead. "
             "Lengths in m, times in s."
         ),
     )
