@@ -2,9 +2,11 @@
 prints its summary and writes the recording the README documents."""
 
 import json
+import os
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -237,3 +239,67 @@ def test_a_strict_fit_that_asks_for_an_indefinite_shell_fails_naming_the_family(
     data = json.loads(output.read_text())
     coupling = {"biaxial_stretch": "s01", "saddle_bend": "b01"}[named.group(1)]
     assert coupling in data["fit"]["active_bounds"] and any(named.group(1) in n for n in data["fit"]["notes"])
+
+
+# -- early errors, first run ----------------------------------------------------------------------
+
+# An output checked before any computation fails in well under this (a fit's relaxation alone
+# takes 10 s and more): the check ran first.
+EARLY_ERROR_SECONDS = 5.0
+
+
+def run_here(*args: str, cwd=None) -> subprocess.CompletedProcess:
+    """``python -m yarnfit.cli`` with this checkout's yarnfit first on the path."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(yarnfit.__file__).parents[1]),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run([sys.executable, "-m", "yarnfit.cli", *args], capture_output=True, text=True, timeout=120,
+                          cwd=cwd, env=env)
+
+
+@pytest.mark.parametrize("command, option, what", [
+    (("fit", "cotton-jersey"), ("-o", "{bad}/jersey.json"), "material file"),
+    (("fit", "cotton-jersey"), ("--rerun", "{bad}/jersey.rrd"), "--rerun recording"),
+    (("relax", "cotton-jersey"), ("--rerun", "{bad}/jersey.rrd"), "--rerun recording"),
+    (("relax", "cotton-jersey"), ("-o", "{bad}/jersey.pyp"), "relaxed pattern"),
+    (("validate", "{material}"), ("--logs", "{bad}/logs"), "--logs directory"),
+])
+def test_an_output_that_cannot_be_written_fails_first(command, option, what, tmp_path):
+    """Every output path is checked writable before any computation: one line, exit 2."""
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file where a directory is needed")
+    material = tmp_path / "m.json"
+    material.write_text("{}")
+    fill = {"bad": str(blocker), "material": str(material)}
+    start = time.perf_counter()
+    out = run_here(*[a.format(**fill) for a in command], option[0], option[1].format(**fill), cwd=tmp_path)
+    assert time.perf_counter() - start < EARLY_ERROR_SECONDS
+    assert out.returncode == 2, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and what in out.stderr and "Traceback" not in out.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blocker", "m.json"]
+
+
+def test_first_compilation_is_announced():
+    """Numba's compilations (not its cache loads) inside the block say so, once."""
+    from numba import njit
+
+    from yarnfit.cli import announce_compilation
+
+    class Line:
+        said = []
+
+        def message(self, text, force=False):
+            self.said.append(text)
+
+    line = Line()
+
+    @njit  # a new function, never cached: compiling it is a first run
+    def twice(x):
+        return 2 * x
+
+    with announce_compilation(line):
+        assert twice(2) == 4
+        assert twice(2.5) == 5.0  # a second compilation says nothing more
+    assert line.said == ["compiling kernels (first run only)"]
+    with announce_compilation(line):
+        twice(3)  # compiled already
+    assert len(line.said) == 1

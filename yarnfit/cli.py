@@ -1,13 +1,16 @@
 """The ``yarnfit`` command line.
 
 Units at this edge follow textile labels (g/m², threads or stitches per cm, mm, µm); everything
-behind it is SI. Errors in the input print one line and exit with status 2; a relaxation that does
-not converge prints its residuals and exits with status 1.
+behind it is SI. Errors in the input print one line and exit with status 2 (every output path is
+checked writable before any computation); a relaxation that does not converge prints its residuals
+and exits with status 1; Ctrl-C stops the work, its workers and queued tasks, writes nothing and
+exits with status 130 after one line.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import sys
 import time
@@ -15,10 +18,13 @@ from pathlib import Path
 
 from . import __version__
 from .fibers import SPINNING_SYSTEMS
+from .outputs import check_writable
 from .yarn import YARN_MODELS
 
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+# What a shell reports for a program ended by SIGINT (128 + 2), so scripts see an interrupt.
+EXIT_INTERRUPTED = 130
 
 
 class UsageError(Exception):
@@ -90,6 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "fitting the coupling s01 or b01 at the positive-definite bound |rho| = 0.99")
     fit.add_argument("--workers", type=int, default=None, metavar="N",
                      help="processes solving samples (default: every core)")
+    fit.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                     help="solve the samples on this Dask scheduler's workers instead of local processes")
     fit.add_argument("--name", help="label for the output files (default: preset, pattern or file name)")
     fit.add_argument("-o", "--output", metavar="MATERIAL.json", help="material file (default: <name>.json)")
     fit.add_argument("--rerun", metavar="FILE.rrd", help="Rerun recording of the fit (default: logs/<name>-fit.rrd)")
@@ -262,6 +270,29 @@ def _renamed(fabric, name: str):
     return replace(fabric, name=name)
 
 
+@contextlib.contextmanager
+def announce_compilation(line: "ProgressLine"):
+    """Say "compiling kernels (first run only)" on ``line`` when Numba first compiles a kernel
+    inside the block: the kernels are cached on disk (``cache=True``), so only a first run (or one
+    after an upgrade) compiles, for about 25 s, and would otherwise sit silent. Numba's event API
+    reports compilations, not cache loads."""
+    from numba.core import event
+
+    class Listener(event.Listener):
+        said = False
+
+        def on_start(self, ev):
+            if not self.said:
+                self.said = True
+                line.message("compiling kernels (first run only)", force=True)
+
+        def on_end(self, ev):
+            pass
+
+    with event.install_listener("numba:compile", Listener()):
+        yield
+
+
 # -- commands ---------------------------------------------------------------------------------
 
 
@@ -344,7 +375,9 @@ def cmd_relax(args: argparse.Namespace) -> int:
     from .relax import OVERLAP_TOLERANCE, relax
 
     fabric = fabric_from_arguments(args)
-    path = Path(args.rerun) if args.rerun else Path("logs") / f"{fabric.name}.rrd"
+    path = check_writable(Path(args.rerun) if args.rerun else Path("logs") / f"{fabric.name}.rrd", "--rerun recording")
+    if args.output:
+        check_writable(args.output, "relaxed pattern")
     recording = None  # opened once the fabric has given a valid pattern: bad input writes no file
     line = ProgressLine()
 
@@ -380,6 +413,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
     from .samples import design_size
     from .fabric_fit import DEFAULT_SAMPLES, fit_fabric
     from .record import FitRecording
+    from .tasks import make_backend
 
     fabric = fabric_from_arguments(args)
     samples = DEFAULT_SAMPLES if args.samples is None else args.samples
@@ -388,8 +422,9 @@ def cmd_fit(args: argparse.Namespace) -> int:
                          f"got {samples}")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be at least 1, got {args.workers}")
-    output = Path(args.output) if args.output else Path(f"{fabric.name}.json")
-    path = Path(args.rerun) if args.rerun else Path("logs") / f"{fabric.name}-fit.rrd"
+    output = check_writable(Path(args.output) if args.output else Path(f"{fabric.name}.json"), "material file")
+    path = check_writable(Path(args.rerun) if args.rerun else Path("logs") / f"{fabric.name}-fit.rrd",
+                          "--rerun recording")
     line = ProgressLine()
     sampling_started = [0.0]
 
@@ -407,9 +442,10 @@ def cmd_fit(args: argparse.Namespace) -> int:
                      force=not result.converged or done == total)
 
     line.message(f"{fabric.name}: relaxing the repeat", force=True)
-    fitted = fit_fabric(fabric, samples=samples, model=args.model, workers=args.workers, on_relaxed=on_relaxed,
-                        on_sample=on_sample, on_relax_iteration=line, on_relax_start=line.start_relaxation,
-                        coupling_limit=None if args.strict else COUPLING_LIMIT)
+    with make_backend(args.scheduler, args.workers) as backend, announce_compilation(line):
+        fitted = fit_fabric(fabric, samples=samples, model=args.model, on_relaxed=on_relaxed, on_sample=on_sample,
+                            on_relax_iteration=line, on_relax_start=line.start_relaxation,
+                            coupling_limit=None if args.strict else COUPLING_LIMIT, backend=backend)
     line.close()
     fitted.write(output)
     recording = FitRecording(fabric.name, path)
@@ -440,7 +476,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     material = ClothMaterial.from_file(args.material, None if args.gsm is None else args.gsm * 1e-3,
                                        linear=args.linear)
     suffix = "-fallback" if args.fallback else ""
-    output = Path(args.output) if args.output else Path(f"{material.name}-{args.scene}{suffix}.xml")
+    output = check_writable(Path(args.output) if args.output else Path(f"{material.name}-{args.scene}{suffix}.xml"),
+                            "scene file")
     strip = {} if args.width is None else {"width": args.width}
     built = export_scene(material, args.scene, output, resolution=args.resolution, size=args.size, **strip,
                          timestep=args.timestep, integrator=args.integrator, friction=args.friction,
@@ -588,6 +625,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
         raise UsageError(f"--scenes: unknown scene {', '.join(unknown) or '(none given)'}; "
                          f"scenes: {', '.join(VALIDATION_SCENES)}")
     reference = read_reference(args.reference) if args.reference else None
+    check_writable(args.logs, "--logs directory", directory=True)
 
     def progress(message: str) -> None:
         print(f"  {message}", file=sys.stderr, flush=True)
@@ -623,6 +661,13 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return COMMANDS[args.command](args)
+    except KeyboardInterrupt:
+        # The work has been stopped where it ran (yarnfit.tasks); outputs are written whole at the
+        # end or not at all, and recordings streamed so far are deleted.
+        if "yarnfit.record" in sys.modules:
+            sys.modules["yarnfit.record"].Recording.discard_open()
+        print(f"\nyarnfit {args.command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except (IndefiniteFitError, UnusableRelaxation) as error:
         # The input was fine; the computation did not give a usable result.
         print(f"yarnfit {args.command}: failed: {_first_line(error)}", file=sys.stderr)

@@ -24,6 +24,7 @@ from .material_file import MaterialFile
 from .relax import RelaxedRepeat, relax
 from .samples import SampleRanges, SampleResult, design_size, levels_for, sample_design
 from .shell import ShellMaterial
+from .tasks import Backend
 
 # Four magnitudes per family and sign, from 0.1 % (1 /m) to the range, uniaxial tension at the
 # third, and the undeformed sample (55 in all): the fewest that give each side of a direction its
@@ -73,7 +74,8 @@ class FabricFit:
         return MaterialFile.from_fit(self).data
 
     def write(self, path: str | os.PathLike) -> Path:
-        """Write the material file (directories created); returns its path."""
+        """Write the material file (directories created, written whole or not at all); returns
+        its path."""
         return MaterialFile.from_fit(self).write(path)
 
 
@@ -89,12 +91,14 @@ def fit_fabric(
     on_relax_iteration: Callable | None = None,
     on_relax_start: Callable | None = None,
     coupling_limit: float | None = COUPLING_LIMIT,
+    backend: Backend | None = None,
 ) -> FabricFit:
     """Relax ``fabric`` (unless ``relaxed`` is given), solve about ``samples`` samples over
     ``ranges`` (default :func:`yarnfit.homogenize.default_ranges`) on ``workers`` processes, and fit
     the shell (``model`` "full" or "paper"). ``on_relax_iteration`` and ``on_relax_start`` go to
     :func:`yarnfit.relax.relax`; ``on_relaxed(relaxed)`` is called once the repeat is relaxed,
-    ``on_sample(done, total, result)`` after each sample. ``coupling_limit`` bounds the couplings
+    ``on_sample(done, total, result)`` after each sample. ``backend`` runs the samples instead of
+    a pool of ``workers`` (:mod:`yarnfit.tasks`: a Dask cluster). ``coupling_limit`` bounds the couplings
     (see :func:`yarnfit.fit.fit_shell`; ``None``: unbounded, an indefinite fit raises).
 
     Raises ``ValueError`` for bad options, :class:`UnusableRelaxation` for a relaxation that did
@@ -118,7 +122,7 @@ def fit_fabric(
     ranges = ranges or default_ranges(relaxed)
     specs = sample_design(ranges, levels)
     start = time.perf_counter()
-    results = solve_samples(relaxed, specs, workers=workers, on_sample=on_sample)
+    results = solve_samples(relaxed, specs, workers=workers, on_sample=on_sample, backend=backend)
     seconds["homogenize"] = time.perf_counter() - start
     start = time.perf_counter()
     shell = fit_shell(results, shell_thickness(relaxed), model=model,

@@ -27,11 +27,9 @@ area) with its residual is the sample's result. Samples are independent and run 
 from __future__ import annotations
 
 import math
-import multiprocessing
 import os
 import time
 import warnings
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
@@ -46,6 +44,7 @@ from .engine.tiling import CurvedTiling, retile
 from .relax import RelaxedRepeat, yarn_centroid_constraints
 from .samples import SampleRanges, SampleResult, SampleSpec
 from .shell import as_first_fundamental_form, as_second_fundamental_form
+from .tasks import Backend, LocalPool, Task, run_tasks
 
 # A bend whose |det II'| is below this fraction of ‖II'‖² is a cylinder (developable); the
 # sample design's bends are exactly singular or far from it.
@@ -545,16 +544,19 @@ def default_ranges(relaxed: RelaxedRepeat) -> SampleRanges:
 
 # -- many samples in parallel ---------------------------------------------------------------------
 
-_WORKER_REPEAT: RelaxedRepeat | None = None
 
-
-def _worker_start(relaxed: RelaxedRepeat) -> None:
-    global _WORKER_REPEAT
-    _WORKER_REPEAT = relaxed
-
-
-def _worker_solve(index: int, spec: SampleSpec) -> tuple[int, SampleResult]:
-    return index, solve_sample(_WORKER_REPEAT, spec)
+def sample_tasks(relaxed, specs: Sequence[SampleSpec], key: Callable[[int], object] = lambda i: i,
+                 label: str = "") -> list[Task]:
+    """One :class:`~yarnfit.tasks.Task` per sample: ``solve_sample(relaxed, spec)`` keyed
+    ``key(i)``, ranked so that the longest start first (the uniaxial searches, 5–15 solves each;
+    then the membrane samples by strain, large stretches taking the most Newton iterations; then
+    the bends). ``relaxed`` may be a :class:`~yarnfit.tasks.Result` placeholder (a catalogue's
+    relaxation task)."""
+    order = sorted(range(len(specs)), key=lambda i: _expected_cost(specs[i]), reverse=True)
+    rank = {i: len(specs) - r for r, i in enumerate(order)}
+    return [Task(key(i), solve_sample, (relaxed, spec), cost=rank[i],
+                 label=f"{label}sample {i + 1}/{len(specs)} ({spec.family} {spec.parameter:+.3g})")
+            for i, spec in enumerate(specs)]
 
 
 def solve_samples(
@@ -562,42 +564,30 @@ def solve_samples(
     specs: Sequence[SampleSpec],
     workers: int | None = None,
     on_sample: Callable[[int, int, SampleResult], None] | None = None,
+    backend: Backend | None = None,
 ) -> list[SampleResult]:
-    """Solve every sample, on ``workers`` processes (default: every core; 1 runs in this
-    process). ``on_sample(done, total, result)`` is called as each finishes. Results come back in
-    the order of ``specs``."""
-    workers = (os.cpu_count() or 1) if workers is None else int(workers)
-    if workers < 1:
-        raise ValueError(f"workers must be at least 1, got {workers}")
-    workers = min(workers, len(specs))
-    results: list[SampleResult | None] = [None] * len(specs)
-    if workers <= 1:
-        for i, spec in enumerate(specs):
-            results[i] = solve_sample(relaxed, spec)
-            if on_sample is not None:
-                on_sample(i + 1, len(specs), results[i])
-        return results
-    # Fork where the platform has it: a spawned worker re-imports the caller's main module, which
-    # re-runs any unguarded script (it hung the first trial). The workers touch neither the
-    # parent's threads (a Rerun recording) nor Numba's thread pool; they only run serial kernels.
-    method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    context = multiprocessing.get_context(method)
-    with ProcessPoolExecutor(workers, mp_context=context, initializer=_worker_start, initargs=(relaxed,)) as pool:
-        # Longest first, so that no long sample starts last while the other workers idle: the
-        # uniaxial searches (5–15 solves), then the membrane samples by strain (large stretches
-        # take the most Newton iterations), then the bends.
-        order = sorted(range(len(specs)), key=lambda i: _expected_cost(specs[i]), reverse=True)
-        pending = {pool.submit(_worker_solve, i, specs[i]) for i in order}
-        done = 0
-        while pending:
-            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for future in finished:
-                i, result = future.result()
-                results[i] = result
-                done += 1
-                if on_sample is not None:
-                    on_sample(done, len(specs), result)
-    return results
+    """Solve every sample on ``backend`` (default: a :class:`~yarnfit.tasks.LocalPool` of
+    ``workers`` processes, every core by default; 1 runs in this process). ``on_sample(done,
+    total, result)`` is called as each finishes. Results come back in the order of ``specs``.
+
+    A sample whose solve raises makes this raise it (after the others finished); Ctrl-C stops the
+    workers and raises ``KeyboardInterrupt`` (:mod:`yarnfit.tasks`)."""
+    if backend is None:
+        workers = (os.cpu_count() or 1) if workers is None else int(workers)
+        if workers < 1:
+            raise ValueError(f"workers must be at least 1, got {workers}")
+        with LocalPool(min(workers, max(1, len(specs)))) as pool:
+            return solve_samples(relaxed, specs, on_sample=on_sample, backend=pool)
+
+    def done(task, outcome, count, total):
+        if on_sample is not None and not isinstance(outcome, BaseException):
+            on_sample(count, total, outcome)
+
+    outcomes = run_tasks(sample_tasks(relaxed, specs), backend, on_done=done)
+    for i in range(len(specs)):
+        if isinstance(outcomes[i], BaseException):
+            raise outcomes[i]
+    return [outcomes[i] for i in range(len(specs))]
 
 
 def _expected_cost(spec: SampleSpec) -> tuple:

@@ -57,6 +57,7 @@ from typing import TYPE_CHECKING
 from . import __version__
 from .fibers import OPTIONAL_FIBER_FIELDS, Fiber
 from .jsonfile import read_json
+from .outputs import write_atomically
 from .checks import check_keys
 from .shell import PARAMETER_NAMES, ShellMaterial
 
@@ -145,11 +146,9 @@ class MaterialFile:
         return cls(data, "material")
 
     def write(self, path: str | os.PathLike) -> Path:
-        """Write the file (directories created; strict JSON); returns its path."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.data, indent=2, allow_nan=False) + "\n")
-        return path
+        """Write the file (directories created; strict JSON; whole or not at all: a temporary file
+        renamed over ``path``); returns its path."""
+        return write_atomically(path, json.dumps(self.data, indent=2, allow_nan=False) + "\n")
 
     # -- reading ------------------------------------------------------------------------------
 

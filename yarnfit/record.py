@@ -103,6 +103,7 @@ Typical use, after the fit::
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -207,20 +208,43 @@ class Recording:
     """One run's ``.rrd`` file: its own stream, the file sink, the recording name, the viewer
     layout and the view coordinates of the ``root`` entity (right-handed, z up)."""
 
+    # Recordings not yet closed, so that an interrupt can discard them all (discard_open()).
+    _open: "set[Recording]" = set()
+
     def __init__(self, name: str, path, layout: rrb.Blueprint, root: str) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        # Streamed to a hidden sibling and renamed on close: an interrupted run leaves no
+        # half-written recording under the name the user asked for (discard() removes it).
+        self.partial = self.path.with_name(f".{self.path.name}.part")
         self.stream = rr.RecordingStream(APPLICATION_ID)
         # The file sink must be attached before anything is logged, or that data is lost.
-        self.stream.save(self.path)
+        self.stream.save(self.partial)
+        Recording._open.add(self)
         self.stream.send_recording_name(name)
         self.stream.send_blueprint(layout)
         self.stream.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
     def close(self) -> None:
-        """Flush everything logged and close the file (writing its footer). Idempotent."""
+        """Flush everything logged, close the file (writing its footer) and give it its name.
+        Idempotent."""
         self.stream.flush()
         self.stream.disconnect()
+        Recording._open.discard(self)
+        if self.partial.exists():
+            os.replace(self.partial, self.path)
+
+    def discard(self) -> None:
+        """Stop recording and delete what was written (an interrupted run). Idempotent."""
+        self.stream.disconnect()
+        Recording._open.discard(self)
+        self.partial.unlink(missing_ok=True)
+
+    @classmethod
+    def discard_open(cls) -> None:
+        """Discard every recording not closed yet (what an interrupted command leaves)."""
+        for recording in list(cls._open):
+            recording.discard()
 
     def log_markdown(self, entity: str, text: str, static: bool = False) -> None:
         self.stream.log(entity, rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=static)
