@@ -88,17 +88,28 @@ def test_the_cache_skips_what_it_has_and_recomputes_what_changed(tmp_path):
     with LocalPool(2) as pool:
         first = run_tasks(graph(str(calls)), pool, cache=cache)
     assert first["c"] == 25 and len(os.listdir(calls)) == 2
-    # Failures are not cached; successes are, whole files only.
-    assert len(list((tmp_path / "cache").glob("*.pkl"))) == 5
+    # Results and the inputs' own failures (d's ValueError) are cached, whole files only; skips
+    # are not (they follow from d).
+    assert len(list((tmp_path / "cache").glob("*.pkl"))) == 6
     assert not list((tmp_path / "cache").glob("*.part"))
     with LocalPool(2) as pool:
         again = run_tasks(graph(str(calls)), pool, cache=cache)
     assert again["c"] == 25 and len(os.listdir(calls)) == 2  # nothing recomputed
+    assert isinstance(again["d"], ValueError) and isinstance(again["f"], SkippedTask)
+    # Wanting only c: its cached result is loaded, nothing upstream is run or loaded.
+    assert run_tasks(graph(str(calls)), LocalPool(1), cache=cache, wanted=["c"]) == {"c": 25}
     changed = [Task("a", record_call, (str(calls), "a", 5)) if t.key == "a" else t for t in graph(str(calls))]
     with LocalPool(2) as pool:
         third = run_tasks(changed, pool, cache=cache)
     # a changed: a, a2 and c ran again (a's key changed, and with it its dependents'); b did not.
     assert third["c"] == 41 and sorted(n.split("-")[0] for n in os.listdir(calls)) == ["a", "a", "b"]
+
+
+def test_a_failure_of_the_machine_is_not_cached(tmp_path):
+    cache = TaskCache(tmp_path)
+    tasks = [Task("lost", open, ("/nonexistent/x",))]  # an OSError: the machine's, not the inputs'.
+    assert isinstance(run_tasks(tasks, LocalPool(1), cache=cache)["lost"], OSError)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_stopped_pool_leaves_no_worker_behind():

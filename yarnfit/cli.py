@@ -150,6 +150,32 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--self-collision", action="store_true", help="let the cloth collide with itself (slower)")
     export.add_argument("--check", type=float, metavar="SECONDS",
                         help="then step the scene this long and report stability and ms/step (exit 1 if unstable)")
+    catalogue = commands.add_parser(
+        "catalogue",
+        help="fit, export and validate every fabric of a labels table (CSV), locally or on a Dask cluster",
+        description=(
+            "Fit, export and (with --validate) validate every row of a CSV labels table: a header row "
+            "name,fibre,pattern,gsm,counts (gsm in g/m², counts per cm as 18x13, empty for the pattern's typical "
+            "counts) and optional yarn_model, yarn_spinning, yarn_packing, yarn_twist_deg columns; one fabric per "
+            "row. Writes DIR/<name>.json, DIR/<name>-cloth.xml and one table, DIR/catalogue.csv and "
+            "DIR/catalogue.parquet, of inputs, engineering constants, fit quality and verdicts. The work runs as "
+            "tasks on local worker processes, a local Dask cluster (--dask) or an existing Dask scheduler "
+            "(--scheduler); results are cached in DIR/.cache, so a rerun or an interrupted run resumes without "
+            "recomputing. A failing row gets its one-line reason in the table; the others still complete."
+        ),
+    )
+    catalogue.add_argument("labels", metavar="LABELS.csv", help="the labels table")
+    catalogue.add_argument("-o", "--output", required=True, metavar="DIR", help="where the results go")
+    catalogue.add_argument("--samples", type=int, default=None, metavar="N",
+                           help="about how many deformation samples per fabric (at least 16; default 55)")
+    catalogue.add_argument("--model", choices=("full", "paper"), default="full", help="as for `yarnfit fit`")
+    catalogue.add_argument("--validate", action="store_true",
+                           help="also run the validation scenes (quick: stretch, sphere, cusick) on each fabric")
+    catalogue.add_argument("--workers", type=int, default=None, metavar="N",
+                           help="local worker processes (default: every core)")
+    catalogue.add_argument("--dask", action="store_true", help="run on a local dask.distributed cluster")
+    catalogue.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on this Dask scheduler's workers")
+
     validate = commands.add_parser(
         "validate",
         help="run the validation suite on a fitted material (stretch tests, drapes, Cusick test, yarn swatch, body)",
@@ -254,14 +280,12 @@ def yarn_from_arguments(args: argparse.Namespace):
 
 def parse_counts(text: str) -> tuple[float, float]:
     """``"AxB"`` per cm → ``(A, B)`` per metre."""
-    parts = text.lower().replace("×", "x").split("x")
+    from .fabric import counts_from_label
+
     try:
-        a, b = (float(p) for p in parts)
-    except ValueError:
-        raise UsageError(f"--counts must look like 30x25 (per cm), got {text!r}") from None
-    if not (math.isfinite(a) and math.isfinite(b) and a > 0 and b > 0):
-        raise UsageError(f"--counts must be two positive numbers per cm, got {text!r}")
-    return a * 100.0, b * 100.0
+        return counts_from_label(text)
+    except ValueError as error:
+        raise UsageError(f"--{error}") from None
 
 
 def _renamed(fabric, name: str):
@@ -645,8 +669,56 @@ def cmd_validate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_catalogue(args: argparse.Namespace) -> int:
+    from .catalogue import read_labels, run_catalogue
+    from .fabric_fit import DEFAULT_SAMPLES
+    from .samples import design_size
+    from .tasks import make_backend
+
+    samples = DEFAULT_SAMPLES if args.samples is None else args.samples
+    if samples < design_size(1):
+        raise UsageError(f"--samples must be at least {design_size(1)}, got {samples}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    read_labels(args.labels)  # a file that cannot be read fails before any worker starts
+    out = check_writable(args.output, "catalogue directory", directory=True)
+    line = ProgressLine()
+    failures = [0]
+
+    def on_done(task, outcome, done, total):
+        if isinstance(outcome, BaseException) and task.key[0] in ("relax", "fit", "export", "validate") \
+                and type(outcome).__name__ != "SkippedTask":
+            failures[0] += 1
+            line.message(f"{task.describe()}: failed: {_first_line(outcome)}", force=True)
+        width = 30
+        bar = "#" * round(width * done / total) + "." * (width - round(width * done / total))
+        line.message(f"[{bar}] {done}/{total} tasks, {failures[0]} failed  [{time.perf_counter() - line.start:.0f} s] "
+                     f"{task.describe()}", force=done == total)
+
+    with make_backend(args.scheduler, args.workers, dask=args.dask) as backend, announce_compilation(line):
+        run = run_catalogue(args.labels, out, backend, samples=samples, model=args.model, validate=args.validate,
+                            on_done=on_done)
+    line.close()
+    width = max(len(e.label.name) for e in run.entries)
+    for entry in run.entries:
+        if entry.status == "ok":
+            e = entry.engineering
+            verdicts = "" if entry.verdicts_passed is None else \
+                f", checks passed {entry.verdicts_passed}" + (f", missed: {', '.join(entry.verdicts_failed)}"
+                                                              if entry.verdicts_failed else "")
+            print(f"  {entry.label.name:<{width}}  ok      weft {e.get('weft_stretch_n_per_m', math.nan):7.4g} N/m, "
+                  f"warp {e.get('warp_stretch_n_per_m', math.nan):7.4g} N/m, fit error ≤ {100 * entry.fit_max_relative_rms:.2g} % "
+                  f"({entry.fit_worst_family}){verdicts}")
+        else:
+            print(f"  {entry.label.name or '(line ' + str(entry.label.line) + ')':<{width}}  FAILED  "
+                  f"{entry.stage}: {entry.reason}")
+    print(f"catalogue: {len(run.entries) - len(run.failed)} of {len(run.entries)} fabrics ok; {run.table_csv}, "
+          f"{run.table_parquet}")
+    return EXIT_FAILED if run.failed else 0
+
+
 COMMANDS = {"materials": cmd_materials, "patterns": cmd_patterns, "relax": cmd_relax, "fit": cmd_fit,
-            "export": cmd_export, "validate": cmd_validate}
+            "export": cmd_export, "validate": cmd_validate, "catalogue": cmd_catalogue}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -53,6 +53,22 @@ DEFAULT_COUNTS_PER_CM: dict[str, tuple[float, float]] = {
     "seed": (14.0, 10.0),
 }
 
+def counts_from_label(text: str) -> tuple[float, float]:
+    """Counts as a label gives them, ``"AxB"`` per cm (``x`` or ``×``), as ``(A, B)`` per metre.
+
+    Raises:
+        ValueError: not two positive numbers separated by ``x``.
+    """
+    parts = text.strip().lower().replace("×", "x").split("x")
+    try:
+        a, b = (float(p) for p in parts)
+    except ValueError:
+        raise ValueError(f"counts must look like 30x25 (per cm), got {text!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b) and a > 0 and b > 0):
+        raise ValueError(f"counts must be two positive numbers per cm, got {text!r}")
+    return a * 100.0, b * 100.0
+
+
 # Fixed-point iterations and tolerance for the radius (the geometry's length changes by well under
 # 1 % per iteration; three or four reach 1e-6).
 RADIUS_ITERATIONS = 20

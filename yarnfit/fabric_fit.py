@@ -19,10 +19,10 @@ from typing import Callable
 
 from .fabric import Fabric
 from .fit import COUPLING_LIMIT, ShellFit, fit_shell
-from .homogenize import default_ranges, solve_samples
+from .homogenize import default_ranges, solve_sample, solve_samples
 from .material_file import MaterialFile
 from .relax import RelaxedRepeat, relax
-from .samples import SampleRanges, SampleResult, design_size, levels_for, sample_design
+from .samples import SampleRanges, SampleResult, SampleSpec, design_size, levels_for, sample_design
 from .shell import ShellMaterial
 from .tasks import Backend
 
@@ -79,6 +79,41 @@ class FabricFit:
         return MaterialFile.from_fit(self).write(path)
 
 
+def relax_for_fit(fabric: Fabric, on_relax_iteration: Callable | None = None,
+                  on_relax_start: Callable | None = None) -> RelaxedRepeat:
+    """The fabric's relaxed repeat (:func:`yarnfit.relax.relax`), or :class:`UnusableRelaxation`
+    when it did not converge or leaves yarns overlapping."""
+    relaxed = relax(fabric, on_iteration=on_relax_iteration, on_start=on_relax_start)
+    if not relaxed.valid:
+        raise UnusableRelaxation(f"the relaxation of {fabric.name!r} is not usable: converged {relaxed.converged}, "
+                                 f"worst overlap {100 * relaxed.penetration:.3g} % of the diameter ({relaxed.residual})")
+    return relaxed
+
+
+def design_specs(relaxed: RelaxedRepeat, samples: int = DEFAULT_SAMPLES,
+                 ranges: SampleRanges | None = None) -> list[SampleSpec]:
+    """The samples a fit of about ``samples`` solves: :func:`yarnfit.samples.sample_design` over
+    ``ranges`` (default :func:`yarnfit.homogenize.default_ranges` of the relaxed repeat)."""
+    return sample_design(ranges or default_ranges(relaxed), levels_for(samples))
+
+
+def solve_design_sample(relaxed: RelaxedRepeat, samples: int, index: int) -> SampleResult:
+    """Sample ``index`` of :func:`design_specs` (default ranges), solved: one task of a fit whose
+    design is only known once the repeat is relaxed (a catalogue's)."""
+    return solve_sample(relaxed, design_specs(relaxed, samples)[index])
+
+
+def fit_solved(fabric: Fabric, relaxed: RelaxedRepeat, results: list[SampleResult], model: str = "full",
+               coupling_limit: float | None = COUPLING_LIMIT, ranges: SampleRanges | None = None,
+               seconds: dict | None = None) -> FabricFit:
+    """The shell fitted to the solved samples ``results`` (see :func:`fit_fabric`)."""
+    seconds = dict(seconds or {})
+    start = time.perf_counter()
+    shell = fit_shell(results, shell_thickness(relaxed), model=model, coupling_limit=coupling_limit)
+    seconds["fit"] = time.perf_counter() - start
+    return FabricFit(fabric, relaxed, ranges or default_ranges(relaxed), results, shell, seconds)
+
+
 def fit_fabric(
     fabric: Fabric,
     samples: int = DEFAULT_SAMPLES,
@@ -106,26 +141,22 @@ def fit_fabric(
     ``coupling_limit=None``) for a fit that is not positive definite, naming the sample family at
     fault.
     """
-    levels = levels_for(samples)
+    levels_for(samples)  # validates the count before the relaxation's minutes
     if model not in ("full", "paper"):
         raise ValueError(f"model must be 'full' or 'paper', got {model!r}")
     seconds = {}
     start = time.perf_counter()
     if relaxed is None:
-        relaxed = relax(fabric, on_iteration=on_relax_iteration, on_start=on_relax_start)
-    seconds["relax"] = time.perf_counter() - start
-    if not relaxed.valid:
+        relaxed = relax_for_fit(fabric, on_relax_iteration, on_relax_start)
+    elif not relaxed.valid:
         raise UnusableRelaxation(f"the relaxation of {fabric.name!r} is not usable: converged {relaxed.converged}, "
                                  f"worst overlap {100 * relaxed.penetration:.3g} % of the diameter ({relaxed.residual})")
+    seconds["relax"] = time.perf_counter() - start
     if on_relaxed is not None:
         on_relaxed(relaxed)
     ranges = ranges or default_ranges(relaxed)
-    specs = sample_design(ranges, levels)
+    specs = design_specs(relaxed, samples, ranges)
     start = time.perf_counter()
     results = solve_samples(relaxed, specs, workers=workers, on_sample=on_sample, backend=backend)
     seconds["homogenize"] = time.perf_counter() - start
-    start = time.perf_counter()
-    shell = fit_shell(results, shell_thickness(relaxed), model=model,
-                      coupling_limit=coupling_limit)
-    seconds["fit"] = time.perf_counter() - start
-    return FabricFit(fabric, relaxed, ranges, results, shell, seconds)
+    return fit_solved(fabric, relaxed, results, model, coupling_limit, ranges, seconds)

@@ -38,9 +38,11 @@ import pickle
 import signal
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any, Callable, Hashable, Iterable, Sequence
+
+import numpy as np
 
 from . import __version__
 from .outputs import write_atomically
@@ -121,10 +123,31 @@ class TaskCache:
 def cache_key(task: Task, dependency_keys: dict[Hashable, str]) -> str:
     """Hex SHA-256 of the task's function, arguments (dependencies by their cache keys) and the
     yarnfit version: any change of input or code version is a new key."""
-    args = tuple(("result", dependency_keys[a.key]) if isinstance(a, Result) else a for a in task.args)
-    payload = pickle.dumps((__version__, task.function.__module__, task.function.__qualname__, args),
-                           protocol=4)
-    return hashlib.sha256(payload).hexdigest()
+    args = [["result", dependency_keys[a.key]] if isinstance(a, Result) else _canonical(a) for a in task.args]
+    payload = repr([__version__, task.function.__module__, task.function.__qualname__, args])
+    return hashlib.sha256(payload.encode("utf-8")).hexdigest()
+
+
+def _canonical(value):
+    """A representation of an argument that depends on its value only: a dataclass by its fields
+    (not by what its cached properties happen to hold), mappings by sorted keys, floats exactly
+    (``float.hex``), arrays by dtype, shape and bytes; anything else by its pickle."""
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    if isinstance(value, float):
+        return value.hex()
+    if isinstance(value, (tuple, list)):
+        return [type(value).__name__, [_canonical(v) for v in value]]
+    if isinstance(value, dict):
+        return ["dict", sorted(([_canonical(k), _canonical(v)] for k, v in value.items()), key=repr)]
+    if is_dataclass(value) and not isinstance(value, type):
+        return [type(value).__module__, type(value).__qualname__,
+                [[f.name, _canonical(getattr(value, f.name))] for f in fields(value)]]
+    if isinstance(value, np.ndarray):
+        return ["ndarray", str(value.dtype), list(value.shape), hashlib.sha256(np.ascontiguousarray(value)).hexdigest()]
+    if isinstance(value, np.generic):
+        return _canonical(value.item())
+    return ["pickle", hashlib.sha256(pickle.dumps(value, protocol=4)).hexdigest()]
 
 
 # -- backends -------------------------------------------------------------------------------------
@@ -344,30 +367,64 @@ class _Graph:
         return order
 
 
+# Failures that are the inputs' own answer and so cached like results (a relaxation that cannot
+# converge, an indefinite fit, a bad pattern): rerunning would only say them again. Anything else (a
+# worker lost, memory, the file system) is retried on the next run.
+CACHED_FAILURES = (ValueError, ArithmeticError)
+
+
 def run_tasks(
     tasks: Sequence[Task],
     backend: Backend,
     cache: TaskCache | None = None,
     on_done: Callable[[Task, object, int, int], None] | None = None,
+    wanted: Iterable[Hashable] | None = None,
 ) -> dict[Hashable, object]:
     """Run the graph ``tasks`` on ``backend`` (see the module docstring).
 
+    Args:
+        cache: results (and :data:`CACHED_FAILURES`) by cache key (:func:`cache_key`).
+        on_done: ``on_done(task, outcome, done, total)`` as each task finishes (cached ones too),
+            in the parent process; ``total`` counts the tasks this run needs.
+        wanted: the tasks whose outcomes the caller needs (default: all). With a cache, a task
+            none of whose needed dependents must run is neither run nor loaded: a rerun of a
+            finished graph loads the wanted results only.
+
     Returns:
-        ``{key: outcome}`` for every task: its result, or the exception it raised (a
+        ``{key: outcome}`` for every task needed: its result, or the exception it raised (a
         :class:`SkippedTask` when a dependency failed). Failures are outcomes, not raised.
 
     Raises:
-        ValueError: duplicate keys, a dependency that is not a task, or a cycle.
+        ValueError: duplicate keys, a dependency that is not a task, an unknown wanted key, or a
+            cycle.
         KeyboardInterrupt: after stopping the backend's work (the caller's ``with`` on the
             backend, or :meth:`Backend.stop`, ends it).
     """
     graph = _Graph.of(tasks)
+    order = graph.order()
+    wanted = set(graph.tasks if wanted is None else wanted)
+    unknown = wanted - set(graph.tasks)
+    if unknown:
+        raise ValueError(f"wanted task {next(iter(unknown))!r} is not in the graph")
     keys = {}  # cache keys, in dependency order
     if cache is not None:
-        for key in graph.order():
+        for key in order:
             keys[key] = cache_key(graph.tasks[key], keys)
+    # What this run needs, dependents before dependencies: a wanted task, or a dependency of a
+    # needed task that must run. A needed task with a cache entry is loaded, not run.
+    needed, must_run, loaded = set(), set(), {}
+    for key in reversed(order):
+        if key not in wanted and not any(d in must_run for d in graph.needed_by.get(key, ())):
+            continue
+        needed.add(key)
+        if cache is not None and graph.tasks[key].cached:
+            found, value = cache.load(keys[key])
+            if found:
+                loaded[key] = value
+                continue
+        must_run.add(key)
     outcomes: dict[Hashable, object] = {}
-    total, finished = len(graph.tasks), [0]
+    total, finished = len(needed), [0]
     running: dict = {}  # future -> key
     # Ready tasks, longest first (ties in the order given): (-cost, index, key).
     index = {key: i for i, key in enumerate(graph.tasks)}
@@ -382,7 +439,7 @@ def run_tasks(
         if on_done is not None:
             on_done(graph.tasks[key], outcome, finished[0], total)
         for dependent in graph.needed_by.get(key, ()):
-            if dependent in outcomes:
+            if dependent in outcomes or dependent not in must_run:
                 continue
             left = graph.waiting_on[dependent]
             left.discard(key)
@@ -394,24 +451,21 @@ def run_tasks(
                 release(dependent)
 
     def launch() -> None:
-        # Keep the backend's queue depth submitted; a cached result finishes its task here, which
-        # may release more.
+        # Keep the backend's queue depth submitted.
         while ready and len(running) < backend.queue_depth:
             _, _, key = heapq.heappop(ready)
             if key in outcomes:  # skipped meanwhile
                 continue
             task = graph.tasks[key]
-            if cache is not None and task.cached:
-                found, value = cache.load(keys[key])
-                if found:
-                    finish(key, value)
-                    continue
             args = tuple(outcomes[a.key] if isinstance(a, Result) else a for a in task.args)
             running[backend.submit(task.function, args)] = key
 
-    for key, left in graph.waiting_on.items():
-        if not left:
+    for key in order:
+        if key in must_run and not graph.waiting_on[key]:
             release(key)
+    for key in order:  # dependencies first, so a cached failure skips its dependents
+        if key in loaded and key not in outcomes:
+            finish(key, loaded[key])
     launch()
     while running:
         done, _ = backend.wait_any(set(running))
@@ -421,7 +475,8 @@ def run_tasks(
                 outcome = future.result()
             except Exception as error:  # noqa: BLE001 - a task's failure is its outcome
                 outcome = error
-            if cache is not None and graph.tasks[key].cached and not isinstance(outcome, BaseException):
+            keep = not isinstance(outcome, BaseException) or isinstance(outcome, CACHED_FAILURES)
+            if cache is not None and graph.tasks[key].cached and keep and not isinstance(outcome, SkippedTask):
                 cache.store(keys[key], outcome)
             finish(key, outcome)
         launch()
