@@ -76,6 +76,7 @@ __all__ = [
     "fit_shell",
     "sample_strain",
     "sample_weights",
+    "shell_energy_of",
     "weighted_residuals",
 ]
 
@@ -241,10 +242,7 @@ class ShellFit:
     def shell_energy(self, samples: Sequence[SampleResult]) -> np.ndarray:
         """``(n,)`` the part of each sample's Ū the shell represents (J/m²): Ū less the rest
         energy and the membrane's residual-stress terms (NaN stays NaN)."""
-        samples = _sample_list(samples)
-        energy = np.array([s.energy_density for s in samples], dtype=np.float64)
-        stress = np.array([self.residual_stress.get(n, 0.0) for n in RESIDUAL_STRESS_NAMES["membrane"]])
-        return energy - self.reference_energy - _residual_stress_columns(samples)[:, :3] @ stress
+        return shell_energy_of(samples, self.reference_energy, self.residual_stress)
 
     def quality_dict(self) -> dict:
         """Everything but the material as plain JSON data (str, float, int, list, dict).
@@ -291,6 +289,20 @@ class ShellFit:
             "used": used,
             "excluded": [sample_dict(sample) for sample in self.excluded],
         }
+
+
+def shell_energy_of(samples: Sequence[SampleResult], reference_energy: float = 0.0,
+                    residual_stress: dict[str, float] | None = None) -> np.ndarray:
+    """``(n,)`` the part of each sample's Ū the shell represents (J/m²): Ū less the rest energy
+    ``reference_energy`` (J/m²) and the membrane's residual-stress terms ``n · ε`` (``residual_stress``
+    by name, ``n0 n1 n2`` in N/m; a missing one is 0, the bending moments are not fitted). NaN
+    stays NaN. :meth:`ShellFit.shell_energy` with a fit's own values; a material file keeps them
+    (:meth:`~yarnfit.material_file.MaterialFile.rest_state`)."""
+    samples = _sample_list(samples)
+    residual_stress = residual_stress or {}
+    energy = np.array([s.energy_density for s in samples], dtype=np.float64)
+    stress = np.array([residual_stress.get(n, 0.0) for n in RESIDUAL_STRESS_NAMES["membrane"]])
+    return energy - reference_energy - _residual_stress_columns(samples)[:, :3] @ stress
 
 
 def design_matrix(samples: Sequence[SampleResult], thickness: float) -> np.ndarray:

@@ -42,7 +42,7 @@ plus one diameter. It only scales S and B; the engineering constants do not depe
 :class:`MaterialFile` is the only code that reads or writes it: :meth:`MaterialFile.from_fit` and
 :meth:`~MaterialFile.write` for ``yarnfit fit``, :meth:`~MaterialFile.read` for everyone else, with
 typed views of what a reader needs (the shell, the areal density, the fabric it was fitted for, the
-relaxed repeat). Errors are one line starting with the file's path.
+relaxed repeat, the samples and the rest state the fit took out of them). Errors are one line starting with the file's path.
 """
 
 from __future__ import annotations
@@ -58,12 +58,13 @@ from . import __version__
 from .fibers import OPTIONAL_FIBER_FIELDS, Fiber
 from .jsonfile import read_json
 from .outputs import write_atomically
-from .checks import check_keys
+from .checks import check_keys, finite_number
 from .shell import PARAMETER_NAMES, ShellMaterial
 
 if TYPE_CHECKING:  # the heavy stages are imported where they are used
     from .fabric import Fabric
     from .relax import RelaxedRepeat
+    from .samples import SampleResult
 
 __all__ = ["IncompatibleMaterial", "MaterialFile", "REQUIRED_KEYS", "fabric_from_inputs"]
 
@@ -210,6 +211,34 @@ class MaterialFile:
             return ShellMaterial(shell.thickness, **values)
         except ValueError as exc:
             raise ValueError(f"{where}: {exc}") from None
+
+    def samples(self) -> "list[SampleResult]":
+        """The yarn-level samples (``samples``) as :class:`~yarnfit.samples.SampleResult`, in file
+        order, those that did not converge included (their Ū NaN where none was reached; no node
+        positions). ValueError naming the file if it has none (written before yarnfit kept them, or
+        not by ``yarnfit fit``) or an entry is malformed."""
+        from .samples import SampleResult
+
+        samples = self.data.get("samples")
+        if not isinstance(samples, list) or not samples:
+            raise ValueError(f"{self.where}: no yarn-level samples (key 'samples'; write the file with `yarnfit fit`)")
+        return [SampleResult.from_dict(sample, f"{self.where}: samples[{k}]") for k, sample in enumerate(samples)]
+
+    def rest_state(self) -> tuple[float, dict[str, float]]:
+        """``(rest energy J/m², {n0, n1, n2} N/m)``: what the fit took out of every sample's Ū
+        before the shell (``fit.reference_energy_j_per_m2`` and
+        ``fit.residual_stress.membrane_n_per_m``; :func:`yarnfit.fit.shell_energy_of` subtracts
+        them); zeros for a file written before they were fitted."""
+        fit = self._block("fit")
+        energy = fit.get("reference_energy_j_per_m2", 0.0)
+        stress = fit.get("residual_stress", {})
+        stress = stress.get("membrane_n_per_m", {}) if isinstance(stress, dict) else {}
+        where = f"{self.where}: fit"
+        if not isinstance(stress, dict):
+            raise ValueError(f"{where}.residual_stress.membrane_n_per_m must be an object, got {stress!r}")
+        return (finite_number(energy, f"{where}.reference_energy_j_per_m2"),
+                {key: finite_number(value, f"{where}.residual_stress.membrane_n_per_m.{key}")
+                 for key, value in stress.items()})
 
     @property
     def name(self) -> str:

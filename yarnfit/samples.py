@@ -299,6 +299,34 @@ class SampleResult:
             "seconds": self.seconds,
         }
 
+    @classmethod
+    def from_dict(cls, data: object, where: str = "sample") -> "SampleResult":
+        """Inverse of :meth:`to_dict` (``None`` reads back as NaN; the node positions are not
+        kept). ValueError ``<where>: ...`` naming the key at fault."""
+        if not isinstance(data, dict):
+            raise ValueError(f"{where}: expected an object (family, parameter, I, II, energy_density_j_m2, "
+                             f"converged, residual), got {type(data).__name__}")
+        missing = [key for key in ("family", "parameter", "I", "II", "energy_density_j_m2", "converged")
+                   if key not in data]
+        if missing:
+            raise ValueError(f"{where}: missing key{'s' if len(missing) > 1 else ''} {', '.join(missing)}")
+        residual = data.get("residual") or {}
+        if not isinstance(residual, dict):
+            raise ValueError(f"{where}: residual must be an object, got {residual!r}")
+
+        def number(value: object, key: str) -> float:
+            return math.nan if value is None else real_number(value, f"{where}: {key}")
+
+        try:
+            spec = SampleSpec(data["family"], data["I"], data["II"], data["parameter"])
+            return cls(spec, number(data["energy_density_j_m2"], "energy_density_j_m2"), data["converged"],
+                       Residual(*(number(residual.get(key), f"residual.{key}")
+                                  for key in ("force", "torque", "energy_change", "penetration"))),
+                       int(data.get("iterations", 0)), float(data.get("seconds", 0.0)))
+        except (TypeError, ValueError) as exc:
+            message = str(exc)
+            raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None
+
 
 # -- sample design --------------------------------------------------------------------------------
 
