@@ -172,7 +172,8 @@ def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documente
     recording, output = tmp_path / "plain-fit.rrd", tmp_path / "plain.json"
     out = subprocess.run([str(Path(sys.executable).parent / "yarnfit"), "fit", "--fiber", "cotton", "--pattern",
                           "plain", "--gsm", "200", "--samples", "16", "--workers", "2", "--rerun", str(recording),
-                          "-o", str(output)], capture_output=True, text=True, timeout=600)
+                          "-o", str(output), "--figures", str(tmp_path / "figures")], capture_output=True, text=True,
+                         timeout=600)
     assert out.returncode == 0, out.stderr
     # Progress went to stderr: the relaxation, then samples done with the time left.
     assert "relaxed in" in out.stderr and re.search(r"samples (\d+)/\1: .* s left\]", out.stderr), out.stderr
@@ -188,6 +189,9 @@ def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documente
     assert fields[-3:-1] == ["N·m", f"{engineering['bending_weft_nm'] / GF_CM2_PER_CM:.4g}"]
     assert fields[-1] == "gf·cm²/cm"
     assert "fit R²" in out.stdout and str(output) in out.stdout and str(recording) in out.stdout
+    # The fit's figures and their tables (yarnfit.plots, tested in test_plots), where --figures says.
+    assert {"plain-tension.png", "plain-tension.svg", "plain-tension.csv", "plain-bending.png"} <= \
+        {p.name for p in (tmp_path / "figures").iterdir()}
 
     # The material file: stable keys, SI units, every sample, and a shell that reproduces them.
     data = json.loads(output.read_text())
@@ -218,7 +222,7 @@ def test_a_strict_fit_that_asks_for_an_indefinite_shell_fails_naming_the_family(
     # block since the rest state is settled, the membrane block before).
     recording, output = tmp_path / "x.rrd", tmp_path / "x.json"
     out = subprocess.run([str(Path(sys.executable).parent / "yarnfit"), "fit", "polyester-jersey", "--strict",
-                          "--yarn-model", "solid",
+                          "--yarn-model", "solid", "--figures", str(tmp_path / "figures"),
                           "--samples", "16", "--rerun", str(recording), "-o", str(output)],
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 1, (out.stdout, out.stderr)
@@ -229,7 +233,7 @@ def test_a_strict_fit_that_asks_for_an_indefinite_shell_fails_naming_the_family(
     assert not recording.exists() and not output.exists()
 
     out = subprocess.run([str(Path(sys.executable).parent / "yarnfit"), "fit", "polyester-jersey",
-                          "--yarn-model", "solid",
+                          "--yarn-model", "solid", "--figures", str(tmp_path / "figures"),
                           "--samples", "16", "--rerun", str(recording), "-o", str(output)],
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
@@ -303,3 +307,30 @@ def test_first_compilation_is_announced():
     with announce_compilation(line):
         twice(3)  # compiled already
     assert len(line.said) == 1
+
+
+# -- show -----------------------------------------------------------------------------------------
+
+
+def test_show_opens_each_kind_of_file_with_its_viewer(tmp_path, monkeypatch):
+    """A material file's figures (drawn, then opened), a scene in MuJoCo's viewer, a recording in
+    Rerun; anything else is a one-line error. The viewers themselves need a display: replaced."""
+    from yarnfit import cli
+    from test_plots import material_file  # a small fitted material written without a yarn-level fit
+
+    opened = []
+    monkeypatch.setattr(cli, "_open_figures", lambda paths: opened.append(("figures", paths)) or 0)
+    monkeypatch.setattr(cli, "_view_scene", lambda path: opened.append(("scene", path)) or 0)
+    monkeypatch.setattr(cli, "_view_recording", lambda path: opened.append(("recording", path)) or 0)
+    material = material_file(tmp_path)
+    assert cli.main(["show", str(material), "--figures", str(tmp_path / "figs")]) == 0
+    kind, paths = opened[-1]
+    assert kind == "figures" and paths and all(p.suffix == ".png" and p.parent == tmp_path / "figs" for p in paths)
+    for suffix, kind in ((".xml", "scene"), (".rrd", "recording")):
+        path = tmp_path / f"x{suffix}"
+        path.write_text("")
+        assert cli.main(["show", str(path)]) == 0 and opened[-1] == (kind, path)
+    (tmp_path / "notes.txt").write_text("")
+    assert cli.main(["show", str(tmp_path / "notes.txt")]) == 2
+    (tmp_path / "other.json").write_text("{}")
+    assert cli.main(["show", str(tmp_path / "other.json")]) == 2

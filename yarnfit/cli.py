@@ -101,6 +101,8 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--name", help="label for the output files (default: preset, pattern or file name)")
     fit.add_argument("-o", "--output", metavar="MATERIAL.json", help="material file (default: <name>.json)")
     fit.add_argument("--rerun", metavar="FILE.rrd", help="Rerun recording of the fit (default: logs/<name>-fit.rrd)")
+    fit.add_argument("--figures", metavar="DIR",
+                     help="where the fit's figures (PNG, SVG) and their tables (CSV) go (default: logs/<name>)")
 
     from .mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE,
                          DEFAULT_TIMESTEP, INTEGRATORS, SCENES)
@@ -175,6 +177,17 @@ def build_parser() -> argparse.ArgumentParser:
                            help="local worker processes (default: every core)")
     catalogue.add_argument("--dask", action="store_true", help="run on a local dask.distributed cluster")
     catalogue.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on this Dask scheduler's workers")
+
+    show = commands.add_parser(
+        "show", help="open a material's or a validation's figures, a scene in MuJoCo's viewer, or a recording in Rerun",
+        description=(
+            "Open FILE by its kind: a material file (yarnfit fit) or a validation summary.json (yarnfit validate): "
+            "its figures, drawn into --figures (default: beside the file) and shown in a window; a scene (.xml): "
+            "MuJoCo's viewer; a recording (.rrd): the Rerun viewer. Without a display the figures' paths are printed."
+        ),
+    )
+    show.add_argument("file", metavar="FILE", help="MATERIAL.json, summary.json, SCENE.xml or RECORDING.rrd")
+    show.add_argument("--figures", metavar="DIR", help="where the figures are drawn (default: beside FILE)")
 
     validate = commands.add_parser(
         "validate",
@@ -449,6 +462,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
     output = check_writable(Path(args.output) if args.output else Path(f"{fabric.name}.json"), "material file")
     path = check_writable(Path(args.rerun) if args.rerun else Path("logs") / f"{fabric.name}-fit.rrd",
                           "--rerun recording")
+    figures = check_writable(Path(args.figures) if args.figures else Path("logs") / fabric.name, "--figures directory",
+                             directory=True)
     line = ProgressLine()
     sampling_started = [0.0]
 
@@ -478,6 +493,10 @@ def cmd_fit(args: argparse.Namespace) -> int:
         recording.sample(index, fitted.relaxed, result)
     recording.finish(fitted)
     print(fit_summary(fitted, output, path))
+    from .plots import fit_figures
+
+    drawn = fit_figures(output, figures)
+    print(f"figures: {len(drawn)} files in {figures} (PNG, SVG, CSV; `yarnfit show {output}` opens them)")
     return 0
 
 
@@ -657,6 +676,11 @@ def cmd_validate(args: argparse.Namespace) -> int:
     summary, path = run_suite(args.material, scenes, quick=args.quick, logs=args.logs, reference=reference,
                               progress=progress)
     print(f"validated {summary['material']['name']}: {path}")
+    if "stretch" in summary["scenes"] or "yarn" in summary["scenes"]:
+        from .plots import validation_figures
+
+        drawn = validation_figures(summary, path.parent, reference, material=args.material)
+        print(f"  figures: {len(drawn)} files in {path.parent} (`yarnfit show {path}` opens them)")
     for scene, seconds in summary["wall_seconds"].items():
         print(f"  {scene:<8} {seconds:7.1f} s  {path.parent / (scene + '.rrd')}")
     results = [Verdict(**v) for v in summary["verdicts"]]
@@ -667,6 +691,79 @@ def cmd_validate(args: argparse.Namespace) -> int:
         print(f"yarnfit validate: failed: {', '.join(failed)}", file=sys.stderr)
         return EXIT_FAILED
     return 0
+
+
+def cmd_show(args: argparse.Namespace) -> int:
+    from .jsonfile import read_json
+
+    path = Path(args.file)
+    if not path.is_file():
+        raise UsageError(f"{path}: no such file")
+    kind = path.suffix.lower()
+    if kind == ".rrd":
+        return _view_recording(path)
+    if kind in (".xml", ".mjcf"):
+        return _view_scene(path)
+    if kind != ".json":
+        raise UsageError(f"{path}: cannot show a {kind or 'file without an extension'} file "
+                         "(a material .json, a summary.json, a scene .xml or a recording .rrd)")
+    _, data = read_json(path, "file")
+    if not isinstance(data, dict) or not ("shell" in data or "verdicts" in data):
+        raise UsageError(f"{path}: neither a material file (no 'shell') nor a validation summary (no 'verdicts')")
+    folder = check_writable(Path(args.figures) if args.figures else path.parent, "--figures directory", directory=True)
+    from .plots import fit_figures, validation_figures
+
+    if "shell" in data:
+        drawn = fit_figures(path, folder)
+    else:
+        material = data.get("material", {}).get("file")
+        drawn = validation_figures(path, folder, material=material if material and Path(material).is_file() else None)
+    return _open_figures([p for p in drawn if p.suffix == ".png"])
+
+
+def _open_figures(paths: list[Path]) -> int:
+    """Show the PNG ``paths`` in matplotlib windows (one per figure, closed together), or without a
+    display print them."""
+    import matplotlib
+
+    if matplotlib.get_backend().lower() in ("agg", "svg", "pdf", "ps", "cairo", "template") or not _has_display():
+        print("no display: the figures are")
+        for p in paths:
+            print(f"  {p}")
+        return 0
+    import matplotlib.image as image
+    import matplotlib.pyplot as plt
+
+    for p in paths:
+        figure = plt.figure(p.stem)
+        axes = figure.add_axes((0, 0, 1, 1))
+        axes.imshow(image.imread(p))
+        axes.set_axis_off()
+    plt.show()
+    return 0
+
+
+def _view_scene(path: Path) -> int:
+    """MuJoCo's interactive viewer on the scene (blocks until its window closes)."""
+    if not _has_display():
+        raise UsageError("no display for MuJoCo's viewer (DISPLAY and WAYLAND_DISPLAY are unset)")
+    import mujoco.viewer
+
+    mujoco.viewer.launch_from_path(str(path))
+    return 0
+
+
+def _view_recording(path: Path) -> int:
+    """The Rerun viewer on the recording (rerun-sdk's own `rerun` command)."""
+    import subprocess
+
+    return subprocess.run([sys.executable, "-m", "rerun", str(path)]).returncode
+
+
+def _has_display() -> bool:
+    import os
+
+    return sys.platform in ("darwin", "win32") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 def cmd_catalogue(args: argparse.Namespace) -> int:
@@ -718,7 +815,7 @@ def cmd_catalogue(args: argparse.Namespace) -> int:
 
 
 COMMANDS = {"materials": cmd_materials, "patterns": cmd_patterns, "relax": cmd_relax, "fit": cmd_fit,
-            "export": cmd_export, "validate": cmd_validate, "catalogue": cmd_catalogue}
+            "export": cmd_export, "validate": cmd_validate, "catalogue": cmd_catalogue, "show": cmd_show}
 
 
 def main(argv: list[str] | None = None) -> int:
