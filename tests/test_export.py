@@ -8,6 +8,7 @@ import json
 import math
 import subprocess
 import sys
+import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
 import mujoco
@@ -15,9 +16,11 @@ import numpy as np
 import pytest
 
 from fabric_shell import FABRIC
-from yarnfit.mujoco import SCENES
+from yarnfit.mujoco import DEFAULT_SIZE, SCENES
+from yarnfit.mujoco.plugin import LIBRARY, PLUGIN_NAME
 from yarnfit.mujoco.run import run_scene
-from yarnfit.mujoco.scenes import FLEX_RADIUS, ClothMaterial, build_scene, compile_quietly, export_scene
+from yarnfit.mujoco.scenes import (DEFAULT_STRIP_WIDTH, FLEX_RADIUS, VERTEX_CLASS, ClothMaterial, build_scene,
+                                   compile_quietly, export_scene, strip_columns)
 from yarnfit.mujoco.split import (MJCF_DIGITS, POISSON_LIMIT, builtin_elasticity, builtin_isotropic,
                                   isotropic_fallback, isotropic_stiffness)
 from yarnfit.shell import NonlinearMembrane, ShellMaterial
@@ -43,6 +46,12 @@ AREAL_DENSITY = 0.2  # kg/m²
 # A cloth resting on its obstacle: the top vertex sits a collision radius above it, give or take
 # the contact's soft penetration (~1 mm at MuJoCo's default solref) and the grid's sag.
 LANDING_ATOL = 3e-3
+# An exported file against the scene built in memory: the file holds every number exactly and the
+# same bodies, joints and triangles in the same order, so both compile to equal arrays and step
+# alike to the last bit (measured). Round-off is the most a tolerance should forgive: the old 6-digit
+# export put vertices 5e-7 m off, and flexcomp's even masses move a drape's by centimetres in 1 s.
+EXPORT_STEPS = 300
+TRAJECTORY_ATOL = 1e-12  # m
 
 
 def isotropic(young, poisson, thickness) -> ShellMaterial:
@@ -235,7 +244,8 @@ def test_fallback_scene_has_no_plugin_and_runs_stably(scene, material_file, tmp_
     built = export_scene(material_file, scene, path, resolution=RESOLUTION, fallback=True)
     model = mujoco.MjModel.from_xml_path(str(path))
     assert model.nplugin == 0
-    assert "yarnfit.shell" not in path.read_text()
+    root = ElementTree.parse(path).getroot()
+    assert root.find("extension") is None and root.find(".//plugin") is None
     fallback = isotropic_fallback(FABRIC)
     assert (built.young_pa, built.poisson, built.thickness_m) == fallback[:3]
     assert mujoco.MjSpec.from_file(str(path)).flexes[0].elastic2d == 3  # both: stretch and bending
@@ -356,11 +366,121 @@ def test_cli_export_bad_input_is_one_line_and_status_2(args, message, material_f
     assert not (tmp_path / "x.xml").exists()
 
 
+# -- the exported file ------------------------------------------------------------------------
+
+
+def differing_arrays(a: mujoco.MjModel, b: mujoco.MjModel) -> list[str]:
+    """The names of the mjModel arrays (and mjOption fields) in which ``a`` and ``b`` differ."""
+    names = [name for name in dir(a) if not name.startswith("_") and isinstance(getattr(a, name), np.ndarray)]
+    differ = [name for name in names if not np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True)]
+    return differ + [f"opt.{name}" for name in dir(a.opt) if not name.startswith("_")
+                     and not np.array_equal(getattr(a.opt, name), getattr(b.opt, name))]
+
+
+def stepped_qpos(model: mujoco.MjModel, steps: int) -> np.ndarray:
+    """``qpos`` after each of ``steps`` steps ``(steps, nq)``; the stretch clamp ramps to its largest
+    control over the run."""
+    data = mujoco.MjData(model)
+    qpos = np.empty((steps, model.nq))
+    for step in range(steps):
+        if model.nu:
+            data.ctrl[:] = model.actuator_ctrlrange[:, 1] * (step + 1) / steps
+        mujoco.mj_step(model, data)
+        qpos[step] = data.qpos
+    return qpos
+
+
+@pytest.mark.parametrize("fallback", [False, True], ids=["plugin", "fallback"])
 @pytest.mark.parametrize("scene", SCENES)
-def test_the_cloth_flex_is_named_cloth(scene, material_file):
-    """Every scene's flex (and its vertex bodies) is found by the name ``cloth``, whatever holds
-    its pinned vertices (the world, a clamp)."""
-    model = compile_quietly(build_scene(ClothMaterial.from_file(material_file), scene, resolution=RESOLUTION).spec)
-    assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "cloth") == 0
-    names = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in model.flex_vertbodyid}
-    assert all(name.startswith("cloth_") for name in names - {"world", "clamp"})
+def test_exported_scene_compiles_to_the_built_model(scene, fallback, material_file, tmp_path):
+    """The exported file is the scene build_scene builds: the same dofs and what they move, vertex
+    positions and lumped masses, pins, plugin and its config, <elasticity>, contacts, options,
+    actuators and sensors; every mjModel array equal, and the same motion."""
+    material = ClothMaterial.from_file(material_file)
+    built = build_scene(material, scene, resolution=RESOLUTION, fallback=fallback)
+    path = tmp_path / f"{scene}.xml"
+    export_scene(material, scene, path, resolution=RESOLUTION, fallback=fallback)
+    memory, file = compile_quietly(built.spec), mujoco.MjModel.from_xml_path(str(path))
+
+    assert (file.nq, file.nv, file.nbody, file.nflexvert) == (memory.nq, memory.nv, memory.nbody, memory.nflexvert)
+    np.testing.assert_array_equal(file.jnt_type, memory.jnt_type)
+    np.testing.assert_array_equal(file.jnt_axis, memory.jnt_axis)
+    np.testing.assert_array_equal(file.jnt_bodyid, memory.jnt_bodyid)
+    np.testing.assert_array_equal(file.flex_vertbodyid, memory.flex_vertbodyid)  # the pins
+    np.testing.assert_array_equal(file.flex_elem, memory.flex_elem)
+    vertex_bodies = np.unique(memory.flex_vertbodyid[memory.body_dofnum[memory.flex_vertbodyid] == 3])
+    np.testing.assert_array_equal(file.body_mass[vertex_bodies], memory.body_mass[vertex_bodies])
+    for name in ("flex_stiffness", "flex_bending", "flex_damping", "flex_radius", "flex_friction", "flex_contype",
+                 "flex_conaffinity", "flex_selfcollide"):
+        np.testing.assert_array_equal(getattr(file, name), getattr(memory, name), err_msg=name)
+    spec = mujoco.MjSpec.from_file(str(path))
+    assert (spec.flexes[0].young, spec.flexes[0].poisson, spec.flexes[0].thickness, spec.flexes[0].elastic2d) == \
+        (built.young_pa, built.poisson, built.thickness_m, 3)
+    assert file.nplugin == memory.nplugin == (0 if fallback else 1)
+    if not fallback:
+        assert spec.plugins[0].config == built.spec.plugins[0].config
+        assert spec.plugins[0].config["membrane"] == "node"
+    assert (file.opt.timestep, file.opt.integrator, file.opt.solver) == \
+        (memory.opt.timestep, memory.opt.integrator, memory.opt.solver)
+    np.testing.assert_array_equal(file.opt.gravity, memory.opt.gravity)
+    for name in ("actuator_gainprm", "actuator_biasprm", "actuator_ctrlrange", "sensor_type", "sensor_objid"):
+        np.testing.assert_array_equal(getattr(file, name), getattr(memory, name), err_msg=name)
+    assert differing_arrays(file, memory) == []
+
+    at_rest = []
+    for model in (memory, file):
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
+        at_rest.append(data.flexvert_xpos.copy())
+    np.testing.assert_array_equal(at_rest[1], at_rest[0])
+    np.testing.assert_allclose(stepped_qpos(file, EXPORT_STEPS), stepped_qpos(memory, EXPORT_STEPS),
+                               rtol=0, atol=TRAJECTORY_ATOL)
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_the_cloth_flex_is_named_cloth(scene, material_file, tmp_path):
+    """Every scene's flex is found by the name ``cloth``, in memory and in the exported file, and the
+    body holding its vertex v is ``cloth_<v>`` (flexcomp's names), or the world or the clamp for a
+    pinned vertex."""
+    material = ClothMaterial.from_file(material_file)
+    path = tmp_path / f"{scene}.xml"
+    export_scene(material, scene, path, resolution=RESOLUTION)
+    across = strip_columns(RESOLUTION, DEFAULT_SIZE["stretch"], DEFAULT_STRIP_WIDTH)  # stretch: vertex ix across + iy
+    holder = {"cloth": {0: "world", RESOLUTION - 1: "world"}, "sphere": {}, "wall": {},
+              "stretch": {v: "world" if v < across else "clamp" for v in range(RESOLUTION * across)
+                          if v // across in (0, RESOLUTION - 1)}}[scene]
+    for model in (compile_quietly(build_scene(material, scene, resolution=RESOLUTION).spec),
+                  mujoco.MjModel.from_xml_path(str(path))):
+        flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "cloth")
+        assert flex >= 0
+        start = model.flex_vertadr[flex]
+        for v in range(model.flex_vertnum[flex]):
+            body = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, model.flex_vertbodyid[start + v])
+            assert body == holder.get(v, f"cloth_{v}")
+
+
+@pytest.mark.parametrize("fallback", [False, True], ids=["plugin", "fallback"])
+@pytest.mark.parametrize("scene", ["cloth", "stretch"])
+def test_exported_file_says_what_it_needs(scene, fallback, material_file, tmp_path):
+    """The file opens with a comment that names the plugin, what it carries and how to get it (pip,
+    the entry point, mj_loadPluginLibrary on the library, the fallback option) and why the cloth is
+    not a <flexcomp>; MuJoCo keeps that comment when it saves the model, and the file is well-formed
+    XML (no ``--`` inside a comment)."""
+    path = tmp_path / f"{scene}.xml"
+    export_scene(material_file, scene, path, resolution=RESOLUTION, fallback=fallback)
+    text = path.read_text()
+    ElementTree.parse(path)  # raises on malformed XML
+    comment = mujoco.MjSpec.from_file(str(path)).comment
+    assert text.index(comment) < text.index("<option")  # first, before any element
+    header = " ".join(comment.split())  # as a paragraph
+    assert PLUGIN_NAME in header and "pip install yarnfit" in header
+    if fallback:
+        assert "no plugin" in header and "fallback option" in header
+    else:
+        for needed in ("mujoco.plugins", "mj_loadPluginLibrary", LIBRARY.name, "fallback option",
+                       'membrane="node"', "not found"):
+            assert needed in header, needed
+    assert "Not a <flexcomp>" in header and "same mass" in header
+    assert ("clamp" in header) == (scene == "stretch")  # flexcomp pins to one body only
+    assert f'<frame childclass="{VERTEX_CLASS}">' in text
+    assert comment in mujoco.MjSpec.from_file(str(path)).to_xml()

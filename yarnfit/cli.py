@@ -119,8 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
             "in every direction, which keeps the step stable; the yarnfit.shell plugin removes its forces exactly and "
             "carries the whole material on node-smoothed strains (no locking on any triangulation), with the "
             "material's strain-stiffening membrane (--linear: the linear StVK membrane fitted from the same "
-            "samples). --fallback writes a plugin-free scene with one isotropic material instead. "
-            "Lengths in m, times in s."
+            "samples). --fallback writes a plugin-free scene with one isotropic material instead. The file opens "
+            "with a comment naming the plugin and how to get it, and spells the cloth out (one body per vertex, "
+            "every number exact): a <flexcomp> cannot hold its area-lumped vertex masses. Lengths in m, times in s."
         ),
     )
     export.add_argument("material", metavar="MATERIAL.json", help="a material file written by `yarnfit fit`")

@@ -6,6 +6,12 @@ vertices on the world or a clamp body, triangles ``(v00, v10, v11), (v00, v11, v
 cell. Vertex masses are the material's areal density times a third of the adjacent triangles'
 area (the total is the cloth's mass; pinned vertices' mass is dropped).
 
+Exported (:func:`export_scene`, :func:`scene_mjcf`) in that expanded form, not as a
+``<flexcomp>``: flexcomp gives every point the same mass and pins points only to its parent body
+(:data:`NOT_FLEXCOMP`; the strip hangs between the world and the clamp). The file writes one body
+``cloth_<v>`` per free vertex ``v`` on one line, every number exact, and compiles to the model
+:func:`build_scene` compiles.
+
 Elasticity, default (the split of :mod:`yarnfit.mujoco.split`): MuJoCo's built-in isotropic
 ``<elasticity elastic2d="stretch">`` carries ``S_iso ⪰ S/2``, integrated implicitly under the
 ``discrete`` integrator, and the ``yarnfit.shell`` plugin, configured with the full material,
@@ -32,6 +38,8 @@ from __future__ import annotations
 
 import math
 import os
+import re
+import textwrap
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,6 +69,7 @@ __all__ = [
     "add_cloth_flex",
     "build_scene",
     "export_scene",
+    "scene_mjcf",
 ]
 
 DEFAULT_STRIP_WIDTH = 0.05  # m
@@ -87,6 +96,17 @@ MEMBRANES = ("node", "triangle")
 DEFAULT_MEMBRANE = "node"
 # MJCF elastic2d names to mjtElastic2D values (none, bend, stretch, both).
 ELASTIC2D = {"none": 0, "bend": 1, "stretch": 2, "both": 3}
+# Exported scenes (export_scene): the default class of the cloth's vertex bodies, and why the cloth
+# is written expanded rather than as a <flexcomp> (measured on MuJoCo 4.0.0; design notes §7).
+VERTEX_CLASS = "cloth_vertex"
+NOT_FLEXCOMP = ("flexcomp gives every point the same mass (its mass over the number of points, pinned points "
+                "included), while this cloth's vertices carry the areal density times a third of their "
+                "triangles' area, so that an edge vertex has half the mass of an interior one. No MJCF element "
+                "can change the mass of a body a flexcomp made.")
+SCENE_SUMMARY = {"cloth": "(a square hanging from two corners)",
+                 "stretch": "(a strip between the world and the clamp on slide joint pull, actuator pull)",
+                 "sphere": "(a square dropped onto a sphere)",
+                 "wall": "(a square dropped across the top edge of a wall)"}
 
 # MuJoCo 4.0.0 warns "flex ... is not rigid and has no equality constraints or passive forces" for a
 # flex whose only elasticity is elastic2d="stretch", although it has passive forces (measured: the
@@ -258,18 +278,130 @@ def build_scene(
 
 def export_scene(material: ClothMaterial | str | os.PathLike, scene: str, output: str | os.PathLike,
                  **options) -> BuiltScene:
-    """Build a scene (``options`` as for :func:`build_scene`), check that it compiles, and write it
-    to ``output`` as MJCF (directories created). ``material`` is a :class:`ClothMaterial` or a
-    material file. The file loads with ``mujoco.MjModel.from_xml_path`` once ``mujoco`` is
-    imported (our entry point registers the plugin)."""
+    """Build a scene (``options`` as for :func:`build_scene`), write it to ``output`` as MJCF
+    (:func:`scene_mjcf`; directories created) and check that the text compiles (a scene that does not
+    compile is never written). ``material`` is a :class:`ClothMaterial` or a material file. The file
+    loads with ``mujoco.MjModel.from_xml_path`` once ``mujoco`` is imported (our entry point
+    registers the plugin) and compiles to the model ``build_scene`` compiles, number for number."""
     if not isinstance(material, ClothMaterial):
         material = ClothMaterial.from_file(material)
     built = build_scene(material, scene, **options)
-    compile_quietly(built.spec)  # a scene that does not compile is never written
+    text = scene_mjcf(built)
+    compile_quietly(mujoco.MjSpec.from_string(text))
     path = Path(output)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(built.spec.to_xml())
+    path.write_text(text)
     return built
+
+
+def scene_mjcf(built: BuiltScene) -> str:
+    """The scene as MJCF text that compiles to the model ``built.spec`` compiles (every array of
+    mjModel equal), with a header comment that names the plugin and how to get it.
+
+    MuJoCo writes it (``MjSpec.to_xml`` with ``savecompiled="false"``: every number exact, where the
+    default writes 6 significant digits), except the cloth's vertex bodies, one line each in class
+    :data:`VERTEX_CLASS` (slide joints). Not a ``<flexcomp>``, which cannot hold this cloth
+    (:data:`NOT_FLEXCOMP`): the file spells out what MuJoCo expands a flexcomp into, one body
+    ``cloth_<v>`` per free vertex ``v``, as ``build_scene`` builds it.
+    """
+    spec = built.spec.copy()
+    spec.compiler.savecompiled = False  # exact numbers
+    spec.compiler.savecanonical = False  # the servo as <position kp dampratio>, as it was built
+    spec.comment = _header(built)
+    vertex_class = spec.add_default(VERTEX_CLASS, spec.default)
+    vertex_class.joint.type = mujoco.mjtJoint.mjJNT_SLIDE
+    with warnings.catch_warnings():  # to_xml compiles the spec
+        warnings.filterwarnings("ignore", message=_SPURIOUS_FLEX_WARNING)
+        text = spec.to_xml()
+    flex = spec.flexes[0]
+    # build_scene adds the vertex bodies last: they are the world's last children in the text.
+    vertices = [spec.body(name) for v, name in enumerate(flex.vertbody) if name == f"{flex.name}_{v}"]
+    start = text.rindex("\n", 0, text.index(f'<body name="{vertices[0].name}"')) + 1
+    end = text.rindex("  </worldbody>")
+    if text.count("<body ", start, end) != len(vertices):
+        raise RuntimeError(f"the {flex.name} flex's vertex bodies are not the last bodies of the world")
+    block = [f"    <!-- The {flex.name} flex's free vertices: body {flex.name}_<v> holds vertex v with a third of the",
+             f"         mass of each of its triangles; class {VERTEX_CLASS} makes its joints slides. Pinned vertices",
+             "         sit on their holder (the flex's body list). -->",
+             f'    <frame childclass="{VERTEX_CLASS}">',
+             *(f"      {_vertex_body(body)}" for body in vertices),
+             "    </frame>\n"]
+    return text[:start] + "\n".join(block) + text[end:]
+
+
+def _vertex_body(body: mujoco.MjsBody) -> str:
+    """One vertex body of :func:`_cloth` as one line of MJCF, its joints in class :data:`VERTEX_CLASS`."""
+    if np.any(body.ipos) or not np.array_equal(body.iquat, [1, 0, 0, 0]) or body.quat[0] != 1:
+        raise RuntimeError(f"vertex body {body.name} is not a point mass at its origin")
+    joints = []
+    for joint in body.joints:
+        if joint.type != mujoco.mjtJoint.mjJNT_SLIDE or joint.name or np.any(joint.pos):
+            raise RuntimeError(f"vertex body {body.name} has a joint other than an unnamed slide")
+        joints.append(f'<joint axis="{_reals(joint.axis)}"/>')
+    plugin = f'<plugin instance="{body.plugin.name}"/>' if body.plugin.active else ""
+    return (f'<body name="{body.name}" pos="{_reals(body.pos)}"><inertial pos="0 0 0" mass="{_real(body.mass)}" '
+            f'diaginertia="{_reals(body.inertia)}"/>{"".join(joints)}{plugin}</body>')
+
+
+def _real(value: float) -> str:
+    """``value`` exactly (the shortest text that reads back to the same double), as MuJoCo writes it."""
+    text = repr(float(value))
+    return text[:-2] if text.endswith(".0") else text
+
+
+def _reals(values) -> str:
+    return " ".join(_real(value) for value in values)
+
+
+def _header(built: BuiltScene) -> str:
+    """The comment at the top of an exported scene: what it is, the plugin and how to get it, why
+    the cloth is not a ``<flexcomp>``. MuJoCo keeps the first comment in ``<mujoco>`` as
+    ``MjSpec.comment`` and writes it back when it saves the model. XML comments cannot hold two
+    hyphens in a row (expat refuses the file; MuJoCo does not mind), so the fallback option is named
+    in words."""
+    spec, flex = built.spec, built.spec.flexes[0]
+    holders = list(dict.fromkeys(name for v, name in enumerate(flex.vertbody) if name != f"{flex.name}_{v}"))
+    paragraphs = [f"{spec.modelname}: the {built.scene} scene {SCENE_SUMMARY[built.scene]}, written by yarnfit "
+                  "export (yarnfit.mujoco.scenes.export_scene). Lengths in m, masses in kg, times in s."]
+    if built.fallback:
+        paragraphs += [f'Isotropic fallback, no plugin: the flex "{flex.name}" carries MuJoCo\'s own elasticity '
+                       'alone (elastic2d="both"), one isotropic material with the fitted one\'s geometric-mean '
+                       "stretch and bending stiffness. It loads in plain MuJoCo 4.0. "
+                       + (f"What it cannot carry over: {'; '.join(built.notes)}. " if built.notes else "")
+                       + f"The fitted orthotropic material needs the engine plugin {PLUGIN_NAME} (pip install "
+                       "yarnfit); yarnfit export without its fallback option writes this scene with it."]
+    else:
+        config = spec.plugins[0].config
+        membrane = config.get("membrane", "triangle")
+        paragraphs += [f'The cloth is the 2D flex "{flex.name}", driven by the MuJoCo engine plugin {PLUGIN_NAME} '
+                       f'(instance "{spec.plugins[0].name}", configured in <extension>): the fitted orthotropic '
+                       "shell, membrane s00 s01 s11 s22 and bending b00 b01 b11 b22 (Pa), thickness (m)"
+                       + (", the strain-stiffening keys s00p2 ... c10" if "c01" in config else "")
+                       + ", the weft angle (rad from world x), a damping time (s) and membrane strains "
+                       + ('smoothed over each vertex (membrane="node")' if membrane == "node"
+                          else f'constant per triangle (membrane="{membrane}")')
+                       + ". The flex's own <elasticity> is MuJoCo's implicit isotropic share that keeps the step "
+                       + ("stable; the plugin adds the rest of the material to it (builtin_young, builtin_poisson "
+                          "and builtin_thickness repeat it)." if "builtin_young" in config else
+                          "stable; the plugin removes its forces and carries the whole material."),
+                       "Getting the plugin: pip install yarnfit. Then import mujoco registers it in Python "
+                       "(yarnfit's mujoco.plugins entry point) and mujoco.MjModel.from_xml_path loads this file "
+                       "as it is; a C or C++ host first calls mj_loadPluginLibrary on "
+                       "yarnfit/mujoco/libyarnfit_shell.so in the installed package (python -c \"from "
+                       'yarnfit.mujoco.plugin import LIBRARY; print(LIBRARY)" prints its path). Without it MuJoCo '
+                       "stops with "
+                       f'"plugin {PLUGIN_NAME} not found": yarnfit export with its fallback option writes the '
+                       "scene without the plugin (MuJoCo's isotropic elasticity alone)."]
+    paragraphs += ["Not a <flexcomp>: " + NOT_FLEXCOMP
+                   + (f" Nor can a flexcomp pin this cloth: it pins points only to the body it is in, and this "
+                      f"cloth is held by the {' and the '.join(holders)}." if len(holders) > 1 else "")
+                   + f" So the cloth is written as MuJoCo expands a flexcomp: one body {flex.name}_<v> per free "
+                   f"vertex v (three world-axis slide joints{'' if built.fallback else ', the plugin'}), pinned "
+                   f'vertices on their holder, and <flex name="{flex.name}">. Every number is exact: this file '
+                   "compiles to the model yarnfit simulates (build_scene)."]
+    text = "\n\n".join(textwrap.fill(paragraph, width=98, initial_indent="  ", subsequent_indent="  ",
+                                     break_long_words=False, break_on_hyphens=False) for paragraph in paragraphs)
+    return "\n" + re.sub("-(?=-)", "- ", text) + "\n"  # a fabric's name may hold "--"
 
 
 def compile_quietly(spec: mujoco.MjSpec) -> mujoco.MjModel:
