@@ -234,12 +234,14 @@ def fit_task(fabric: Fabric, relaxed, model: str, *results) -> dict:
 def export_task(material_data: dict) -> str:
     """The ``cloth`` scene of a material (``yarnfit export --scene cloth``) as MJCF text, checked to
     compile."""
-    from .material_file import MaterialFile
-    from .mujoco.scenes import ClothMaterial, build_scene, compile_quietly
+    import mujoco
 
-    built = build_scene(ClothMaterial.from_file(MaterialFile(material_data)), "cloth")
-    compile_quietly(built.spec)
-    return built.spec.to_xml()
+    from .material_file import MaterialFile
+    from .mujoco.scenes import ClothMaterial, build_scene, compile_quietly, scene_mjcf
+
+    text = scene_mjcf(build_scene(ClothMaterial.from_file(MaterialFile(material_data)), "cloth"))
+    compile_quietly(mujoco.MjSpec.from_string(text))
+    return text
 
 
 def validate_task(material_path: str, scenes: tuple[str, ...], quick: bool, logs: str, material_data: dict) -> dict:

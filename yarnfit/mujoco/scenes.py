@@ -13,10 +13,14 @@ Exported (:func:`export_scene`, :func:`scene_mjcf`) in that expanded form, not a
 :func:`build_scene` compiles.
 
 Elasticity, default (the split of :mod:`yarnfit.mujoco.split`): MuJoCo's built-in isotropic
-``<elasticity elastic2d="stretch">`` carries ``S_iso ⪰ S/2``, integrated implicitly under the
-``discrete`` integrator, and the ``yarnfit.shell`` plugin, configured with the full material,
-its weft angle and ``builtin_*`` keys repeating that ``<elasticity>``, adds the orthotropic
-remainder and all the bending. With ``fallback=True`` the scene has no plugin: MuJoCo's
+``<elasticity elastic2d="both">`` carries ``S_iso ⪰ S/2`` and a bending at least the material's,
+integrated implicitly under the ``discrete`` integrator, which keeps the step stable; the
+``yarnfit.shell`` plugin, configured with the full material, its weft angle and
+``membrane="node"`` (:data:`DEFAULT_MEMBRANE`), removes MuJoCo's forces exactly and carries the
+whole material, its membrane on node-smoothed strains (no locking on any triangulation). With
+``membrane="triangle"`` it keeps constant-strain triangles and, with ``builtin_*`` keys repeating
+the ``<elasticity>``, adds only the orthotropic membrane remainder (and all the bending; plugins/
+README.md). With ``fallback=True`` the scene has no plugin: MuJoCo's
 ``elastic2d="both"`` with :func:`~yarnfit.mujoco.split.isotropic_fallback`. One damping time
 (s) goes to both parts, so the total damping is that time times the full material's stiffness.
 
@@ -49,6 +53,7 @@ import numpy as np
 
 from ..checks import non_negative_number, positive_number
 from ..material_file import MaterialFile
+from ..outputs import write_atomically
 from ..shell import ShellMaterial
 from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE,
                DEFAULT_TIMESTEP, INTEGRATORS, SCENES)
@@ -288,9 +293,7 @@ def export_scene(material: ClothMaterial | str | os.PathLike, scene: str, output
     built = build_scene(material, scene, **options)
     text = scene_mjcf(built)
     compile_quietly(mujoco.MjSpec.from_string(text))
-    path = Path(output)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    write_atomically(output, text)
     return built
 
 
