@@ -559,3 +559,19 @@ def test_largest_tangent_bounds_every_tangent_within_the_strain_bound():
     assert gaps.min() >= -1e-9 * np.abs(upper).max()
     with pytest.raises(ValueError, match="bound must be >= 0"):
         terms.stiffest(-0.1)
+
+
+def test_a_uniaxial_pull_follows_a_large_poisson_ratio_until_the_width_collapses():
+    """A linear StVK membrane with ν = s01/s11 = 1.2 pulled along the weft, no shear coupling: the
+    free width's Green strain is −ν times the pulled one (closed form) while it stays above −½; past
+    that (e₁ > 1/(2ν)) no width balances the pull, which is said, not extrapolated."""
+    h = 1e-3
+    knit = ShellMaterial(thickness=h, s00=2.0e6, s01=1.2e6, s11=1.0e6, s22=1.0e5,
+                         b00=1.0, b01=0.0, b11=1.0, b22=1.0)
+    stretch = 1.3
+    e1 = 0.5 * (stretch**2 - 1)
+    pull = knit.uniaxial_pull(0.0, stretch)
+    assert 0.5 * (pull.first_form[1, 1] - 1) == pytest.approx(-1.2 * e1, rel=1e-9)
+    assert pull.force_n_per_m == pytest.approx(stretch * h * (2.0e6 - 1.2e6**2 / 1.0e6) * e1, rel=1e-9)
+    with pytest.raises(ValueError, match="the width collapses"):
+        knit.uniaxial_pull(0.0, 1.4)  # e1 = 0.48 > 1/2.4

@@ -496,7 +496,11 @@ def cmd_fit(args: argparse.Namespace) -> int:
     print(fit_summary(fitted, output, path))
     from .plots import fit_figures
 
-    drawn = fit_figures(output, figures)
+    try:
+        drawn = fit_figures(output, figures)
+    except ValueError as error:  # the material file is written: a figure that cannot be drawn says why
+        print(f"yarnfit fit: figures not drawn: {_first_line(error)}", file=sys.stderr)
+        return 0
     print(f"figures: {len(drawn)} files in {figures} (PNG, SVG, CSV; `yarnfit show {output}` opens them)")
     return 0
 
@@ -677,11 +681,14 @@ def cmd_validate(args: argparse.Namespace) -> int:
     summary, path = run_suite(args.material, scenes, quick=args.quick, logs=args.logs, reference=reference,
                               progress=progress)
     print(f"validated {summary['material']['name']}: {path}")
-    if "stretch" in summary["scenes"] or "yarn" in summary["scenes"]:
+    if {"stretch", "yarn"} & set(summary.get("scenes", {})):  # the scenes with curves to draw
         from .plots import validation_figures
 
-        drawn = validation_figures(summary, path.parent, reference, material=args.material)
-        print(f"  figures: {len(drawn)} files in {path.parent} (`yarnfit show {path}` opens them)")
+        try:
+            drawn = validation_figures(summary, path.parent, reference, material=args.material)
+            print(f"  figures: {len(drawn)} files in {path.parent} (`yarnfit show {path}` opens them)")
+        except ValueError as error:  # summary.json is written: say why the figures are not
+            print(f"yarnfit validate: figures not drawn: {_first_line(error)}", file=sys.stderr)
     for scene, seconds in summary["wall_seconds"].items():
         print(f"  {scene:<8} {seconds:7.1f} s  {path.parent / (scene + '.rrd')}")
     results = [Verdict(**v) for v in summary["verdicts"]]

@@ -246,10 +246,19 @@ def _tension_figure(fabric: str, base: Path, shell: ShellMaterial, stretch_range
     columns = {"strain [%]": PERCENT * strain}
     for direction, degrees in DIRECTIONS.items():
         angle = math.radians(degrees)
-        force = np.array([shell.uniaxial_pull(angle, 1.0 + e).force_n_per_m for e in strain]) / N_PER_M_IN_N_PER_CM
+        force = np.full(strain.shape, math.nan)
+        for k, e in enumerate(strain):
+            try:
+                force[k] = shell.uniaxial_pull(angle, 1.0 + e).force_n_per_m / N_PER_M_IN_N_PER_CM
+            except ValueError:
+                # Beyond here no free width balances the pull (a StVK membrane of a large Poisson
+                # ratio collapses its width): the curve ends, and the table says nan.
+                break
         small = shell.uniaxial_stiffness(angle)[0] * strain / N_PER_M_IN_N_PER_CM
         color = DIRECTION_COLORS[direction]
-        ax.plot(PERCENT * strain, force, "-", color=color, lw=1.8, label=f"{direction} ({degrees:g}°)")
+        ends = "" if np.isfinite(force).all() else \
+            f", ends at {PERCENT * strain[np.isfinite(force)].max():.3g} %: the width collapses"
+        ax.plot(PERCENT * strain, force, "-", color=color, lw=1.8, label=f"{direction} ({degrees:g}°){ends}")
         ax.plot(PERCENT * strain, small, "--", color=color, lw=0.9, alpha=0.7)
         columns[f"{direction} force per width [N/cm]"] = force
         columns[f"{direction} small-strain law [N/cm]"] = small

@@ -342,6 +342,9 @@ UNIAXIAL_STRESS_RTOL = 1e-9
 # difference step of its Jacobian as a fraction of the pulled strain.
 UNIAXIAL_NEWTON_STEPS = 50
 UNIAXIAL_FD_STEP = 1e-6
+# The uniaxial pull's first guess keeps the free width's Green strain this fraction of the way above
+# −½ (zero width): a guess there is admissible, and the Newton steps move from it.
+UNIAXIAL_WIDTH_MARGIN = 0.1
 
 
 class UniaxialPull(NamedTuple):
@@ -645,7 +648,13 @@ class ShellMaterial:
             g = rotated_gradient(free)
             return np.array([2.0 * g[1, 1], 4.0 * g[0, 1]])
 
-        free = np.array([-self.uniaxial_stiffness(angle)[1] * strain, 0.0])
+        def admissible(free: np.ndarray) -> bool:  # the pulled sheet keeps a positive width
+            form = first_form(free)
+            return bool(form[1, 1] > 0.0 and np.linalg.det(form) > 0.0)
+
+        # The small-strain Poisson contraction, kept inside the admissible widths: a knit's ν ≈ 1.5
+        # at 40 % would ask for a negative squared width.
+        free = np.array([max(-self.uniaxial_stiffness(angle)[1] * strain, -0.5 * (1.0 - UNIAXIAL_WIDTH_MARGIN)), 0.0])
         # Residuals are judged against the stress the pulled strain makes in the stiffest
         # direction: a bias pull of a satin (s22 ~ 1e-5 s00) has a pulling stress below the
         # round-off of its weft and warp stresses.
@@ -655,19 +664,23 @@ class ShellMaterial:
             g = gradient(free)
             if np.abs(g).max() <= UNIAXIAL_STRESS_RTOL * scale:
                 break
+            if not all(admissible(free + sign * step * e) for e in np.eye(2) for sign in (1.0, -1.0)):
+                break  # at the edge of the admissible widths: no free width balances the pull
             jacobian = np.column_stack([(gradient(free + step * e) - gradient(free - step * e)) / (2.0 * step)
                                         for e in np.eye(2)])
             direction = -np.linalg.solve(0.5 * (jacobian + jacobian.T), g)
             if not float(g @ direction) < 0.0:
                 direction = -g  # an indefinite difference Jacobian: steepest descent instead
             alpha, start, imbalance = 1.0, energy(free), float(np.abs(g).max())
-            while alpha > 1e-12 and not (energy(free + alpha * direction) < start
-                                         or float(np.abs(gradient(free + alpha * direction)).max()) < imbalance):
+            while alpha > 1e-12 and not (admissible(free + alpha * direction)
+                                         and (energy(free + alpha * direction) < start
+                                              or float(np.abs(gradient(free + alpha * direction)).max()) < imbalance)):
                 alpha *= 0.5
             free = free + alpha * direction
         if np.abs(gradient(free)).max() > UNIAXIAL_STRESS_RTOL * scale:
             raise ValueError(f"uniaxial pull at {math.degrees(angle):g}° to stretch {stretch!r}: no free width and "
-                             f"shear balance the transverse stresses (is the membrane convex?)")
+                             f"shear balance the transverse stresses (the width collapses, or the membrane is not "
+                             f"convex)")
         I = first_form(free)
         return UniaxialPull(
             force_n_per_m=2.0 * stretch * float(rotated_gradient(free)[0, 0]),
