@@ -18,6 +18,8 @@ import yarnfit
 from yarnfit.catalogue import TABLE_COLUMNS, Label, fabric_of, read_labels, run_catalogue
 from yarnfit.tasks import DaskBackend, LocalPool
 
+from test_tasks import default_sigint
+
 # The smallest design (one magnitude per family and sign): the catalogue's machinery, not the fit,
 # is under test here.
 SAMPLES = 16
@@ -116,7 +118,8 @@ def test_an_interrupted_catalogue_resumes(tmp_path):
     out = tmp_path / "out"
     command = [sys.executable, "-m", "yarnfit.cli", "catalogue", str(labels), "-o", str(out), "--samples",
                str(SAMPLES), "--workers", "2"]
-    first = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=_python_env())
+    first = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=_python_env(),
+                             preexec_fn=default_sigint)
     for line in first.stderr:  # off a terminal the progress line comes every 2 s
         match = re.search(r"\] (\d+)/(\d+) tasks", line)
         if match and int(match[1]) >= 5:  # some tasks done, most to go

@@ -151,6 +151,13 @@ def test_outputs_are_checked_before_and_written_whole(tmp_path):
     assert target.read_text() == "whole" and os.listdir(target.parent) == ["out.json"]
 
 
+def default_sigint():
+    """In the child before exec: SIGINT back to its default. A shell without job control (CI
+    running in the background) starts its commands with SIGINT ignored, which they inherit, and
+    Python then installs no KeyboardInterrupt handler: the test would send a signal nobody hears."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _children(pid):
     return subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True).stdout.split()
 
@@ -164,7 +171,8 @@ def test_sigint_stops_a_fit_during_its_samples(tmp_path):
     # The yarnfit under test, wherever the installed one is.
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(yarnfit.__file__).parents[1]),
                                                         os.environ.get("PYTHONPATH", "")])}
-    fit = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env)
+    fit = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env,
+                           preexec_fn=default_sigint)
     seen = []
     for line in fit.stderr:
         seen.append(line)
