@@ -11,11 +11,12 @@ jittered lattice, edges in every direction).
    20 /m along and across it and on the bias, at cells of 1/32 of its length: energy per area
    against ½ bending κ² (the free ends' missing hinges cost ~1/n).
 3. Clamped strips (locking): the 8 × 5 cm FAB strip's clamped stiffness (validate.stretch's
-   linear solve, constant-strain triangles: the plugin's membrane) of a knit along its courses and
+   linear solve, constant-strain triangles: the plugin's membrane="triangle") of a knit along its courses and
    of a woven cut on the bias, at the drapes' 1.5 cm cells, against a fine criss-cross mesh of
    1 mm cells.
 4. The same clamped strips with node-smoothed strains (validate.stretch's solve with
-   ``smoothing="node"``, not the plugin's element: the candidate for meshes that lock).
+   ``smoothing="node"``: the plugin's default membrane="node", whose clamped strip equals this solve
+   to 1e-5, tests/test_plugin_mechanics.py).
 
 Run: python validation/plugin_acceptance.py [--knit MATERIAL.json] [--woven MATERIAL.json]
 (default: the cotton-jersey and cotton-twill presets, fitted first, ~20 s).
@@ -94,7 +95,7 @@ def main() -> None:
         fine = clamped(shell, "crisscross", angle, FINE_CELL)
         ratios = "   ".join(f"{kind} {clamped(shell, kind, angle, DRAPE_CELL) / fine:.3f}" for kind in MESH_KINDS)
         print(f"  {label:>22} (fine {fine:.4g} N/m): {ratios}")
-    print(f"\n4. the same with node-smoothed strains (a study, not the plugin's element), at {DRAPE_CELL * 100:g} cm "
+    print(f"\n4. the same with node-smoothed strains (the plugin's default membrane), at {DRAPE_CELL * 100:g} cm "
           "and 1.25 cm cells")
     for label, shell, angle in (("knit along its courses", knit, 0.0), ("woven on the bias", woven, math.pi / 4)):
         fine = clamped(shell, "crisscross", angle, FINE_CELL)
