@@ -15,8 +15,9 @@ the arguments the task names by :class:`Result`), longest first among those read
 the same on either backend:
 
 * **results cached** (:class:`TaskCache`) by a hash of the task's function, arguments and the yarnfit
-  version, written whole (temporary file, then rename): a rerun, or a run after an interrupted one,
-  recomputes nothing it already has;
+  version, written whole (temporary file, then rename), with the inputs' own failures
+  (:data:`CACHED_FAILURES`): a rerun, or a run after an interrupted one, recomputes nothing it
+  already has, and loads only what the wanted tasks need;
 * **a failure stays one task's**: its exception is kept, the tasks that needed its result are
   skipped with :class:`SkippedTask` naming it, every other task still runs;
 * **progress** through ``on_done(task, outcome, done, total)`` as each task finishes;
@@ -327,6 +328,8 @@ def make_backend(scheduler: str | None = None, workers: int | None = None, dask:
 
 @dataclass
 class _Graph:
+    """Tasks by key, what each still waits on, and which tasks need each."""
+
     tasks: dict[Hashable, Task]
     waiting_on: dict[Hashable, set] = field(default_factory=dict)
     needed_by: dict[Hashable, list] = field(default_factory=dict)
@@ -351,19 +354,19 @@ class _Graph:
         """The keys with every task after its dependencies (ValueError on a cycle)."""
         order, state = [], {}
 
-        def visit(key, path):
+        def visit(key):
             if state.get(key) == "done":
                 return
             if state.get(key) == "open":
                 raise ValueError(f"the tasks' dependencies form a cycle through {key!r}")
             state[key] = "open"
             for d in self.tasks[key].dependencies:
-                visit(d, path)
+                visit(d)
             state[key] = "done"
             order.append(key)
 
         for key in self.tasks:
-            visit(key, ())
+            visit(key)
         return order
 
 
