@@ -16,9 +16,9 @@ from yarnfit.validate import DIRECTIONS
 from yarnfit.validate.stretch import pull_strip, run_stretch
 
 # The issue's bound for the scene against the shell law at small strain (the clamped law on the
-# scene's mesh, with the scene's node-smoothed strains). Measured on the quick 9 × 6 strip at 0.2 %
-# strain: +0.30 % to +0.47 % for the six cases below (constant-strain triangles before issue 15:
-# within 1.6 %, the woven's bias; the presets within 1.1 %).
+# scene's mesh, with the strips' constant-strain triangles). Measured on the quick 9 × 6 strip at
+# 0.2 % strain: within 1.6 % (the woven's bias), the presets within 1.1 % (validation of issue 6);
+# with node-smoothed strains the six cases below came within +0.30 % to +0.47 %.
 LAW_RTOL = 0.03
 SERVO_LAG_RTOL = 0.04
 # Areal density of the test materials (kg/m²).
