@@ -181,6 +181,22 @@ static int read_number(const mjModel* m, int instance, const char* key, double f
   return 0;
 }
 
+// Parse attribute `key` of instance `instance`, one of two words: `first` (also when absent or
+// empty) sets *out to 0, `second` to 1; anything else fails with a message naming both.
+static int read_choice(const mjModel* m, int instance, const char* key, const char* first, const char* second,
+                       int* out) {
+  const char* text = mj_getPluginConfig(m, instance, key);
+  if (!text || !text[0] || !strcmp(text, first)) {
+    *out = 0;
+  } else if (!strcmp(text, second)) {
+    *out = 1;
+  } else {
+    mju_error(YF_NAME ": config key '%s' must be '%s' or '%s', got '%s'", key, first, second, text);
+    return -1;
+  }
+  return 0;
+}
+
 // Least value over one side of zero strain of phi'' = 2 k2 x + 3 k3 x^2 (side +1: x >= 0, -1:
 // x < 0). It is 0 at x = 0 and falls only if the cubic term softens that side (k2 < 0 for x > 0,
 // k2 > 0 for x < 0), to its minimum -k2^2 / (3 k3) at x = -k2 / (3 k3), or without bound when k3 = 0
@@ -262,24 +278,8 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
     if (read_number(m, instance, keys[k].key, keys[k].fallback, keys[k].required, keys[k].value)) return -1;
   }
   if (read_number(m, instance, "c01", 0, 0, &s->c01) || read_number(m, instance, "c10", 0, 0, &s->c10)) return -1;
-  const char* membrane = mj_getPluginConfig(m, instance, "membrane");
-  if (!membrane || !membrane[0] || !strcmp(membrane, "triangle")) {
-    s->node_membrane = 0;
-  } else if (!strcmp(membrane, "node")) {
-    s->node_membrane = 1;
-  } else {
-    mju_error(YF_NAME ": config key 'membrane' must be 'triangle' or 'node', got '%s'", membrane);
-    return -1;
-  }
-  const char* rest = mj_getPluginConfig(m, instance, "rest");
-  if (!rest || !rest[0] || !strcmp(rest, "qpos0")) {
-    s->rest_texcoord = 0;
-  } else if (!strcmp(rest, "texcoord")) {
-    s->rest_texcoord = 1;
-  } else {
-    mju_error(YF_NAME ": config key 'rest' must be 'qpos0' or 'texcoord', got '%s'", rest);
-    return -1;
-  }
+  if (read_choice(m, instance, "membrane", "triangle", "node", &s->node_membrane) ||
+      read_choice(m, instance, "rest", "qpos0", "texcoord", &s->rest_texcoord)) return -1;
   s->stiffens = 0;
   for (int d = 0; d < 3; d++) {
     for (int k = 0; k < kNumStiffening; k++) {
