@@ -14,11 +14,10 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-import yarnfit
 from yarnfit.catalogue import TABLE_COLUMNS, Label, fabric_of, read_labels, run_catalogue
 from yarnfit.tasks import DaskBackend, LocalPool
 
-from test_tasks import default_sigint
+from test_tasks import checkout_env, default_sigint
 
 # The smallest design (one magnitude per family and sign): the catalogue's machinery, not the fit,
 # is under test here.
@@ -105,11 +104,6 @@ def test_a_catalogue_on_a_dask_cluster(tmp_path):
     assert [e.engineering for e in again.entries] == [e.engineering for e in run.entries]
 
 
-def _python_env():
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(yarnfit.__file__).parents[1]),
-                                                         os.environ.get("PYTHONPATH", "")])}
-
-
 def test_an_interrupted_catalogue_resumes(tmp_path):
     """SIGINT during the samples: exit 130 with one line, no half-written file, no worker left;
     the next run takes what the first finished from the cache and completes."""
@@ -118,7 +112,7 @@ def test_an_interrupted_catalogue_resumes(tmp_path):
     out = tmp_path / "out"
     command = [sys.executable, "-m", "yarnfit.cli", "catalogue", str(labels), "-o", str(out), "--samples",
                str(SAMPLES), "--workers", "2"]
-    first = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=_python_env(),
+    first = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=checkout_env(),
                              preexec_fn=default_sigint)
     for line in first.stderr:  # off a terminal the progress line comes every 2 s
         match = re.search(r"\] (\d+)/(\d+) tasks", line)
@@ -137,7 +131,7 @@ def test_an_interrupted_catalogue_resumes(tmp_path):
     assert not [p for p in out.rglob("*") if p.name.endswith(".part")]
     before = {p.name: p.stat().st_mtime_ns for p in (out / ".cache").glob("*.pkl")}
     assert len(before) >= 5
-    second = subprocess.run(command, capture_output=True, text=True, env=_python_env(), timeout=600)
+    second = subprocess.run(command, capture_output=True, text=True, env=checkout_env(), timeout=600)
     assert second.returncode == 0, second.stderr
     assert "4 of 4 fabrics ok" in second.stdout
     # What the first run finished was loaded, not recomputed (a recomputed result is a new file).

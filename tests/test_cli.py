@@ -2,7 +2,6 @@
 prints its summary and writes the recording the README documents."""
 
 import json
-import os
 import re
 import subprocess
 import sys
@@ -254,10 +253,10 @@ EARLY_ERROR_SECONDS = 5.0
 
 def run_here(*args: str, cwd=None) -> subprocess.CompletedProcess:
     """``python -m yarnfit.cli`` with this checkout's yarnfit first on the path."""
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(yarnfit.__file__).parents[1]),
-                                                        os.environ.get("PYTHONPATH", "")])}
+    from test_tasks import checkout_env
+
     return subprocess.run([sys.executable, "-m", "yarnfit.cli", *args], capture_output=True, text=True, timeout=120,
-                          cwd=cwd, env=env)
+                          cwd=cwd, env=checkout_env())
 
 
 @pytest.mark.parametrize("command, option, what", [

@@ -151,6 +151,13 @@ def test_outputs_are_checked_before_and_written_whole(tmp_path):
     assert target.read_text() == "whole" and os.listdir(target.parent) == ["out.json"]
 
 
+def checkout_env() -> dict:
+    """The environment for ``python -m yarnfit.cli`` in a subprocess with the yarnfit under test
+    first on the path, wherever the installed one is."""
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(yarnfit.__file__).parents[1]),
+                                                         os.environ.get("PYTHONPATH", "")])}
+
+
 def default_sigint():
     """In the child before exec: SIGINT back to its default. A shell without job control (CI
     running in the background) starts its commands with SIGINT ignored, which they inherit, and
@@ -168,10 +175,7 @@ def test_sigint_stops_a_fit_during_its_samples(tmp_path):
     command = [sys.executable, "-m", "yarnfit.cli", "fit", "--fiber", "cotton", "--pattern", "plain", "--gsm", "200",
                "--counts", "25x25", "--samples", "16", "--workers", "2", "-o", str(tmp_path / "plain.json"),
                "--rerun", str(tmp_path / "plain.rrd")]
-    # The yarnfit under test, wherever the installed one is.
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(yarnfit.__file__).parents[1]),
-                                                        os.environ.get("PYTHONPATH", "")])}
-    fit = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env,
+    fit = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=checkout_env(),
                            preexec_fn=default_sigint)
     seen = []
     for line in fit.stderr:

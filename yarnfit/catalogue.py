@@ -34,8 +34,10 @@ from pathlib import Path
 from typing import Callable
 
 from .fabric import DEFAULT_COUNTS_PER_CM, Fabric, counts_from_label
-from .fabric_fit import DEFAULT_SAMPLES, design_specs, fit_solved, relax_for_fit, solve_design_sample
+from .checks import error_line
+from .fabric_fit import DEFAULT_SAMPLES, fit_solved, relax_for_fit, solve_design_sample
 from .fibers import get_fiber
+from .material_file import MaterialFile
 from .outputs import write_atomically
 from .samples import design_size, levels_for
 from .tasks import Backend, Result, SkippedTask, Task, TaskCache, run_tasks
@@ -226,8 +228,6 @@ class CatalogueRun:
 
 def fit_task(fabric: Fabric, relaxed, model: str, *results) -> dict:
     """The material file's contents of the shell fitted to ``results``."""
-    from .material_file import MaterialFile
-
     return MaterialFile.from_fit(fit_solved(fabric, relaxed, list(results), model)).data
 
 
@@ -236,7 +236,6 @@ def export_task(material_data: dict) -> str:
     compile."""
     import mujoco
 
-    from .material_file import MaterialFile
     from .mujoco.scenes import ClothMaterial, build_scene, compile_quietly, scene_mjcf
 
     text = scene_mjcf(build_scene(ClothMaterial.from_file(MaterialFile(material_data)), "cloth"))
@@ -256,10 +255,6 @@ def validate_task(material_path: str, scenes: tuple[str, ...], quick: bool, logs
 
 
 # -- the run --------------------------------------------------------------------------------------
-
-
-def _stage(key) -> str:
-    return key[0]
 
 
 def run_catalogue(
@@ -299,7 +294,7 @@ def run_catalogue(
             if label.name in seen:
                 raise ValueError(f"name {label.name!r} already on line {seen[label.name]}")
         except ValueError as error:
-            entries[i] = CatalogueEntry(label, "failed", "input", _one_line(error))
+            entries[i] = CatalogueEntry(label, "failed", "input", error_line(error))
             continue
         seen[label.name] = label.line
         fabrics[i] = fabric
@@ -330,7 +325,7 @@ def run_catalogue(
         if not isinstance(outcome, BaseException):
             name = fabrics[i].name
             if stage == "fit":
-                write_atomically(out / f"{name}.json", _json_text(outcome))
+                MaterialFile(outcome).write(out / f"{name}.json")
             elif stage == "export":
                 write_atomically(out / f"{name}-cloth.xml", outcome)
         if on_done is not None:
@@ -349,15 +344,14 @@ def _entry(label: Label, fabric: Fabric, i: int, outcomes: dict, out: Path, vali
     for stage in stages:
         outcome = outcomes.get((stage, i))
         if isinstance(outcome, BaseException):
-            cause, where = outcome, stage
+            where, cause = stage, outcome
             if isinstance(outcome, SkippedTask):
                 # The stage that failed first: relax, a sample, or the fit.
-                where = next((k[0] for k, v in outcomes.items() if k[1] == i and isinstance(v, BaseException)
-                              and not isinstance(v, SkippedTask)), stage)
-                cause = next((v for k, v in outcomes.items() if k[1] == i and isinstance(v, BaseException)
-                              and not isinstance(v, SkippedTask)), outcome)
+                where, cause = next(((k[0], v) for k, v in outcomes.items() if k[1] == i
+                                     and isinstance(v, BaseException) and not isinstance(v, SkippedTask)),
+                                    (stage, outcome))
             material = str(out / f"{fabric.name}.json") if stage != "fit" else None
-            return CatalogueEntry(label, "failed", where, _one_line(cause), material, **_fit_columns(outcomes, i))
+            return CatalogueEntry(label, "failed", where, error_line(cause), material, **_fit_columns(outcomes, i))
     entry = dict(_fit_columns(outcomes, i))
     if validate:
         verdicts = outcomes[("validate", i)].get("verdicts", [])
@@ -377,12 +371,6 @@ def _fit_columns(outcomes: dict, i: int) -> dict:
     return {"engineering": {k: float(data["engineering"][k]) for k in ENGINEERING_KEYS if k in data["engineering"]},
             "fit_min_r2": float(min(r2)) if r2 else math.nan, "fit_worst_family": worst,
             "fit_max_relative_rms": float(rms[worst]) if worst else math.nan}
-
-
-def _json_text(data: dict) -> str:
-    import json
-
-    return json.dumps(data, indent=2, allow_nan=False) + "\n"
 
 
 def write_table(entries: list[CatalogueEntry], out: Path) -> tuple[Path, Path]:
@@ -409,8 +397,3 @@ def write_table(entries: list[CatalogueEntry], out: Path) -> tuple[Path, Path]:
     pq.write_table(table, sink)
     table_parquet = write_atomically(out / "catalogue.parquet", sink.getvalue().to_pybytes())
     return table_csv, table_parquet
-
-
-def _one_line(error: BaseException) -> str:
-    text = str(error).strip()
-    return text.splitlines()[0] if text else type(error).__name__

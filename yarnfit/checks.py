@@ -13,7 +13,15 @@ from collections.abc import Collection, Mapping
 
 import numpy as np
 
-__all__ = ["check_keys", "finite_number", "non_negative_number", "positive_number", "positive_or_none", "real_number"]
+__all__ = ["check_keys", "error_line", "finite_number", "non_negative_number", "positive_number", "positive_or_none",
+           "real_number"]
+
+
+def error_line(error: BaseException) -> str:
+    """The one line a failure is reported by: its message's first line, or its type's name when
+    the message is empty."""
+    text = str(error).strip()
+    return text.splitlines()[0] if text else type(error).__name__
 
 
 def real_number(value: object, name: str) -> float:

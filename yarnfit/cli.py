@@ -18,6 +18,7 @@ from pathlib import Path
 
 from . import __version__
 from .fibers import SPINNING_SYSTEMS
+from .checks import error_line
 from .outputs import check_writable
 from .yarn import YARN_MODELS
 
@@ -499,7 +500,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
     try:
         drawn = fit_figures(output, figures)
     except ValueError as error:  # the material file is written: a figure that cannot be drawn says why
-        print(f"yarnfit fit: figures not drawn: {_first_line(error)}", file=sys.stderr)
+        print(f"yarnfit fit: figures not drawn: {error_line(error)}", file=sys.stderr)
         return 0
     print(f"figures: {len(drawn)} files in {figures} (PNG, SVG, CSV; `yarnfit show {output}` opens them)")
     return 0
@@ -688,7 +689,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
             drawn = validation_figures(summary, path.parent, reference, material=args.material)
             print(f"  figures: {len(drawn)} files in {path.parent} (`yarnfit show {path}` opens them)")
         except ValueError as error:  # summary.json is written: say why the figures are not
-            print(f"yarnfit validate: figures not drawn: {_first_line(error)}", file=sys.stderr)
+            print(f"yarnfit validate: figures not drawn: {error_line(error)}", file=sys.stderr)
     for scene, seconds in summary["wall_seconds"].items():
         print(f"  {scene:<8} {seconds:7.1f} s  {path.parent / (scene + '.rrd')}")
     results = [Verdict(**v) for v in summary["verdicts"]]
@@ -778,7 +779,7 @@ def cmd_catalogue(args: argparse.Namespace) -> int:
     from .catalogue import read_labels, run_catalogue
     from .fabric_fit import DEFAULT_SAMPLES
     from .samples import design_size
-    from .tasks import make_backend
+    from .tasks import SkippedTask, make_backend
 
     samples = DEFAULT_SAMPLES if args.samples is None else args.samples
     if samples < design_size(1):
@@ -791,10 +792,10 @@ def cmd_catalogue(args: argparse.Namespace) -> int:
     failures = [0]
 
     def on_done(task, outcome, done, total):
-        if isinstance(outcome, BaseException) and task.key[0] in ("relax", "fit", "export", "validate") \
-                and type(outcome).__name__ != "SkippedTask":
+        if isinstance(outcome, BaseException) and not isinstance(outcome, SkippedTask) \
+                and task.key[0] in ("relax", "fit", "export", "validate"):
             failures[0] += 1
-            line.message(f"{task.describe()}: failed: {_first_line(outcome)}", force=True)
+            line.message(f"{task.describe()}: failed: {error_line(outcome)}", force=True)
         width = 30
         bar = "#" * round(width * done / total) + "." * (width - round(width * done / total))
         line.message(f"[{bar}] {done}/{total} tasks, {failures[0]} failed  [{time.perf_counter() - line.start:.0f} s] "
@@ -847,15 +848,11 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERRUPTED
     except (IndefiniteFitError, UnusableRelaxation) as error:
         # The input was fine; the computation did not give a usable result.
-        print(f"yarnfit {args.command}: failed: {_first_line(error)}", file=sys.stderr)
+        print(f"yarnfit {args.command}: failed: {error_line(error)}", file=sys.stderr)
         return EXIT_FAILED
     except (UsageError, PatternError, ValueError, OSError) as error:
-        print(f"yarnfit {args.command}: error: {_first_line(error)}", file=sys.stderr)
+        print(f"yarnfit {args.command}: error: {error_line(error)}", file=sys.stderr)
         return EXIT_USAGE
-
-
-def _first_line(error: Exception) -> str:
-    return str(error).splitlines()[0] if str(error) else type(error).__name__
 
 
 if __name__ == "__main__":

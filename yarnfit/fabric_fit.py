@@ -83,7 +83,11 @@ def relax_for_fit(fabric: Fabric, on_relax_iteration: Callable | None = None,
                   on_relax_start: Callable | None = None) -> RelaxedRepeat:
     """The fabric's relaxed repeat (:func:`yarnfit.relax.relax`), or :class:`UnusableRelaxation`
     when it did not converge or leaves yarns overlapping."""
-    relaxed = relax(fabric, on_iteration=on_relax_iteration, on_start=on_relax_start)
+    return _usable(fabric, relax(fabric, on_iteration=on_relax_iteration, on_start=on_relax_start))
+
+
+def _usable(fabric: Fabric, relaxed: RelaxedRepeat) -> RelaxedRepeat:
+    """``relaxed``, or :class:`UnusableRelaxation` when it did not converge or leaves overlaps."""
     if not relaxed.valid:
         raise UnusableRelaxation(f"the relaxation of {fabric.name!r} is not usable: converged {relaxed.converged}, "
                                  f"worst overlap {100 * relaxed.penetration:.3g} % of the diameter ({relaxed.residual})")
@@ -146,11 +150,7 @@ def fit_fabric(
         raise ValueError(f"model must be 'full' or 'paper', got {model!r}")
     seconds = {}
     start = time.perf_counter()
-    if relaxed is None:
-        relaxed = relax_for_fit(fabric, on_relax_iteration, on_relax_start)
-    elif not relaxed.valid:
-        raise UnusableRelaxation(f"the relaxation of {fabric.name!r} is not usable: converged {relaxed.converged}, "
-                                 f"worst overlap {100 * relaxed.penetration:.3g} % of the diameter ({relaxed.residual})")
+    relaxed = relax_for_fit(fabric, on_relax_iteration, on_relax_start) if relaxed is None else _usable(fabric, relaxed)
     seconds["relax"] = time.perf_counter() - start
     if on_relaxed is not None:
         on_relaxed(relaxed)

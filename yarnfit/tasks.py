@@ -37,7 +37,6 @@ import multiprocessing
 import os
 import pickle
 import signal
-import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
@@ -46,6 +45,7 @@ from typing import Any, Callable, Hashable, Iterable, Sequence
 import numpy as np
 
 from . import __version__
+from .checks import error_line
 from .outputs import write_atomically
 
 __all__ = ["Backend", "DaskBackend", "LocalPool", "Result", "SkippedTask", "Task", "TaskCache", "make_backend",
@@ -487,5 +487,5 @@ def run_tasks(
 
 
 def _one_line(error: BaseException) -> str:
-    text = str(error).strip()
-    return f"{type(error).__name__}: {text.splitlines()[0]}" if text else type(error).__name__
+    """The failure's type and line, as a dependent's skip names it."""
+    return f"{type(error).__name__}: {error_line(error)}" if str(error).strip() else type(error).__name__

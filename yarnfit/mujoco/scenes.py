@@ -46,7 +46,6 @@ import re
 import textwrap
 import warnings
 from dataclasses import dataclass
-from pathlib import Path
 
 import mujoco
 import numpy as np
