@@ -13,6 +13,8 @@ from yarnfit.engine.contact_lagrangian import (
     MAX_STIFFENING,
     MULTIPLIER_UPDATE_RESIDUAL,
     PENETRATION_PROGRESS,
+    STALL_ITERATIONS,
+    STALL_PROGRESS,
     ContactLagrangian,
     ContactSet,
 )
@@ -104,6 +106,26 @@ def test_updates_wait_for_balance_and_tighten_tenfold():
     assert lagrangian.due(balanced(deep, force=0.05 * MULTIPLIER_UPDATE_RESIDUAL))
     lagrangian.restart()  # a new load step starts from the first threshold again
     assert lagrangian.due(balanced(deep, force=0.5 * MULTIPLIER_UPDATE_RESIDUAL))
+
+
+def test_a_stalled_inner_solve_updates_without_balance():
+    model, position, options, lagrangian, contacts = queried()
+    n = contacts.start[-1]
+    deep = 10 * options.penetration_tolerance
+    unbalanced = 1.0  # far above the update threshold: only a stall can make an update due
+    # An imbalance that keeps halving is progress: no update however long it takes.
+    for k in range(5 * STALL_ITERATIONS):
+        assert not lagrangian.due(balanced(deep, force=unbalanced * STALL_PROGRESS ** (k / (STALL_ITERATIONS - 1))))
+    lagrangian.restart()
+    # A flat imbalance is a stall: due after two windows of STALL_ITERATIONS steps, not before.
+    for _ in range(2 * STALL_ITERATIONS):
+        assert not lagrangian.due(balanced(deep, force=unbalanced))
+    assert lagrangian.due(balanced(deep, force=unbalanced))
+    # An update starts the count again; nothing to correct is never due.
+    lagrangian.update(contacts, np.zeros(n), np.zeros(n), balanced(deep))
+    assert not lagrangian.due(balanced(deep, force=unbalanced))
+    for _ in range(3 * STALL_ITERATIONS):
+        assert not lagrangian.due(balanced(0.5 * options.penetration_tolerance, force=unbalanced))
 
 
 def test_penalties_stiffen_only_where_updates_stall():
