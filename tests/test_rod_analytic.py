@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
 from yarnfit.engine import (
     Loads,
@@ -166,16 +167,16 @@ def test_pure_twist():
     # Reference: turning the last frame by Φ about the axis stores U = G J Φ² / (2 L_t), with
     # L_t = (N − 1) l0 the distance between the centres of the first and last edge (the twisted
     # length of the discrete rod). Discretely each of the N − 1 joints turns by ψ = Φ / (N − 1) and
-    # stores (2 / l0) G J sin²(ψ / 2), which equals the continuum to O(ψ²/12). No bending may leak.
+    # stores (2 / l0) G J tan²(ψ / 2), which equals the continuum to O(ψ²/6). No bending may leak.
     n_edges, phi = 20, 0.5 * math.pi
     model, result = twisted_rod(n_edges, phi)
     terms = energy(model, result.state)
     l0 = LENGTH / n_edges
     psi = phi / (n_edges - 1)
-    discrete = (n_edges - 1) * (2.0 / l0) * GJ * math.sin(psi / 2) ** 2
+    discrete = (n_edges - 1) * (2.0 / l0) * GJ * math.tan(psi / 2) ** 2
     continuum = GJ * phi**2 / (2 * (n_edges - 1) * l0)
     assert terms.twist == pytest.approx(discrete, rel=DISCRETE_RTOL)
-    assert terms.twist == pytest.approx(continuum, rel=psi**2 / 12 * 1.01)
+    assert terms.twist == pytest.approx(continuum, rel=psi**2 / 6 * 1.01)
     assert terms.bend <= 1e-12 * terms.twist
     assert np.abs(result.state.node_position[:, 1:]).max() <= 1e-10 * LENGTH  # stays straight
 
@@ -194,12 +195,14 @@ def roll_up(n_edges: int) -> RodState:
 
 def test_roll_up_into_a_ring():
     # Reference: an end moment M = 2π E I / L bends the rod into a full circle of radius L / 2π.
-    # Discretely every joint balances M = (E I / l0) sin φ, so φ = arcsin(2π / N) exactly, the
-    # nodes lie on a circle of radius l0 / (2 sin(φ/2)), and the ring closes as N grows.
+    # Discretely every joint balances M = dU/dφ of its energy U = (2 / l0) E I tan²(φ/2), that is
+    # (2 E I / l0) sin(φ/2) / cos³(φ/2) = 2π E I / (N l0); the nodes lie on a circle of radius
+    # l0 / (2 sin(φ/2)), and the ring closes as N grows.
     gaps = []
     for n_edges in (40, 80):
         state = roll_up(n_edges)
-        phi = math.asin(2 * math.pi / n_edges)
+        phi = brentq(lambda p: math.sin(p / 2) / math.cos(p / 2) ** 3 - math.pi / n_edges, 0.0, 1.0, xtol=1e-15,
+                     rtol=4 * np.finfo(float).eps)
         np.testing.assert_allclose(joint_angles(state), phi, rtol=DISCRETE_RTOL)
         x = state.node_position
         l0 = LENGTH / n_edges
@@ -208,8 +211,13 @@ def test_roll_up_into_a_ring():
         centre = np.array([0.5 * l0, 0.0, -math.sqrt(radius**2 - 0.25 * l0**2)])
         np.testing.assert_allclose(np.linalg.norm(x - centre, axis=1), radius, rtol=DISCRETE_RTOL)
         assert radius == pytest.approx(LENGTH / (2 * math.pi), rel=2.0 / n_edges)
-        gaps.append(np.linalg.norm(x[-1] - x[0]) / LENGTH)
-    assert gaps[1] < 0.5 * gaps[0] and gaps[1] < 2e-3
+        # The last node is N φ round the circle from the first: the ring's gap is the chord over
+        # the angle by which N φ misses 2π.
+        gap = np.linalg.norm(x[-1] - x[0])
+        assert gap == pytest.approx(2 * radius * abs(math.sin((n_edges * phi - 2 * math.pi) / 2)), rel=0.0,
+                                    abs=DISCRETE_RTOL * radius)
+        gaps.append(gap / LENGTH)
+    assert gaps[1] < 0.5 * gaps[0]
 
 
 def test_reactions_balance_a_tip_loaded_cantilever():
@@ -230,11 +238,12 @@ def test_reactions_balance_a_tip_loaded_cantilever():
 
 
 def test_reactions_of_a_pure_twist():
-    # Each of the N − 1 joints turns by ψ = Φ / (N − 1) and carries the moment (G J / l0) sin ψ
-    # (the derivative of its energy (2 / l0) G J sin²(ψ / 2)): the held end frames feel it with
-    # opposite signs, about the rod's axis.
+    # Each of the N − 1 joints turns by ψ = Φ / (N − 1) and carries the moment
+    # (2 G J / l0) sin(ψ/2) / cos³(ψ/2) (the derivative of its energy (2 / l0) G J tan²(ψ / 2)): the
+    # held end frames feel it with opposite signs, about the rod's axis.
     n_edges, phi = 20, 0.5 * math.pi
     model, result = twisted_rod(n_edges, phi)
-    moment = GJ / (LENGTH / n_edges) * math.sin(phi / (n_edges - 1))
+    psi = phi / (n_edges - 1)
+    moment = 2 * GJ / (LENGTH / n_edges) * math.sin(psi / 2) / math.cos(psi / 2) ** 3
     np.testing.assert_allclose(result.reaction_moment[-1], [moment, 0.0, 0.0], rtol=0.0, atol=DISCRETE_RTOL * moment)
     np.testing.assert_allclose(result.reaction_moment[0], [-moment, 0.0, 0.0], rtol=0.0, atol=DISCRETE_RTOL * moment)

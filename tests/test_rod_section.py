@@ -15,6 +15,7 @@ import re
 
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
 from yarnfit.engine import (
     Loads,
@@ -270,8 +271,8 @@ def test_anisotropic_section_bends_about_the_material_directors(spin):
 def test_pure_twist_by_end_moment():
     # Reference: an end moment M about the axis twists the rod by Φ = M L/GJ, storing GJ Φ²/(2L).
     # Discretely the frames sit at edge midpoints, so the twisted length is L_t = L − l0; each of
-    # the N − 1 joints carries M with torque GJ sin ψ / l0 (energy (2/l0) GJ sin²(ψ/2)), so
-    #   Φ_N = (N − 1) arcsin(M l0/GJ) = M L_t/GJ (1 + O(ψ²/6)),  U_N = (N − 1)(2/l0) GJ sin²(ψ/2).
+    # the N − 1 joints carries M with torque (2 GJ / l0) sin(ψ/2) / cos³(ψ/2) (energy
+    # (2/l0) GJ tan²(ψ/2)), so Φ_N = (N − 1) ψ = M L_t/GJ (1 + O(ψ²)), U_N = (N − 1)(2/l0) GJ tan²(ψ/2).
     # The section is anisotropic in bending so a twist stiffness read from the wrong slot shows.
     section = yarn_section(bending=(BENDING, 4.0 * BENDING))
     model = cantilever(section)
@@ -283,11 +284,12 @@ def test_pure_twist_by_end_moment():
     state = solve(model, loads)
     relative = quaternion_conj_mul(state.edge_quaternion[:1], state.edge_quaternion[-1:])[0]
     phi = 2.0 * math.atan2(relative[3], relative[0])  # rotation about d3 of the clamped frame
-    psi = math.asin(moment * l0 / TORSION)
+    psi = brentq(lambda p: 2.0 * TORSION / l0 * math.sin(p / 2) / math.cos(p / 2) ** 3 - moment, 0.0, 1.0,
+                 xtol=1e-15, rtol=4 * np.finfo(float).eps)
     assert phi == pytest.approx((N_EDGES - 1) * psi, rel=DISCRETE_RTOL, abs=0.0)
     assert phi == pytest.approx(moment * twisted_length / TORSION, rel=TWIST_SMALL_ANGLE_RTOL, abs=0.0)
     terms = energy(model, state)
-    assert terms.twist == pytest.approx((N_EDGES - 1) * (2.0 / l0) * TORSION * math.sin(psi / 2) ** 2, rel=DISCRETE_RTOL, abs=0.0)
+    assert terms.twist == pytest.approx((N_EDGES - 1) * (2.0 / l0) * TORSION * math.tan(psi / 2) ** 2, rel=DISCRETE_RTOL, abs=0.0)
     assert terms.twist == pytest.approx(TORSION * phi**2 / (2.0 * twisted_length), rel=TWIST_SMALL_ANGLE_RTOL, abs=0.0)
     assert terms.bend <= DISCRETE_RTOL * terms.twist
     assert np.abs(state.node_position[:, 1:]).max() <= OFF_PLANE_ATOL  # stays straight

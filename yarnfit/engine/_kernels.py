@@ -100,8 +100,26 @@ def stretch_shear_element(p0, p1, q, rest_length, shear_stiffness, stretch_stiff
 
 
 @njit(cache=True)
+def _darboux_jacobian_product(w, u, m):
+    """``Jᵀ m`` with ``J = ∂v/∂φ = (w² I − w [u]× + u uᵀ) / (2 w²)``, the derivative of
+    ``v = u / w`` (``Ω = (w, u) = q̄a qb``) with respect to a turn ``φ`` of ``qb`` expressed in
+    ``qa``'s frame (``δw = −½ u·δφ``, ``δu = ½ (w δφ + δφ × u)``)."""
+    um = cross(u, m)
+    udm = u[0] * m[0] + u[1] * m[1] + u[2] * m[2]
+    c = 0.5 / (w * w)
+    return (c * (w * w * m[0] + w * um[0] + u[0] * udm),
+            c * (w * w * m[1] + w * um[1] + u[1] * udm),
+            c * (w * w * m[2] + w * um[2] + u[2] * udm))
+
+
+@njit(cache=True)
 def bend_twist_element(qa, qb, rest_darboux, mean_rest_length, bend1, bend2, twist):
     """Energy and gradient of one bend–twist element.
+
+    ``C = v(q̄a qb) − v(Ω0)`` with ``v(Ω) = Im Ω / Re Ω``, which is ``tan(φ/2) n`` for a turn ``φ``
+    about ``n`` (the paper's curvature ``(2/l̄) Im/Re``). It is the same for ``Ω`` and ``−Ω``, so no
+    sign needs choosing, and it grows without bound as the two frames turn half a turn apart: a
+    node cannot fold a rod back on itself (docs/design.md §4).
 
     Args:
         qa, qb: frames of the two edges (unit quaternions).
@@ -109,22 +127,22 @@ def bend_twist_element(qa, qb, rest_darboux, mean_rest_length, bend1, bend2, twi
         mean_rest_length: l̄ (m). bend1, bend2: EI1, EI2 (N·m²). twist: GJ (N·m²).
 
     Returns:
-        ``(U_bend, U_twist, tau_b)`` with ``tau_b = ∂U/∂θb = −∂U/∂θa`` (N·m, world).
+        ``(U_bend, U_twist, tau_b)`` with ``tau_b = ∂U/∂θb = −∂U/∂θa`` (N·m, world); the energies
+        are infinite (and ``tau_b`` zero) when the frames are exactly half a turn apart.
     """
     om = quat_mul(quat_conj(qa), qb)
-    s = 1.0 if quat_dot(om, rest_darboux) >= 0.0 else -1.0
-    k1 = om[1] - s * rest_darboux[1]
-    k2 = om[2] - s * rest_darboux[2]
-    k3 = om[3] - s * rest_darboux[3]
+    w = om[0]
+    if w == 0.0:
+        return math.inf, math.inf, (0.0, 0.0, 0.0)
+    k1 = om[1] / w - rest_darboux[1] / rest_darboux[0]
+    k2 = om[2] / w - rest_darboux[2] / rest_darboux[0]
+    k3 = om[3] / w - rest_darboux[3] / rest_darboux[0]
     f = 2.0 / mean_rest_length
     u_bend = f * (bend1 * k1 * k1 + bend2 * k2 * k2)
     u_twist = f * twist * k3 * k3
-    # m = ∂U/∂C; ∂C/∂θb = ½ (w I − [u]×) R(qa)ᵀ with Ω = (w, u)  =>  tau_b = ½ R(qa) (w m + u × m)
+    # m = ∂U/∂C; tau_b = R(qa) Jᵀ m (see _darboux_jacobian_product).
     m = (2.0 * f * bend1 * k1, 2.0 * f * bend2 * k2, 2.0 * f * twist * k3)
-    u = (om[1], om[2], om[3])
-    um = cross(u, m)
-    w = om[0]
-    tau_b = quat_rotate(qa, (0.5 * (w * m[0] + um[0]), 0.5 * (w * m[1] + um[1]), 0.5 * (w * m[2] + um[2])))
+    tau_b = quat_rotate(qa, _darboux_jacobian_product(w, (om[1], om[2], om[3]), m))
     return u_bend, u_twist, tau_b
 
 
@@ -497,44 +515,44 @@ def project_bend_twist_one(
 ):
     """One XPBD projection of the bend–twist constraint of joint ``j`` (``lam (J, 3)``).
 
-    ``C = Im(q̄a qb) − s Im(Ω0)`` (s = ±1, the rest Darboux quaternion's sign nearest the current
-    one), ``Δλ_k = −(C_k + α̃_k λ_k) / (wa + wb + α̃_k)`` with ``α̃_k = l̄ / (4 K_k Δt²)``, then
-    ``Δqa = −wa qb ⊗ (0, Δλ)`` and ``Δqb = wb qa ⊗ (0, Δλ)`` from the old frames, renormalised.
-    Inlined into the sweep loops like :func:`project_stretch_shear_one`.
+    ``C = v(q̄a qb) − v(Ω0)`` (:func:`bend_twist_element`), per component
+    ``Δλ_k = −(C_k + α̃_k λ_k) / (4 (wa + wb) |J_k|² + α̃_k)`` with ``α̃_k = l̄ / (4 K_k Δt²)`` and
+    ``J = ∂C/∂φ``; then each frame turns by ``±4 w R(qa) Jᵀ Δλ`` (world; a frame of inertia I is a
+    quaternion particle of mass 4I), applied as ``q ← (q + ½ (0, δθ) q) / |·|``. Frames half a turn
+    apart are left alone. Inlined into the sweep loops like :func:`project_stretch_shear_one`.
     """
     a = joint_edges[j, 0]
     b = joint_edges[j, 1]
     wa = edge_inv_qmass[a]
     wb = edge_inv_qmass[b]
-    weight = wa + wb
-    if weight == 0.0:
+    if wa + wb == 0.0:
         return
     qa = row4(quat, a)
     qb = row4(quat, b)
     rest = row4(joint_rest_darboux, j)
     om = quat_mul(quat_conj(qa), qb)
-    s = 1.0 if quat_dot(om, rest) >= 0.0 else -1.0
+    w = om[0]
+    if w == 0.0:
+        return
+    u = (om[1], om[2], om[3])
     scale_a = joint_rest_length[j] * 0.25 * inv_dt2
-    alpha1 = scale_a / joint_stiffness[j, 0]
-    alpha2 = scale_a / joint_stiffness[j, 1]
-    alpha3 = scale_a / joint_stiffness[j, 2]
-    d1 = -((om[1] - s * rest[1]) + alpha1 * lam[j, 0]) / (weight + alpha1)
-    d2 = -((om[2] - s * rest[2]) + alpha2 * lam[j, 1]) / (weight + alpha2)
-    d3 = -((om[3] - s * rest[3]) + alpha3 * lam[j, 2]) / (weight + alpha3)
-    lam[j, 0] += d1
-    lam[j, 1] += d2
-    lam[j, 2] += d3
-    d = (0.0, d1, d2, d3)
-    if wa > 0.0:
-        ta = quat_mul(qb, d)
-        na = quat_normalized((qa[0] - wa * ta[0], qa[1] - wa * ta[1], qa[2] - wa * ta[2], qa[3] - wa * ta[3]))
-        for k in range(4):
-            quat[a, k] = na[k]
-    if wb > 0.0:
-        tb = quat_mul(qa, d)
-        nb = quat_normalized((qb[0] + wb * tb[0], qb[1] + wb * tb[1], qb[2] + wb * tb[2], qb[3] + wb * tb[3]))
-        for k in range(4):
-            quat[b, k] = nb[k]
+    delta = [0.0, 0.0, 0.0]
+    for k in range(3):
+        # Row k of J = (w² I − w [u]× + u uᵀ) / (2 w²) is Jᵀ e_k.
+        e = (1.0 if k == 0 else 0.0, 1.0 if k == 1 else 0.0, 1.0 if k == 2 else 0.0)
+        row = _darboux_jacobian_product(w, u, e)
+        alpha = scale_a / joint_stiffness[j, k]
+        c = u[k] / w - rest[k + 1] / rest[0]
+        weight = 4.0 * (wa + wb) * (row[0] * row[0] + row[1] * row[1] + row[2] * row[2])
+        delta[k] = -(c + alpha * lam[j, k]) / (weight + alpha)
+        lam[j, k] += delta[k]
+    turn = quat_rotate(qa, _darboux_jacobian_product(w, u, (delta[0], delta[1], delta[2])))
+    for edge, q, sign in ((a, qa, -4.0 * wa), (b, qb, 4.0 * wb)):
+        if sign != 0.0:
+            t = quat_mul((0.0, 0.5 * sign * turn[0], 0.5 * sign * turn[1], 0.5 * sign * turn[2]), q)
+            n = quat_normalized((q[0] + t[0], q[1] + t[1], q[2] + t[2], q[3] + t[3]))
+            for k in range(4):
+                quat[edge, k] = n[k]
 
 
 @njit(cache=True, parallel=True)
