@@ -1,6 +1,8 @@
 """The paper's comparisons (§5) as checks (yarnfit.validate.paper): (a) woven bias strips are
 softer, (b) 1.5 times thicker yarns carry more stress, (c) fibres drape differently."""
 
+import json
+
 import pytest
 
 from fabric_shell import FABRIC
@@ -23,6 +25,12 @@ def test_bias_softness_reads_every_level_of_each_strip_size():
     assert out["8x5"]["bias_softer"] is False
     strips["8x5_bias"]["force_per_width_n_per_m"] = [5.0, 24.0]
     assert bias_softness({"strips": strips})["8x5"]["bias_softer"] is True
+    # A reset strip carries no force at a level: the ratio there is undefined (JSON null, not an
+    # infinity that strict JSON readers reject), and softness is not shown.
+    strips["8x5_weft"]["force_per_width_n_per_m"] = [10.0, 0.0]
+    out = bias_softness({"strips": strips})
+    assert out["8x5"]["bias_over_weakest_axis"] == [0.5, None] and out["8x5"]["bias_softer"] is False
+    json.loads(json.dumps(out, allow_nan=False))
     del strips["8x5_warp"]
     assert bias_softness({"strips": strips}) == {}
 

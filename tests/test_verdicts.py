@@ -62,6 +62,10 @@ def test_the_bias_criterion_applies_to_wovens_only():
     assert by_check(summary, "woven")["bias softer (8x5 strips)"].passed is False
     knit = by_check(summary, "knit")["bias softer (8x5 strips)"]
     assert knit.passed is None and knit.line().startswith("n/a")
+    # A level where weft or warp carried no force has no ratio: said, not taken as the largest.
+    summary["bias_softness"]["8x5"]["bias_over_weakest_axis"] = [0.4, None]
+    figure = by_check(summary, "woven")["bias softer (8x5 strips)"].figure
+    assert "up to 0.4;" in figure and "undefined at 1 level(s)" in figure
 
 
 def test_checks_of_scenes_not_run_are_not_listed():

@@ -48,7 +48,8 @@ def main() -> int:
     for preset in PRESETS:
         soft = bias_softness(run_stretch(preset_material(folder, preset), quick=True).summary())["8x5"]
         out["bias_softness"][preset] = soft
-        ratios = ", ".join(f"{e:.3g}: {r:.3f}" for e, r in zip(soft["strain"], soft["bias_over_weakest_axis"]))
+        ratios = ", ".join(f"{e:.3g}: " + ("undefined" if r is None else f"{r:.3f}")
+                           for e, r in zip(soft["strain"], soft["bias_over_weakest_axis"]))
         print(f"  {preset:17s} softer on the bias: {str(soft['bias_softer']):5s}  (strain: ratio) {ratios}")
 
     print("(b) cotton-jersey with 1.5 times thicker yarns, 8 x 5 strips (quick mesh)")

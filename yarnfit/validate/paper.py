@@ -43,7 +43,9 @@ RADIUS_ITERATIONS = 6
 def bias_softness(stretch: dict) -> dict:
     """Per strip size in a stretch summary (:func:`yarnfit.validate.stretch.run_stretch`): the bias
     force over the smaller of the weft and warp forces at each strain level, and whether the bias
-    is softer at every level (``bias_softer``)."""
+    is softer at every level (``bias_softer``). Where the weaker axis carries no tensile force (a
+    strip MuJoCo reset) the ratio is undefined: ``None`` at that level, and ``bias_softer`` is
+    false, since softness was not shown there."""
     strips = stretch.get("strips", {})
     out = {}
     for size in sorted({name.split("_")[0] for name in strips}):
@@ -52,9 +54,10 @@ def bias_softness(stretch: dict) -> dict:
             continue
         force = {d: np.asarray(strips[n]["force_per_width_n_per_m"]) for d, n in names.items()}
         levels = min(len(f) for f in force.values())
-        ratio = force["bias"][:levels] / np.minimum(force["weft"][:levels], force["warp"][:levels])
-        out[size] = {"strain": list(strips[names["bias"]]["strain"][:levels]),
-                     "bias_over_weakest_axis": ratio.tolist(), "bias_softer": bool(np.all(ratio < 1.0))}
+        weakest = np.minimum(force["weft"][:levels], force["warp"][:levels])
+        ratio = [float(b / w) if w > 0.0 else None for b, w in zip(force["bias"][:levels], weakest)]
+        out[size] = {"strain": list(strips[names["bias"]]["strain"][:levels]), "bias_over_weakest_axis": ratio,
+                     "bias_softer": all(r is not None and r < 1.0 for r in ratio)}
     return out
 
 

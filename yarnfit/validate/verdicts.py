@@ -52,10 +52,14 @@ def verdicts(summary: dict, family: str | None) -> list[Verdict]:
                            + (f" (not: {', '.join(unsettled)})" if unsettled else ""),
                            "every level held until at rest"))
     for size, bias in summary.get("bias_softness", {}).items():
-        worst = max(bias["bias_over_weakest_axis"]) if bias["bias_over_weakest_axis"] else float("nan")
+        defined = [r for r in bias["bias_over_weakest_axis"] if r is not None]
+        undefined = len(bias["bias_over_weakest_axis"]) - len(defined)
+        worst = max(defined) if defined else float("nan")
         applies = family == "woven"
         out.append(Verdict(f"bias softer ({size} strips)", bool(bias["bias_softer"]) if applies else None,
-                           f"bias / weaker axis up to {worst:.3g}",
+                           f"bias / weaker axis up to {worst:.3g}"
+                           + (f"; undefined at {undefined} level(s) where weft or warp carried no force"
+                              if undefined else ""),
                            "a woven's bias is softer than weft and warp" if applies
                            else f"a criterion for wovens; this fabric is {family or 'of unknown family'}"))
     comparison = summary.get("shell_vs_yarn", {}).get("same_proportions")
