@@ -36,7 +36,6 @@ from ._quat import (
     norm,
     pull_back_block,
     quat_conj,
-    quat_dot,
     quat_mul,
     quat_normalized,
     quat_rotate,
@@ -113,6 +112,13 @@ def _darboux_jacobian_product(w, u, m):
 
 
 @njit(cache=True)
+def _bend_twist_strain(om, rest_darboux):
+    """``C = v(Ω) − v(Ω0)`` with ``v = Im / Re`` (:func:`bend_twist_element`); ``Re Ω ≠ 0``."""
+    w, w0 = om[0], rest_darboux[0]
+    return (om[1] / w - rest_darboux[1] / w0, om[2] / w - rest_darboux[2] / w0, om[3] / w - rest_darboux[3] / w0)
+
+
+@njit(cache=True)
 def bend_twist_element(qa, qb, rest_darboux, mean_rest_length, bend1, bend2, twist):
     """Energy and gradient of one bend–twist element.
 
@@ -134,9 +140,7 @@ def bend_twist_element(qa, qb, rest_darboux, mean_rest_length, bend1, bend2, twi
     w = om[0]
     if w == 0.0:
         return math.inf, math.inf, (0.0, 0.0, 0.0)
-    k1 = om[1] / w - rest_darboux[1] / rest_darboux[0]
-    k2 = om[2] / w - rest_darboux[2] / rest_darboux[0]
-    k3 = om[3] / w - rest_darboux[3] / rest_darboux[0]
+    k1, k2, k3 = _bend_twist_strain(om, rest_darboux)
     f = 2.0 / mean_rest_length
     u_bend = f * (bend1 * k1 * k1 + bend2 * k2 * k2)
     u_twist = f * twist * k3 * k3
@@ -535,14 +539,14 @@ def project_bend_twist_one(
     if w == 0.0:
         return
     u = (om[1], om[2], om[3])
+    strain = _bend_twist_strain(om, rest)
     scale_a = joint_rest_length[j] * 0.25 * inv_dt2
     delta = [0.0, 0.0, 0.0]
     for k in range(3):
         # Row k of J = (w² I − w [u]× + u uᵀ) / (2 w²) is Jᵀ e_k.
-        e = (1.0 if k == 0 else 0.0, 1.0 if k == 1 else 0.0, 1.0 if k == 2 else 0.0)
-        row = _darboux_jacobian_product(w, u, e)
+        row = _darboux_jacobian_product(w, u, _axis(k, 1.0))
         alpha = scale_a / joint_stiffness[j, k]
-        c = u[k] / w - rest[k + 1] / rest[0]
+        c = strain[k]
         weight = 4.0 * (wa + wb) * (row[0] * row[0] + row[1] * row[1] + row[2] * row[2])
         delta[k] = -(c + alpha * lam[j, k]) / (weight + alpha)
         lam[j, k] += delta[k]
