@@ -6,10 +6,11 @@ tests check), so an error here costs iterations, not accuracy; this test keeps i
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from scipy.spatial.transform import Rotation
 
 from yarnfit.engine import Loads, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState, straight_points
-from yarnfit.engine import _contact_kernels
+from yarnfit.engine import _contact_kernels, _kernels
 from yarnfit.engine.contact_lagrangian import ContactSet
 from yarnfit.engine.quasistatic import CONTACT_FD_STEP, _rotate_frames, _Work
 
@@ -24,6 +25,9 @@ ENERGY_DIFFERENCE_RTOL = 1e-5
 # Tilting a parallel contact by ±1e-6 rad changes its gaps by ~1e-10 m of 1e-5 m penetration: the
 # gradient moves by ~1e-5 of itself; a kink would move it by O(1).
 PARALLEL_CONTINUITY = 1e-3
+# The CSC assembly sums a few O(1) triplets per entry in another order than scipy: ~1e-16 each;
+# a dropped, doubled or misplaced triplet errs by O(1).
+ASSEMBLY_ATOL = 1e-14
 
 
 def _two_rods():
@@ -53,7 +57,7 @@ def test_rod_hessian_matches_differences_of_the_gradient(build):
     quaternion = _rotate_frames(state.edge_quaternion, 0.2 * rng.standard_normal((model.n_edges, 3)))
     solver = QuasiStaticSolver(model)
     work = _Work(position, quaternion)
-    hessian = solver._hessian(work).toarray()
+    hessian = solver._hessian(work)[0].toarray()
     loads = Loads.zeros(model)
     node_force, moment = loads.total_node_force(model), loads.edge_moment
 
@@ -248,3 +252,31 @@ def test_pair_out_of_reach_has_only_its_constant():
         u = np.clip(np.dot(p - q0, q1 - q0) / np.dot(q1 - q0, q1 - q0), 0.0, 1.0)
         assert gap[c] <= np.linalg.norm(p - q0 - u * (q1 - q0)) - 2e-4 + 1e-15
         assert gap[c] > reach
+
+
+def test_csc_assembly_matches_scipy_on_random_triplets():
+    """The solver's CSC assembly sums duplicates, drops pinned DOFs and explicit zeros off the
+    diagonal and stores every diagonal entry, as scipy's COO → CSC conversion (the reference) does
+    once a zero diagonal is added and off-diagonal zeros are eliminated."""
+    rng = np.random.default_rng(7)
+    n_full, count = 40, 600
+    rows = rng.integers(0, n_full, count + 10)
+    cols = rng.integers(0, n_full, count + 10)
+    vals = rng.normal(size=count + 10)
+    vals[:50] = 0.0  # explicit zeros, on and off the diagonal
+    rows[50:60], cols[50:60], vals[50:55], vals[55:60] = 3, 5, 1.5, -1.5  # a sum that cancels
+    dof_map = np.full(n_full, -1)
+    free = np.flatnonzero(rng.random(n_full) < 0.8)
+    dof_map[free] = np.arange(free.size)
+    indptr, indices, data, diagonal = _kernels.assemble_csc(rows, cols, vals, count, dof_map, free.size)
+    r, c = dof_map[rows[:count]], dof_map[cols[:count]]
+    keep = (r >= 0) & (c >= 0)
+    reference = sp.coo_matrix((vals[:count][keep], (r[keep], c[keep])), shape=(free.size, free.size)).toarray()
+    ours = sp.csc_matrix((data, indices, indptr), shape=(free.size, free.size))
+    # Sums of the same few terms in another order: round-off only.
+    np.testing.assert_allclose(ours.toarray(), reference, rtol=0.0, atol=ASSEMBLY_ATOL)
+    assert np.all(np.diff(indptr) >= 1)
+    assert all(np.all(np.diff(indices[indptr[j]:indptr[j + 1]]) > 0) for j in range(free.size))
+    np.testing.assert_array_equal(indices[diagonal], np.arange(free.size))
+    off = indices != np.repeat(np.arange(free.size), np.diff(indptr))
+    assert np.all(data[off] != 0.0)

@@ -217,6 +217,52 @@ def _virtual_boxes(lower, upper, lattice, image_range):
 
 
 @njit(cache=True)
+def mapped_edge_boxes(pos, pos_end, row_edge, start, r0, t0, finish, r1, t1, edge_radius, half_margin, lower, upper):
+    """Boxes of edges placed by per-row rigid maps (a curved tiling's images): row ``i`` is edge
+    ``row_edge[i]`` with node ``start[i]`` at ``r0[i] x + t0[i]`` and node ``finish[i]`` at
+    ``r1[i] x + t1[i]``, at ``pos`` and at ``pos_end``; each box is inflated by the edge's radius
+    plus ``half_margin`` (m). Writes ``lower``, ``upper`` ``(rows, 3)``."""
+    for i in range(row_edge.shape[0]):
+        pad = edge_radius[row_edge[i]] + half_margin
+        for k in range(3):
+            lower[i, k] = np.inf
+            upper[i, k] = -np.inf
+        for x in (pos, pos_end):
+            for end in range(2):
+                node = start[i] if end == 0 else finish[i]
+                for k in range(3):
+                    if end == 0:
+                        v = r0[i, k, 0] * x[node, 0] + r0[i, k, 1] * x[node, 1] + r0[i, k, 2] * x[node, 2] + t0[i, k]
+                    else:
+                        v = r1[i, k, 0] * x[node, 0] + r1[i, k, 1] * x[node, 1] + r1[i, k, 2] * x[node, 2] + t1[i, k]
+                    lower[i, k] = min(lower[i, k], v)
+                    upper[i, k] = max(upper[i, k], v)
+        for k in range(3):
+            lower[i, k] -= pad
+            upper[i, k] += pad
+
+
+@njit(cache=True)
+def gather_pair_maps(pairs, row, edge_end_rotation, edge_offset, r0, t0, r1, t1, rotation, translation):
+    """Rigid maps of the nodes ``(a0, a1, b0, b1)`` of each pair into ``rotation (P, 4, 3, 3)`` and
+    ``translation (P, 4, 3)``: a0 stays, a1 is edge a's end in its tile, b's nodes are read from
+    row ``row[p]`` of a curved tiling's image maps (``r0``, ``t0`` its start, ``r1``, ``t1`` its end)."""
+    for p in range(pairs.shape[0]):
+        a = pairs[p, 0]
+        i = row[p]
+        for j in range(3):
+            for k in range(3):
+                rotation[p, 0, j, k] = 1.0 if j == k else 0.0
+                rotation[p, 1, j, k] = edge_end_rotation[a, j, k]
+                rotation[p, 2, j, k] = r0[i, j, k]
+                rotation[p, 3, j, k] = r1[i, j, k]
+            translation[p, 0, j] = 0.0
+            translation[p, 1, j] = edge_offset[a, j]
+            translation[p, 2, j] = t0[i, j]
+            translation[p, 3, j] = t1[i, j]
+
+
+@njit(cache=True)
 def _canonical(a, ia, ja, b, ib, jb):
     """The unique report of a pair of virtual edges: ``(first, second, image of second)`` with the
     first edge in the home tile, ``first < second`` or, for an edge and its own image, the image
@@ -234,54 +280,6 @@ def _canonical(a, ia, ja, b, ib, jb):
     if ib == 0 and jb == 0 and (ia > 0 or (ia == 0 and ja > 0)):
         return a, a, ia, ja
     return -1, -1, 0, 0
-
-
-@njit(cache=True)
-def _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes, edge_rod,
-               edge_chain_tile, edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, rod_period,
-               exclusion_factor, node_free, out_pairs, out_images, count_only):
-    n_pairs = 0
-    n = keys.shape[0]
-    start = 0
-    while start < n:
-        stop = start + 1
-        key = keys[order[start]]
-        while stop < n and keys[order[stop]] == key:
-            stop += 1
-        for u in range(start, stop):
-            vu = entry_cell[order[u], 3]
-            for w in range(u + 1, stop):
-                vw = entry_cell[order[w], 3]
-                a, b, ix, iy = _canonical(v_edge[vu], v_image[vu, 0], v_image[vu, 1],
-                                          v_edge[vw], v_image[vw, 0], v_image[vw, 1])
-                if a < 0:
-                    continue
-                overlap = True
-                owner = True
-                for k in range(3):
-                    if v_lower[vu, k] > v_upper[vw, k] or v_lower[vw, k] > v_upper[vu, k]:
-                        overlap = False
-                        break
-                    # Report the pair only from the lowest cell of the boxes' intersection.
-                    first = math.floor((max(v_lower[vu, k], v_lower[vw, k]) - origin[k]) / cell_size)
-                    if first != entry_cell[order[u], k]:
-                        owner = False
-                if not overlap or not owner:
-                    continue
-                if not (node_free[edge_nodes[a, 0]] or node_free[edge_nodes[a, 1]]
-                        or node_free[edge_nodes[b, 0]] or node_free[edge_nodes[b, 1]]):
-                    continue
-                if _pair_excluded(a, b, ix, iy, edge_rod, edge_chain_tile, edge_arc_start, edge_rest_length,
-                                  edge_radius, rod_length, rod_closed, rod_period, exclusion_factor):
-                    continue
-                if not count_only:
-                    out_pairs[n_pairs, 0] = a
-                    out_pairs[n_pairs, 1] = b
-                    out_images[n_pairs, 0] = ix
-                    out_images[n_pairs, 1] = iy
-                n_pairs += 1
-        start = stop
-    return n_pairs
 
 
 @njit(cache=True)
@@ -313,61 +311,60 @@ def pairs_of_boxes(v_edge, v_image, v_lower, v_upper, edge_nodes, edge_rod, edge
     ``v_upper``) whose boxes overlap, each physical pair reported once with its first edge in the
     home tile (see :func:`_canonical`).
 
-    Uniform grid with cell size equal to the largest box, entries sorted by cell key: O(E log E)
-    plus the pairs found. Neighbours along one yarn (see :func:`_pair_excluded`) and pairs whose
-    four nodes are all pinned are left out.
+    Sweep and prune along the axis of the largest extent: boxes sorted by their lower bound there,
+    each compared with those starting before it ends. O(M log M) plus the boxes overlapping along
+    that axis. (A uniform grid with cells the size of the largest box did a quadratic scan per
+    cell where the boxes are as large as the periodic repeat holding them: HYLC's stockinette, 300
+    boxes in a few cells, 0.56 ms per query against 0.05 ms for the sweep.) Neighbours along one
+    yarn (see :func:`_pair_excluded`) and pairs whose four nodes are all pinned are left out.
     """
     n_virtual = v_edge.shape[0]
     if n_virtual < 2:
         return np.empty((0, 2), dtype=np.int64), np.empty((0, 2), dtype=np.int64)
-    cell_size = 0.0
-    origin = np.empty(3)
-    extent = np.empty(3, dtype=np.int64)
+    axis = 0
+    widest = -1.0
     for k in range(3):
-        origin[k] = v_lower[:, k].min()
-    for v in range(n_virtual):
-        for k in range(3):
-            cell_size = max(cell_size, v_upper[v, k] - v_lower[v, k])
-    for k in range(3):
-        extent[k] = int(math.floor((v_upper[:, k].max() - origin[k]) / cell_size)) + 1
-    n_entries = 0
-    for v in range(n_virtual):
-        m = 1
-        for k in range(3):
-            m *= (int(math.floor((v_upper[v, k] - origin[k]) / cell_size))
-                  - int(math.floor((v_lower[v, k] - origin[k]) / cell_size)) + 1)
-        n_entries += m
-    keys = np.empty(n_entries, dtype=np.int64)
-    entry_cell = np.empty((n_entries, 4), dtype=np.int64)  # cell (x, y, z) and virtual edge
-    u = 0
-    for v in range(n_virtual):
-        c0x = int(math.floor((v_lower[v, 0] - origin[0]) / cell_size))
-        c0y = int(math.floor((v_lower[v, 1] - origin[1]) / cell_size))
-        c0z = int(math.floor((v_lower[v, 2] - origin[2]) / cell_size))
-        c1x = int(math.floor((v_upper[v, 0] - origin[0]) / cell_size))
-        c1y = int(math.floor((v_upper[v, 1] - origin[1]) / cell_size))
-        c1z = int(math.floor((v_upper[v, 2] - origin[2]) / cell_size))
-        for ix in range(c0x, c1x + 1):
-            for iy in range(c0y, c1y + 1):
-                for iz in range(c0z, c1z + 1):
-                    keys[u] = ix + extent[0] * (iy + extent[1] * iz)
-                    entry_cell[u, 0] = ix
-                    entry_cell[u, 1] = iy
-                    entry_cell[u, 2] = iz
-                    entry_cell[u, 3] = v
-                    u += 1
-    order = np.argsort(keys, kind="mergesort")
-    dummy_pairs = np.empty((0, 2), dtype=np.int64)
-    dummy_images = np.empty((0, 2), dtype=np.int64)
-    n_pairs = _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes,
-                         edge_rod, edge_chain_tile, edge_arc_start, edge_rest_length, edge_radius, rod_length,
-                         rod_closed, rod_period, exclusion_factor, node_free, dummy_pairs, dummy_images, True)
-    pairs = np.empty((n_pairs, 2), dtype=np.int64)
-    images = np.empty((n_pairs, 2), dtype=np.int64)
-    _scan_grid(keys, order, v_edge, v_image, entry_cell, v_lower, v_upper, cell_size, origin, edge_nodes, edge_rod,
-               edge_chain_tile, edge_arc_start, edge_rest_length, edge_radius, rod_length, rod_closed, rod_period,
-               exclusion_factor, node_free, pairs, images, False)
-    return pairs, images
+        extent = v_upper[:, k].max() - v_lower[:, k].min()
+        if extent > widest:
+            widest = extent
+            axis = k
+    order = np.argsort(v_lower[:, axis], kind="mergesort")
+    n_pairs = 0
+    found = np.empty((16 * n_virtual, 4), dtype=np.int64)  # (a, b, image x, image y), grown by doubling
+    for u in range(n_virtual):
+        vu = order[u]
+        end = v_upper[vu, axis]
+        for w in range(u + 1, n_virtual):
+            vw = order[w]
+            if v_lower[vw, axis] > end:
+                break
+            overlap = True
+            for k in range(3):
+                if v_lower[vu, k] > v_upper[vw, k] or v_lower[vw, k] > v_upper[vu, k]:
+                    overlap = False
+                    break
+            if not overlap:
+                continue
+            a, b, ix, iy = _canonical(v_edge[vu], v_image[vu, 0], v_image[vu, 1],
+                                      v_edge[vw], v_image[vw, 0], v_image[vw, 1])
+            if a < 0:
+                continue
+            if not (node_free[edge_nodes[a, 0]] or node_free[edge_nodes[a, 1]]
+                    or node_free[edge_nodes[b, 0]] or node_free[edge_nodes[b, 1]]):
+                continue
+            if _pair_excluded(a, b, ix, iy, edge_rod, edge_chain_tile, edge_arc_start, edge_rest_length,
+                              edge_radius, rod_length, rod_closed, rod_period, exclusion_factor):
+                continue
+            if n_pairs == found.shape[0]:
+                grown = np.empty((2 * n_pairs, 4), dtype=np.int64)
+                grown[:n_pairs] = found
+                found = grown
+            found[n_pairs, 0] = a
+            found[n_pairs, 1] = b
+            found[n_pairs, 2] = ix
+            found[n_pairs, 3] = iy
+            n_pairs += 1
+    return np.ascontiguousarray(found[:n_pairs, :2]), np.ascontiguousarray(found[:n_pairs, 2:])
 
 
 @njit(cache=True)
@@ -523,6 +520,24 @@ def contact_energy_gradient(pos, edge_nodes, edge_radius, edge_samples, pairs, p
                 node_grad[nodes[m], k] += g[k]
             node_scale[nodes[m]] += math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
     return energy
+
+
+@njit(cache=True)
+def constraint_measures(gap, force, constraint_start, radius_sum, stiffness, smoothing):
+    """``(penetration, separation)`` of sampled constraints with gaps ``gap`` (m) and normal forces
+    ``force`` (N), pair ``p`` owning ``constraint_start[p]:[p + 1]``: the deepest overlap, and the
+    widest gap of a constraint carrying a force above the smoothing band ``smoothing k (ra + rb)``,
+    each over the pair's sum of radii ``radius_sum`` (m); ``stiffness`` k (N/m) per pair."""
+    penetration = 0.0
+    separation = 0.0
+    for p in range(constraint_start.shape[0] - 1):
+        rsum = radius_sum[p]
+        band = smoothing * stiffness[p] * rsum
+        for c in range(constraint_start[p], constraint_start[p + 1]):
+            penetration = max(penetration, -gap[c] / rsum)
+            if force[c] > band:
+                separation = max(separation, gap[c] / rsum)
+    return penetration, separation
 
 
 @njit(cache=True)

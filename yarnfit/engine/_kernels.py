@@ -686,3 +686,82 @@ def rotate_frames(quat, theta, out):
         for k in range(4):
             out[e, k] = qn[k]
 
+
+
+@njit(cache=True)
+def assemble_csc(rows, cols, vals, count, dof_map, n_free):
+    """Sum the first ``count`` COO triplets over full DOFs into a CSC matrix over the free DOFs
+    (``dof_map``: full DOF → free index, −1 for a pinned one), in canonical form: row indices
+    sorted within each column, duplicates summed in the order they were written, every diagonal
+    entry stored (zero if none was written) and no explicit zero off the diagonal.
+
+    Two stable counting sorts (by row, then by column) put the triplets in (column, row) order in
+    O(count + n_free). Returns ``(indptr (n_free + 1,), indices, data, diagonal (n_free,))``,
+    ``diagonal[j]`` the position of entry (j, j)."""
+    n_kept = 0
+    for k in range(count):
+        if dof_map[rows[k]] >= 0 and dof_map[cols[k]] >= 0:
+            n_kept += 1
+    total = n_kept + n_free
+    r = np.empty(total, dtype=np.int64)
+    c = np.empty(total, dtype=np.int64)
+    v = np.empty(total)
+    u = 0
+    for k in range(count):
+        i = dof_map[rows[k]]
+        j = dof_map[cols[k]]
+        if i >= 0 and j >= 0:
+            r[u] = i
+            c[u] = j
+            v[u] = vals[k]
+            u += 1
+    for j in range(n_free):  # the diagonal, written last so that it adds nothing to a sum
+        r[u] = j
+        c[u] = j
+        v[u] = 0.0
+        u += 1
+    # Stable counting sort by row, then by column: (column, row) order, ties in written order.
+    start = np.zeros(n_free + 1, dtype=np.int64)
+    for k in range(total):
+        start[r[k] + 1] += 1
+    for i in range(n_free):
+        start[i + 1] += start[i]
+    by_row = np.empty(total, dtype=np.int64)
+    for k in range(total):
+        by_row[start[r[k]]] = k
+        start[r[k]] += 1
+    start[:] = 0
+    for k in range(total):
+        start[c[k] + 1] += 1
+    for j in range(n_free):
+        start[j + 1] += start[j]
+    order = np.empty(total, dtype=np.int64)
+    for t in range(total):
+        k = by_row[t]
+        order[start[c[k]]] = k
+        start[c[k]] += 1
+    indptr = np.zeros(n_free + 1, dtype=np.int64)
+    indices = np.empty(total, dtype=np.int64)
+    data = np.empty(total)
+    diagonal = np.empty(n_free, dtype=np.int64)
+    n = 0
+    t = 0
+    while t < total:
+        k = order[t]
+        row = r[k]
+        column = c[k]
+        value = v[k]
+        t += 1
+        while t < total and r[order[t]] == row and c[order[t]] == column:
+            value += v[order[t]]
+            t += 1
+        if value != 0.0 or row == column:
+            if row == column:
+                diagonal[column] = n
+            indices[n] = row
+            data[n] = value
+            n += 1
+        indptr[column + 1] = n
+    for j in range(n_free):  # columns are never empty (each holds its diagonal), but keep indptr monotone
+        indptr[j + 1] = max(indptr[j + 1], indptr[j])
+    return indptr, indices[:n], data[:n], diagonal

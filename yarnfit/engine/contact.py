@@ -168,17 +168,16 @@ def _pair_maps(model: RodModel, pairs: np.ndarray, images: np.ndarray,
     rotation = np.empty((n, 4, 3, 3))
     translation = np.empty((n, 4, 3))
     a, b = pairs[:, 0], pairs[:, 1]
+    if rows is not None:
+        _contact_kernels.gather_pair_maps(pairs, rows.row(b, images), model.edge_end_rotation, model.edge_offset,
+                                          rows.r0, rows.t0, rows.r1, rows.t1, rotation, translation)
+        return rotation, translation
     rotation[:, 0] = np.eye(3)
     translation[:, 0] = 0.0
     rotation[:, 1] = model.edge_end_rotation[a]
     translation[:, 1] = model.edge_offset[a]
-    if rows is None:
-        rotation[:, 2], translation[:, 2] = node_maps(model, model.edge_nodes[b, 0], images)
-        rotation[:, 3], translation[:, 3] = node_maps(model, model.edge_nodes[b, 1], images + model.edge_tile[b])
-    else:
-        row = rows.row(b, images)
-        rotation[:, 2], translation[:, 2] = rows.r0[row], rows.t0[row]
-        rotation[:, 3], translation[:, 3] = rows.r1[row], rows.t1[row]
+    rotation[:, 2], translation[:, 2] = node_maps(model, model.edge_nodes[b, 0], images)
+    rotation[:, 3], translation[:, 3] = node_maps(model, model.edge_nodes[b, 1], images + model.edge_tile[b])
     return rotation, translation
 
 
@@ -186,13 +185,10 @@ def _curved_virtual_boxes(model: RodModel, rows: _ImageRows, position, end, marg
     """Boxes of every edge at every tile image of ``rows`` that can reach the home tile's boxes,
     each edge's nodes placed by their own maps: ``(edge, image, lower, upper)``."""
     m = model
-    pad = (m.edge_radius + 0.5 * margin)[None, :, None]
-    shape = (len(rows.edge) // m.n_edges, m.n_edges, 3)
-    ends = ((rows.r0, rows.t0, rows.start), (rows.r1, rows.t1, rows.finish))
-    points = [(np.einsum("eij,ej->ei", r, x[nodes]) + t).reshape(shape)
-              for x in (position, end) for r, t, nodes in ends]
-    lower = (np.minimum.reduce(points) - pad).reshape(-1, 3)
-    upper = (np.maximum.reduce(points) + pad).reshape(-1, 3)
+    lower = np.empty((len(rows.edge), 3))
+    upper = np.empty((len(rows.edge), 3))
+    _contact_kernels.mapped_edge_boxes(position, end, rows.edge, rows.start, rows.r0, rows.t0, rows.finish, rows.r1,
+                                       rows.t1, m.edge_radius, 0.5 * margin, lower, upper)
     # Keep only boxes that overlap the hull of the home tile's boxes.
     hull_lo, hull_hi = lower[rows.home].min(axis=0), upper[rows.home].max(axis=0)
     keep = np.all((lower <= hull_hi) & (upper >= hull_lo), axis=1)

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._contact_kernels import constraint_measures
 from .contact import ContactPairs, ImageMaps, find_pairs
 from .model import RodModel
 
@@ -120,17 +121,23 @@ class ContactSet:
         return (self.edge_samples, *self.pairs.kernel_args(), self.start, self.multiplier, self.stiffness,
                 CONTACT_SMOOTHING)
 
+    def same_constraints(self, other: "ContactSet") -> bool:
+        """The same pairs (with images), multipliers and penalties as ``other``: the contact
+        potential is then the same function of the positions."""
+        return self is other or (
+            len(self.pairs) == len(other.pairs)
+            and np.array_equal(self.pairs.pairs, other.pairs.pairs)
+            and np.array_equal(self.pairs.images, other.pairs.images)
+            and np.array_equal(self.multiplier, other.multiplier)
+            and np.array_equal(self.stiffness, other.stiffness))
+
     def measures(self, gap: np.ndarray, force: np.ndarray) -> tuple[float, float]:
         """``(penetration, separation)`` of constraint gaps ``gap`` (m) and normal forces
         ``force`` (N): the deepest overlap, and the widest gap of a constraint still carrying a
         force above the smoothing band, each over the pair's sum of radii (0 without pairs)."""
         if len(self.pairs) == 0:
             return 0.0, 0.0
-        rsum = self.per_constraint(self.radius_sum)
-        penetration = float(np.max(-gap / rsum, initial=0.0))
-        loaded = force > CONTACT_SMOOTHING * self.per_constraint(self.stiffness) * rsum
-        separation = float(np.max(gap[loaded] / rsum[loaded], initial=0.0))
-        return penetration, separation
+        return constraint_measures(gap, force, self.start, self.radius_sum, self.stiffness, CONTACT_SMOOTHING)
 
 
 class _Memory:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from numba import njit
 
 __all__ = ["BACKWARD_ERROR", "PIVOT_THRESHOLD", "SingularSystemError", "SymmetricSolve"]
 
@@ -42,6 +43,55 @@ PIVOT_THRESHOLD = 0.01
 _SYMMETRIC = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=PIVOT_THRESHOLD, options=dict(SymmetricMode=True))
 
 
+def _saddle_point(matrix: sp.csc_matrix, constraints: sp.spmatrix, weight: np.ndarray):
+    """``K = [M Aᵀ; A 0]`` (CSC, canonical when ``M`` is) and the weights extended by each
+    constraint row's: one over its largest entry once its columns are weighted."""
+    n, m = matrix.shape[0], constraints.shape[0]
+    by_column, by_row = sp.csc_matrix(constraints), sp.csr_matrix(constraints)
+    by_column.sort_indices()
+    by_row.sort_indices()
+    row_max = np.zeros(m)
+    np.maximum.at(row_max, by_column.indices, np.abs(by_column.data * np.repeat(weight, np.diff(by_column.indptr))))
+    weight = np.concatenate([weight, 1.0 / np.where(row_max > 0.0, row_max, 1.0)])
+    indptr, indices, data = _stack_saddle_point(matrix.indptr, matrix.indices, matrix.data, by_column.indptr,
+                                                by_column.indices, by_column.data, by_row.indptr, by_row.indices,
+                                                by_row.data, n)
+    system = sp.csc_matrix((data, indices, indptr), shape=(n + m, n + m))
+    system.has_canonical_format = matrix.has_canonical_format
+    return system, weight
+
+
+@njit(cache=True)
+def _stack_saddle_point(m_indptr, m_indices, m_data, a_indptr, a_rows, a_data, at_indptr, at_columns, at_data, n):
+    """CSC arrays of ``[M Aᵀ; A 0]`` from ``M`` (CSC, ``(n, n)``) and ``A`` given by columns
+    (``a_*``, CSC) and by rows (``at_*``, CSR): column j < n is M's column then A's column j (rows
+    n + i, below every row of M); column n + i is A's row i."""
+    m = at_indptr.shape[0] - 1
+    nnz = m_indptr[n] + 2 * a_indptr[n]
+    indptr = np.empty(n + m + 1, dtype=np.int32)
+    indices = np.empty(nnz, dtype=np.int32)
+    data = np.empty(nnz)
+    u = 0
+    indptr[0] = 0
+    for j in range(n):
+        for k in range(m_indptr[j], m_indptr[j + 1]):
+            indices[u] = m_indices[k]
+            data[u] = m_data[k]
+            u += 1
+        for k in range(a_indptr[j], a_indptr[j + 1]):
+            indices[u] = n + a_rows[k]
+            data[u] = a_data[k]
+            u += 1
+        indptr[j + 1] = u
+    for i in range(m):
+        for k in range(at_indptr[i], at_indptr[i + 1]):
+            indices[u] = at_columns[k]
+            data[u] = at_data[k]
+            u += 1
+        indptr[n + i + 1] = u
+    return indptr, indices, data
+
+
 class SingularSystemError(RuntimeError):
     """The system is singular to working precision (the caller damps harder)."""
 
@@ -54,24 +104,26 @@ class SymmetricSolve:
     partial-pivoting fallback was needed."""
 
     def __init__(self, matrix: sp.spmatrix, constraints: sp.spmatrix | None = None):
-        matrix = sp.csc_matrix(matrix)
+        matrix = matrix if sp.isspmatrix_csc(matrix) else sp.csc_matrix(matrix)
         self._n = matrix.shape[0]
         diagonal = np.abs(matrix.diagonal())
         weight = 1.0 / np.sqrt(np.where(diagonal > 0.0, diagonal, 1.0))
         self._n_constraints = 0
         system = matrix
         if constraints is not None and constraints.shape[0] > 0:
-            constraints = sp.csr_matrix(constraints)
+            system, weight = _saddle_point(matrix, sp.coo_matrix(constraints), weight)
             self._n_constraints = constraints.shape[0]
-            row_max = abs(constraints @ sp.diags(weight)).max(axis=1).toarray().ravel()
-            weight = np.concatenate([weight, 1.0 / np.where(row_max > 0.0, row_max, 1.0)])
-            system = sp.bmat([[matrix, constraints.T], [constraints, None]], format="csc")
         self.system = system
         self._weight = weight
-        self._norm = spla.norm(system, 1)
+        # Column of every stored entry: the system's 1-norm and its equilibration W K W are then
+        # sums and products over the stored entries, in the order scipy's (W K) W gives them.
+        column = np.repeat(np.arange(system.shape[1]), np.diff(system.indptr))
+        self._norm = float(np.bincount(column, weights=np.abs(system.data), minlength=system.shape[1]).max(initial=0.0))
+        equilibrated = sp.csc_matrix(((weight[system.indices] * system.data) * weight[column], system.indices,
+                                      system.indptr), shape=system.shape)
         self.pivoted = False
         try:
-            self._lu = spla.splu(sp.csc_matrix(sp.diags(weight) @ system @ sp.diags(weight)), **_SYMMETRIC)
+            self._lu = spla.splu(equilibrated, **_SYMMETRIC)
         except RuntimeError:  # a zero pivot even with threshold pivoting
             self._use_pivoted()
 

@@ -45,6 +45,7 @@ still carrying force are all below tolerance.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -317,6 +318,9 @@ class _Work:
     # The line search's swept contacts when the iterate lies on its segment (no chord step): a
     # superset of the pairs near it, which the next evaluation uses instead of a new search.
     swept: ContactSet | None = None
+    # The line search's evaluation at that iterate with those contacts: the next evaluation is the
+    # same numbers, so it is taken over rather than computed again.
+    swept_evaluation: _Evaluation | None = None
     contact_force: np.ndarray = field(default_factory=lambda: np.empty(0))
     # Full gradient (every DOF, pinned ones included) of the last evaluation: the solve always
     # ends on an evaluation at the returned state, so this gives the reactions there.
@@ -376,7 +380,8 @@ class QuasiStaticSolver:
         # Axial stiffness seen by each node (N/m) and carried by each edge (N), for round-off floors.
         edge_stiffness = np.maximum(model.edge_stretch_stiffness, model.edge_shear_stiffness)
         self._constraint = None
-        self._constraint_gram = None
+        self._constraint_dense = None
+        self._least_squares_multiplier = None
         self._spin_edges = np.empty(0, dtype=np.int64)
         self._node_stiffness = np.zeros(n)
         np.add.at(self._node_stiffness, model.edge_nodes.ravel(), np.repeat(edge_stiffness / model.edge_rest_length, 2))
@@ -386,7 +391,8 @@ class QuasiStaticSolver:
         """Restrict ``constraints`` to the free DOFs (rotations have zero columns), drop empty and
         dependent rows, and prepare the projection used to measure residuals."""
         self._constraint = None
-        self._constraint_gram = None
+        self._constraint_dense = None
+        self._least_squares_multiplier = None
         self._spin_edges = np.empty(0, dtype=np.int64)
         if constraints is None:
             return
@@ -413,7 +419,11 @@ class QuasiStaticSolver:
             return
         rows = np.sort(pivot[:rank])
         self._constraint = sp.csr_matrix(dense[rows])
-        self._constraint_gram = scipy.linalg.cho_factor(dense[rows] @ dense[rows].T)
+        # The residual's projection g − Aᵀ(AAᵀ)⁻¹Ag runs at every assessment: keep A dense (a few
+        # rows) with (AAᵀ)⁻¹A beside it, two small dense products instead of sparse ones and a solve.
+        self._constraint_dense = np.ascontiguousarray(dense[rows])
+        gram = scipy.linalg.cho_factor(dense[rows] @ dense[rows].T)
+        self._least_squares_multiplier = scipy.linalg.cho_solve(gram, dense[rows])
 
     def _spin_gauge(self, held: np.ndarray, moment: np.ndarray) -> np.ndarray:
         """The first edge of every rod whose frames can all turn about their own tangents at no
@@ -463,9 +473,8 @@ class QuasiStaticSolver:
         squares)."""
         if self._constraint is None:
             return free_gradient
-        a = self._constraint
-        mu = scipy.linalg.cho_solve(self._constraint_gram, a @ free_gradient)
-        return free_gradient - a.T @ mu
+        mu = self._least_squares_multiplier @ free_gradient
+        return free_gradient - self._constraint_dense.T @ mu
 
     # -- public -------------------------------------------------------------------------------
 
@@ -580,9 +589,14 @@ class QuasiStaticSolver:
         its own segment, its swept pairs are those contacts: every pair within reach of a point on
         the segment is among them, and a pair out of reach adds no force (only its multipliers'
         constant, the same at every point the potential is compared at)."""
-        work.contacts = work.swept if work.swept is not None else lagrangian.query(work.position)
-        work.swept = None
-        ev = self._assess(work.point, work.contacts, node_force, moment, energy_change)
+        if work.swept is not None and work.swept_evaluation is not None:
+            work.contacts = work.swept
+            ev = work.swept_evaluation
+            ev = dataclasses.replace(ev, residual=dataclasses.replace(ev.residual, energy_change=energy_change))
+        else:
+            work.contacts = work.swept if work.swept is not None else lagrangian.query(work.position)
+            ev = self._assess(work.point, work.contacts, node_force, moment, energy_change)
+        work.swept = work.swept_evaluation = None
         work.contact_force = ev.contact_force
         work.gradient = ev.gradient
         return ev
@@ -652,8 +666,9 @@ class QuasiStaticSolver:
 
     # -- Newton step --------------------------------------------------------------------------
 
-    def _hessian(self, work: _Work) -> sp.csc_matrix:
-        """Hessian of the potential on the free DOFs at the current iterate."""
+    def _hessian(self, work: _Work) -> tuple[sp.csc_matrix, np.ndarray]:
+        """Hessian of the potential on the free DOFs at the current iterate (CSC, canonical, every
+        diagonal entry stored: the damping goes there) and the positions of its diagonal entries."""
         m, opt = self.model, self.options
         c = work.contacts
         n_entries = 81 * m.n_edges + 36 * m.n_joints + 144 * len(c.pairs)
@@ -667,11 +682,11 @@ class QuasiStaticSolver:
                 work.position, m.edge_nodes, m.edge_radius, *c.kernel_args(),
                 CONTACT_FD_STEP, rows, cols, vals, count,
             )
-        r = self._dof_map[rows[:count]]
-        col = self._dof_map[cols[:count]]
-        keep = (r >= 0) & (col >= 0)
         n_free = self._free.size
-        return sp.csc_matrix((vals[:count][keep], (r[keep], col[keep])), shape=(n_free, n_free))
+        indptr, indices, data, diagonal = _kernels.assemble_csc(rows, cols, vals, count, self._dof_map, n_free)
+        hessian = sp.csc_matrix((data, indices.astype(np.int32), indptr.astype(np.int32)), shape=(n_free, n_free))
+        hessian.has_canonical_format = True
+        return hessian, diagonal
 
     def _newton_direction(self, work: _Work, ev: _Evaluation, damping: _Damping):
         """Levenberg–Marquardt direction d on the free DOFs, the factorised matrix's solve and the
@@ -679,16 +694,17 @@ class QuasiStaticSolver:
         direction is found. Raises ``damping`` until the matrix is regular and d descends."""
         if self._free.size == 0:
             return None, None, 0.0
-        hessian = self._hessian(work)
+        hessian, on_diagonal = self._hessian(work)
         g = ev.gradient[self._free]
-        n = self._free.size
-        diag = hessian.diagonal()
+        diag = hessian.data[on_diagonal]
         floor = 1e-12 * max(float(np.abs(diag).max(initial=0.0)), 1e-300)
-        scale = sp.diags(np.maximum(np.abs(diag), floor))
+        scale = np.maximum(np.abs(diag), floor)
         a = self._step_constraints(work.quaternion)
         for _ in range(20):
+            damped = hessian.copy()
+            damped.data[on_diagonal] += damping.value * scale
             try:
-                solve = SymmetricSolve(hessian + damping.value * scale, a)
+                solve = SymmetricSolve(damped, a)
                 d = solve(-g)
             except SingularSystemError:  # exactly singular: damp harder
                 damping.harden()
@@ -738,7 +754,9 @@ class QuasiStaticSolver:
         def assess(point):
             return self._assess(point, contacts, node_force, moment)
 
-        start = assess(work.point).potential
+        # The current iterate's potential with the swept contacts: the evaluation's own when the
+        # sweep found the same constraints (same pairs, multipliers and penalties).
+        start = ev.potential if contacts.same_constraints(work.contacts) else assess(work.point).potential
         g_dot_d = float(ev.gradient[self._free] @ direction)
         scale = max(abs(start), abs(ev.internal), 1e-300)
 
@@ -749,10 +767,11 @@ class QuasiStaticSolver:
         def acceptable(trial: float, alpha: float) -> bool:
             return below_roundoff(alpha) or trial <= start + ARMIJO_SLOPE * alpha * g_dot_d
 
-        def accept(point, trial: float, alpha: float, on_segment: bool = True):
+        def accept(point, trial: _Evaluation, alpha: float, on_segment: bool = True):
             work.position, work.quaternion, work.moment_work = point
             work.swept = contacts if on_segment and opt.contact else None
-            change = abs(trial - start) / max(abs(trial), abs(start), abs(ev.internal), 1e-300)
+            work.swept_evaluation = trial if work.swept is not None else None
+            change = abs(trial.potential - start) / max(abs(trial.potential), abs(start), abs(ev.internal), 1e-300)
             return alpha, change
 
         point = self._moved(work.point, moment, alpha_max * dx, alpha_max * dtheta)
@@ -763,7 +782,7 @@ class QuasiStaticSolver:
                 damping.raise_by(NOISE_DAMPING)
             else:
                 damping.succeeded(1.0)
-            return accept(point, trial.potential, alpha_max)
+            return accept(point, trial, alpha_max)
         if acceptable(trial.potential, alpha_max):
             if alpha_max < 1.0:
                 damping.failed()
@@ -773,14 +792,14 @@ class QuasiStaticSolver:
                 damping.succeeded(gain)
             whole = point
             point, trial = self._chord_steps(point, trial, solve, assess, moment)
-            return accept(point, trial.potential, alpha_max, on_segment=point is whole)
+            return accept(point, trial, alpha_max, on_segment=point is whole)
         damping.failed()
         alpha = 0.5 * alpha_max
         while alpha > 1e-12 * alpha_max:
             point = self._moved(work.point, moment, alpha * dx, alpha * dtheta)
-            potential = assess(point).potential
-            if acceptable(potential, alpha):
-                return accept(point, potential, alpha)
+            trial = assess(point)
+            if acceptable(trial.potential, alpha):
+                return accept(point, trial, alpha)
             alpha *= 0.5
         damping.harden()
         return 0.0, 0.0
