@@ -493,7 +493,12 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
             x, y = np.array(xs[j - 1:j + 2]), ys[j - 1:j + 2]
             a, b, c = np.polyfit(x, y, 2) if len(x) == 3 and np.isfinite(y).all() else (0.0, 0.0, 0.0)
             lower, upper = xs[i - 1], xs[i + 1] if i + 1 < len(xs) else 0.0
-            if a > 0.0 and ys[i] - (c - b * b / (4.0 * a)) <= SEARCH_ENERGY_RTOL * ys[i]:
+            # The parabola's lowest point inside the bracket: with the best at E⊥ = 0 (the
+            # interval's upper end: an auxetic knit, such as HYLC's stockinette, would widen), a
+            # vertex beyond 0 promises nothing the search may reach, and bisecting towards 0 only
+            # repeated the pure stretch's equilibrium (2–6 solves more per sample).
+            lowest = min(max(-b / (2.0 * a), lower), upper) if a > 0.0 else 0.0
+            if a > 0.0 and ys[i] - (a * lowest * lowest + b * lowest + c) <= SEARCH_ENERGY_RTOL * ys[i]:
                 found = True  # the parabola promises no useful decrease below the best
                 break
             trial = -b / (2.0 * a) if a > 0.0 else 0.5 * (lower + xs[i])
