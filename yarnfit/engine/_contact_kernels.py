@@ -513,6 +513,13 @@ def contact_energy_gradient(pos, edge_nodes, edge_radius, edge_samples, pairs, p
         energy += _pair_sample_terms(a0, a1, b0, b1, edge_samples[ea], edge_samples[eb],
                                      edge_radius[ea] + edge_radius[eb], multiplier, constraint_start[p],
                                      stiffness[p], smoothing, local, out_gap, out_force)
+        pushing = False  # most candidate pairs are out of reach: nothing to add
+        for k in range(12):
+            if local[k] != 0.0:
+                pushing = True
+                break
+        if not pushing:
+            continue
         nodes = _pair_nodes(edge_nodes, pairs, p)
         for m in range(4):
             g = mat_t_vec(pair_rotation[p, m], (local[3 * m], local[3 * m + 1], local[3 * m + 2]))
