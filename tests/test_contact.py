@@ -17,6 +17,7 @@ from yarnfit.engine import (
     XPBDSolver,
     straight_points,
 )
+from yarnfit.engine._contact_kernels import segment_closest_points, tunneling_step_limit
 from yarnfit.engine.contact import find_pairs
 from yarnfit.engine.model import CONTACT_EXCLUSION_FACTOR
 
@@ -200,3 +201,58 @@ def test_rod_on_an_incline_slides_above_the_friction_angle():
     expected = 0.5 * 9.81 * (math.sin(theta) - mu * math.cos(theta)) * 0.3**2
     # The step starts with static contact and resolves sliding at the substep level: 2 % covers it.
     assert slide == pytest.approx(expected, rel=0.02)
+
+
+# -- the Newton step's no-tunnelling cap ----------------------------------------------------------
+
+# Kernel's stop: within CCD_CONVERGED (1 %) of the allowed approach, so the step it allows reaches at
+# least 98 % of the exact limit on a head-on approach.
+CCD_REACH = 0.98
+# Distance samples along a step in the brute-force reference.
+CCD_SAMPLES = 2001
+# The sampled distances are exact to round-off of unit-sized coordinates.
+CCD_ROUNDOFF = 1e-12
+
+
+def _segment_pair(a0, a1, b0, b1):
+    """Two free segments with identity maps, as the contact kernels take them."""
+    pos = np.array([a0, a1, b0, b1], dtype=np.float64)
+    edge_nodes = np.array([[0, 1], [2, 3]])
+    pairs = np.array([[0, 1]])
+    rotation = np.broadcast_to(np.eye(3), (1, 4, 3, 3)).copy()
+    translation = np.zeros((1, 4, 3))
+    return pos, edge_nodes, pairs, rotation, translation
+
+
+def _distance_along(pos, dx, alphas):
+    return np.array([segment_closest_points(*(pos + a * dx))[2] for a in alphas])
+
+
+def test_a_yarn_sliding_along_another_is_not_cut():
+    pos, edge_nodes, pairs, rotation, translation = _segment_pair((0, 0, 0), (1, 0, 0), (0, 0, 0.2), (1, 0, 0.2))
+    dx = np.zeros((4, 3))
+    dx[2:, 0] = 5.0  # b slides 25 distances along a: the distance never changes
+    assert tunneling_step_limit(pos, dx, edge_nodes, pairs, rotation, translation, 0.9) == 1.0
+
+
+def test_a_head_on_approach_stops_at_a_tenth_of_the_distance():
+    pos, edge_nodes, pairs, rotation, translation = _segment_pair((0, 0, 0), (1, 0, 0), (0, 0, 0.2), (1, 0, 0.2))
+    dx = np.zeros((4, 3))
+    dx[2:, 2] = -0.4  # b would pass through a at α = 0.5
+    alpha = tunneling_step_limit(pos, dx, edge_nodes, pairs, rotation, translation, 0.9)
+    exact = (0.2 - 0.02) / 0.4
+    assert CCD_REACH * exact <= alpha <= exact
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_no_step_brings_a_pair_below_a_tenth_of_its_distance(seed):
+    """Random segments and moves against the distance sampled densely along the step (brute force):
+    nowhere up to the allowed step is the distance below a tenth of its start."""
+    rng = np.random.default_rng(seed)
+    pos, edge_nodes, pairs, rotation, translation = _segment_pair(*rng.normal(size=(4, 3)))
+    dx = rng.normal(scale=3.0, size=(4, 3))
+    alpha = tunneling_step_limit(pos, dx, edge_nodes, pairs, rotation, translation, 0.9)
+    start = _distance_along(pos, dx, [0.0])[0]
+    along = _distance_along(pos, dx, np.linspace(0.0, alpha, CCD_SAMPLES))
+    assert along.min() >= 0.1 * start * (1.0 - CCD_ROUNDOFF)
+    assert 0.0 < alpha <= 1.0

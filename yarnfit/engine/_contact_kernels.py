@@ -263,6 +263,29 @@ def gather_pair_maps(pairs, row, edge_end_rotation, edge_offset, r0, t0, r1, t1,
 
 
 @njit(cache=True)
+def flat_pair_maps(pairs, images, edge_nodes, edge_tile, edge_end_rotation, edge_offset, lattice, rotation, translation):
+    """Rigid maps of the nodes ``(a0, a1, b0, b1)`` of each pair of a flat (or non-periodic) model
+    into ``rotation (P, 4, 3, 3)`` and ``translation (P, 4, 3)``: a0 stays, a1 is edge a's end in
+    its tile, b's nodes are translated by ``image @ lattice`` (b1 one edge tile further)."""
+    for p in range(pairs.shape[0]):
+        a = pairs[p, 0]
+        b = pairs[p, 1]
+        for j in range(3):
+            for k in range(3):
+                identity = 1.0 if j == k else 0.0
+                rotation[p, 0, j, k] = identity
+                rotation[p, 1, j, k] = edge_end_rotation[a, j, k]
+                rotation[p, 2, j, k] = identity
+                rotation[p, 3, j, k] = identity
+            translation[p, 0, j] = 0.0
+            translation[p, 1, j] = edge_offset[a, j]
+            ix = images[p, 0]
+            iy = images[p, 1]
+            translation[p, 2, j] = ix * lattice[0, j] + iy * lattice[1, j]
+            translation[p, 3, j] = (ix + edge_tile[b, 0]) * lattice[0, j] + (iy + edge_tile[b, 1]) * lattice[1, j]
+
+
+@njit(cache=True)
 def _canonical(a, ia, ja, b, ib, jb):
     """The unique report of a pair of virtual edges: ``(first, second, image of second)`` with the
     first edge in the home tile, ``first < second`` or, for an edge and its own image, the image
@@ -375,25 +398,75 @@ def pair_distances(pos, edge_nodes, pairs, pair_rotation, pair_translation, out)
         out[p] = segment_closest_points(a0, a1, b0, b1)[2]
 
 
+# Conservative advancements per pair in tunneling_step_limit, and the fraction of the allowed
+# approach left at which a pair closing in counts as arrived (the geometric approach would
+# otherwise take ever smaller advances).
+CCD_ADVANCES = 64
+CCD_CONVERGED = 1e-2
+
+
+@njit(cache=True)
+def _moved_distance(a0, a1, b0, b1, move, alpha):
+    """Centreline distance of a pair's segments with their points moved by ``alpha · move (4, 3)``."""
+    p = np.empty((4, 3))
+    for k in range(3):
+        p[0, k] = a0[k] + alpha * move[0, k]
+        p[1, k] = a1[k] + alpha * move[1, k]
+        p[2, k] = b0[k] + alpha * move[2, k]
+        p[3, k] = b1[k] + alpha * move[3, k]
+    return segment_closest_points(row3(p, 0), row3(p, 1), row3(p, 2), row3(p, 3))[2]
+
+
 @njit(cache=True)
 def tunneling_step_limit(pos, dx, edge_nodes, pairs, pair_rotation, pair_translation, fraction):
-    """Largest step length ``α ≤ 1`` along node displacements ``dx (N, 3)`` such that no pair's
-    centreline distance can reach zero: the distance of two segments changes by at most the sum of
-    their largest node moves (a rigid map does not change a move's length), so
-    ``α (δa + δb) ≤ fraction · d0`` keeps every pair apart."""
+    """Largest step length ``α ≤ 1`` along node displacements ``dx (N, 3)`` that brings no pair's
+    centreline distance below ``(1 − fraction)`` of its current value ``d0``, so no yarn passes
+    through another.
+
+    Conservative advancement (additive CCD, Li et al. 2021): with the pair's four mapped
+    displacements ``D`` and their mean ``D̄``, the segments' distance changes by at most
+    ``ℓ = max_a |D − D̄| + max_b |D − D̄|`` per unit of α, so from a distance ``d`` the step may
+    advance ``(d − (1 − fraction) d0) / ℓ`` and the distance is measured again there. A bound on
+    the whole step alone (the sum of the largest node moves, as before) cut every step that slid a
+    yarn along another at constant distance, to 1/256–1/64 in the twill swatch; the advancement
+    lets such a step through and still stops one that closes in. At most CCD_ADVANCES per pair: a
+    pair still advancing then limits the step where it got to.
+    """
     alpha = 1.0
+    move = np.empty((4, 3))
     for p in range(pairs.shape[0]):
         a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
-        _, _, dist, _ = segment_closest_points(a0, a1, b0, b1)
-        travel = 0.0
-        for e in (pairs[p, 0], pairs[p, 1]):
-            move = 0.0
-            for m in range(2):
-                i = edge_nodes[e, m]
-                move = max(move, math.sqrt(dx[i, 0] ** 2 + dx[i, 1] ** 2 + dx[i, 2] ** 2))
-            travel += move
-        if travel * alpha > fraction * dist:
-            alpha = fraction * dist / travel
+        nodes = _pair_nodes(edge_nodes, pairs, p)
+        mean = np.zeros(3)
+        for m in range(4):
+            d = mat_vec(pair_rotation[p, m], (dx[nodes[m], 0], dx[nodes[m], 1], dx[nodes[m], 2]))
+            for k in range(3):
+                move[m, k] = d[k]
+                mean[k] += 0.25 * d[k]
+        spread_a = 0.0
+        spread_b = 0.0
+        for m in range(4):
+            r = math.sqrt((move[m, 0] - mean[0]) ** 2 + (move[m, 1] - mean[1]) ** 2 + (move[m, 2] - mean[2]) ** 2)
+            if m < 2:
+                spread_a = max(spread_a, r)
+            else:
+                spread_b = max(spread_b, r)
+        bound = spread_a + spread_b
+        distance = segment_closest_points(a0, a1, b0, b1)[2]
+        floor = (1.0 - fraction) * distance
+        if bound * alpha <= distance - floor:
+            continue  # the whole (current) step cannot close the pair in that far
+        reached = 0.0
+        d = distance
+        for _ in range(CCD_ADVANCES):
+            reached += (d - floor) / bound
+            if reached >= alpha:
+                reached = alpha
+                break
+            d = _moved_distance(a0, a1, b0, b1, move, reached)
+            if d - floor <= CCD_CONVERGED * (distance - floor):
+                break  # closing in on the floor: stop here
+        alpha = min(alpha, reached)
     return alpha
 
 

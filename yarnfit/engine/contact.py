@@ -172,6 +172,10 @@ def _pair_maps(model: RodModel, pairs: np.ndarray, images: np.ndarray,
         _contact_kernels.gather_pair_maps(pairs, rows.row(b, images), model.edge_end_rotation, model.edge_offset,
                                           rows.r0, rows.t0, rows.r1, rows.t1, rotation, translation)
         return rotation, translation
+    if model.tiling is None:
+        _contact_kernels.flat_pair_maps(pairs, images, model.edge_nodes, model.edge_tile, model.edge_end_rotation,
+                                        model.edge_offset, model.lattice, rotation, translation)
+        return rotation, translation
     rotation[:, 0] = np.eye(3)
     translation[:, 0] = 0.0
     rotation[:, 1] = model.edge_end_rotation[a]
