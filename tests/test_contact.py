@@ -18,7 +18,7 @@ from yarnfit.engine import (
     straight_points,
 )
 from yarnfit.engine._contact_kernels import segment_closest_points, tunneling_step_limit
-from yarnfit.engine.contact import find_pairs
+from yarnfit.engine.contact import find_pairs, pair_distances
 from yarnfit.engine.model import CONTACT_EXCLUSION_FACTOR
 
 # Issue acceptance: pressed rods stop at centreline distance ra + rb within 1 %.
@@ -256,3 +256,26 @@ def test_no_step_brings_a_pair_below_a_tenth_of_its_distance(seed):
     along = _distance_along(pos, dx, np.linspace(0.0, alpha, CCD_SAMPLES))
     assert along.min() >= 0.1 * start * (1.0 - CCD_ROUNDOFF)
     assert 0.0 < alpha <= 1.0
+
+
+@pytest.mark.parametrize("swept", [False, True])
+def test_pairs_within_reach_are_the_candidates_whose_segments_come_that_close(swept):
+    """``find_pairs(within=w)`` keeps exactly the box candidates whose segments are within
+    ra + rb + w at the start, or could be on the way (distance less both edges' largest node
+    moves), as computed here pair by pair."""
+    model = crossed_rods(1e-3, 1e-3, 0.5e-3)
+    position = np.array(model.node_rest_position)
+    rng = np.random.default_rng(3)
+    end = position + (rng.normal(scale=3e-4, size=position.shape) if swept else 0.0)
+    margin = 4e-3
+    candidates = find_pairs(model, position, margin, end if swept else None)
+    kept = find_pairs(model, position, margin, end if swept else None, within=1e-3)
+    distance = pair_distances(model, position, candidates)
+    move = np.linalg.norm(end - position, axis=1)
+    travel = sum(move[model.edge_nodes[candidates.pairs[:, k]]].max(axis=1) for k in range(2))
+    rsum = model.edge_radius[candidates.pairs].sum(axis=1)
+    expected = distance - travel <= rsum + 1e-3
+    assert 0 < expected.sum() < len(candidates)  # the filter has work to do either way
+    np.testing.assert_array_equal(kept.pairs, candidates.pairs[expected])
+    np.testing.assert_array_equal(kept.images, candidates.images[expected])
+    np.testing.assert_array_equal(kept.translation, candidates.translation[expected])

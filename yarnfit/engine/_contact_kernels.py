@@ -418,6 +418,36 @@ def _moved_distance(a0, a1, b0, b1, move, alpha):
 
 
 @njit(cache=True)
+def keep_pairs_in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, images, pair_rotation, pair_translation,
+                        margin):
+    """Move to the front, in order and in place, the pairs whose segments come within
+    ``ra + rb + margin`` (m) of each other at ``pos`` or anywhere on the straight way to
+    ``pos_end`` (their distance at ``pos`` less the largest move of a node of each edge: rigid
+    maps keep a move's length); returns how many."""
+    kept = 0
+    for p in range(pairs.shape[0]):
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
+        distance = segment_closest_points(a0, a1, b0, b1)[2]
+        travel = 0.0
+        for e in (pairs[p, 0], pairs[p, 1]):
+            move = 0.0
+            for m in range(2):
+                i = edge_nodes[e, m]
+                move = max(move, math.sqrt((pos_end[i, 0] - pos[i, 0]) ** 2 + (pos_end[i, 1] - pos[i, 1]) ** 2
+                                           + (pos_end[i, 2] - pos[i, 2]) ** 2))
+            travel += move
+        if distance - travel > edge_radius[pairs[p, 0]] + edge_radius[pairs[p, 1]] + margin:
+            continue
+        if kept != p:
+            pairs[kept] = pairs[p]
+            images[kept] = images[p]
+            pair_rotation[kept] = pair_rotation[p]
+            pair_translation[kept] = pair_translation[p]
+        kept += 1
+    return kept
+
+
+@njit(cache=True)
 def tunneling_step_limit(pos, dx, edge_nodes, pairs, pair_rotation, pair_translation, fraction):
     """Largest step length ``α ≤ 1`` along node displacements ``dx (N, 3)`` that brings no pair's
     centreline distance below ``(1 − fraction)`` of its current value ``d0``, so no yarn passes

@@ -133,10 +133,12 @@ def _image_rows(model: RodModel, si: int, sj: int) -> _ImageRows:
 
 
 def find_pairs(model: RodModel, position: np.ndarray, margin: float, position_end: np.ndarray | None = None,
-               maps: ImageMaps | None = None) -> ContactPairs:
+               maps: ImageMaps | None = None, within: float | None = None) -> ContactPairs:
     """Candidate pairs near ``position`` or anywhere on the way to ``position_end`` (m), their
     boxes inflated by radius plus ``margin / 2`` (m). ``maps``: the model's :class:`ImageMaps`
-    (curved tilings; built for this query when not given)."""
+    (curved tilings; built for this query when not given). ``within`` (m): keep only the pairs
+    whose segments come within ``ra + rb + within`` of each other on the way (boxes overlap far
+    beyond that: a dense weave's strip, 25,600 candidates of which 15,600 within a radius)."""
     m = model
     end = position if position_end is None else np.ascontiguousarray(position_end)
     reach = 2.0 * float(m.edge_radius.max()) + margin + float(m.edge_rest_length.max())
@@ -149,14 +151,23 @@ def find_pairs(model: RodModel, position: np.ndarray, margin: float, position_en
             m.edge_chain_tile, m.edge_arc_start, m.edge_rest_length, m.rod_length, m.rod_closed, m.rod_period,
             m.lattice, searched, ~m.node_pinned, margin, CONTACT_EXCLUSION_FACTOR,
         )
-        return ContactPairs(pairs, images, *_pair_maps(m, pairs, images))
+        return _within(m, position, end, ContactPairs(pairs, images, *_pair_maps(m, pairs, images)), within)
     rows = (maps if maps is not None else ImageMaps(m)).rows(searched)
     boxes = _curved_virtual_boxes(m, rows, position, end, margin)
     pairs, images = _contact_kernels.pairs_of_boxes(
         *boxes, m.edge_nodes, m.edge_rod, m.edge_chain_tile, m.edge_arc_start, m.edge_rest_length, m.edge_radius,
         m.rod_length, m.rod_closed, m.rod_period, ~m.node_pinned, CONTACT_EXCLUSION_FACTOR,
     )
-    return ContactPairs(pairs, images, *_pair_maps(m, pairs, images, rows))
+    return _within(m, position, end, ContactPairs(pairs, images, *_pair_maps(m, pairs, images, rows)), within)
+
+
+def _within(model: RodModel, position, end, pairs: ContactPairs, within: float | None) -> ContactPairs:
+    """``pairs`` cut to those within reach (see :func:`find_pairs`), without copying them."""
+    if within is None or len(pairs) == 0:
+        return pairs
+    kept = _contact_kernels.keep_pairs_in_reach(position, end, model.edge_nodes, model.edge_radius, pairs.pairs,
+                                                pairs.images, pairs.rotation, pairs.translation, float(within))
+    return ContactPairs(pairs.pairs[:kept], pairs.images[:kept], pairs.rotation[:kept], pairs.translation[:kept])
 
 
 def _pair_maps(model: RodModel, pairs: np.ndarray, images: np.ndarray,
