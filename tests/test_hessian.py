@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 from yarnfit.engine import Loads, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState, straight_points
 from yarnfit.engine import _contact_kernels, _kernels
 from yarnfit.engine.contact_lagrangian import ContactSet
-from yarnfit.engine.quasistatic import CONTACT_FD_STEP, _rotate_frames, _Work
+from yarnfit.engine.quasistatic import _rotate_frames, _Work
 
 # Central differences of the analytic gradient at step h carry O(h²) truncation and O(ε/h)
 # round-off: ~1e-10 relative at the steps below; 1e-7 leaves room and still fails on any wrong term.
@@ -127,7 +127,7 @@ def _contact_pair_terms(multiplier, mapped=False):
     def hessian(x):
         rows, cols, vals = np.empty(144, np.int64), np.empty(144, np.int64), np.empty(144)
         count = _contact_kernels.contact_hessian_coo(x, edge_nodes, radius, CONTACT_SAMPLES, pairs, rotation,
-                                                     translation, start, lam, k, CONTACT_SMOOTHING, CONTACT_FD_STEP, rows, cols,
+                                                     translation, start, lam, k, CONTACT_SMOOTHING, rows, cols,
                                                      vals, 0)
         out = np.zeros((12, 12))
         np.add.at(out, (rows[:count], cols[:count]), vals[:count])
@@ -165,9 +165,9 @@ REFERENCE_STEP = {5.0: 1e-9, 0.3: 1e-9, -0.9995: 1e-12}
 
 
 # Above the band (the quadratic branch), inside it (the parabolic ramp) and at its foot; the second
-# edge as itself or as a rotated image. At the foot the solver's own step (CONTACT_FD_STEP) matters:
-# at 1e-6 of the radius sum its stencil straddled the foot and the stiffness came out several times
-# too large (Newton then cycled for tens of thousands of iterations on knit samples).
+# edge as itself or as a rotated image. The foot matters: when the solver's Hessian was itself a
+# difference of gradients, a stencil of 1e-6 of the radius sum straddled the foot, the stiffness
+# came out several times too large, and Newton cycled for tens of thousands of iterations on knits.
 @pytest.mark.parametrize("mapped", [False, True])
 @pytest.mark.parametrize("band_position", [5.0, 0.3, -0.9995])
 def test_contact_hessian_matches_differences_of_the_gradient(band_position, mapped):

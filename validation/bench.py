@@ -221,6 +221,12 @@ def bench_fit() -> None:
             for family, quality in fitted.fit.families.items():
                 if quality["samples"]:
                     report(f"{key}_r2_{family}", quality["r2"], "")
+        # The stockinette's samples once more on one worker, its own relaxation reused: the
+        # figures above run every core at once, and a sample then shares the machine's caches and
+        # memory with another (10–15 % slower on 2 cores); this is one core to itself.
+        alone = fit_fabric(fabrics[-1], workers=1, relaxed=fitted.relaxed)
+        report("fit_stockinette_one_worker_mean_sample_seconds",
+               sum(r.seconds for r in alone.samples) / len(alone.samples), "s (one core, nothing else running)")
 
 
 # -- mujoco ---------------------------------------------------------------------------------------

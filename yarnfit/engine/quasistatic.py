@@ -8,8 +8,8 @@ solver here is a damped Newton method on the exact energy of :mod:`yarnfit.engin
 
 - degrees of freedom: free node positions and world rotation vectors of free edge frames
   (``q ← exp(θ) ⊗ q``);
-- Hessian: analytic for stretch–shear elements, central differences of the analytic gradient for
-  bend–twist and contact elements; assembled sparse with the step constraints' rows into a
+- Hessian: analytic for stretch–shear and contact elements (the closest points' motion
+  included), central differences of the analytic gradient for bend–twist elements; assembled sparse with the step constraints' rows into a
   saddle-point system, equilibrated and factorised symmetrically with a fill-reducing ordering
   (:mod:`yarnfit.engine.linear`);
   Levenberg–Marquardt damping ``μ diag(H)`` keeps every step a descent direction where the
@@ -101,12 +101,6 @@ POTENTIAL_ROUNDOFF = 1e-13
 # edge for good: HYLC's stockinette, settled rest state, weft bend at -6.5 /m, cycled between force
 # imbalances of 3e-8 and 2e-7 N (6.6e-5 relative) for 29,000 iterations at damping 1e-12.
 NOISE_DAMPING = 10.0
-# Central-difference step of the contact Hessian, relative to the pair's sum of radii: it moves a
-# constraint's ramp argument λ − k g by 1e-4 of the smoothing band's half-width δ, well inside the
-# foot of the ramp where lightly held loops rest ((λ − k g + δ)/δ ~ 2e-3, force and stiffness going
-# to zero). The rods' 1e-6 moved it by 1e-2 δ, straddled the foot, and Newton cycled there for
-# 30,000 iterations (docs/design.md §5). Round-off ε|x|/h: ~3e-8 of the largest entry.
-CONTACT_FD_STEP = 1e-8
 # A step never moves a node further than the model's reach (one tile of a periodic model, the rest
 # configuration's extent otherwise): a Newton step beyond it means the quadratic model has failed,
 # and the contact search along it would have to map that many tiles (a HYLC satin at r = 1 mm, in a
@@ -146,7 +140,7 @@ class QuasiStaticOptions:
         contact_margin: broad-phase margin in units of the smallest radius.
         max_rotation_step: largest frame rotation per iteration (rad).
         fd_relative_step: central-difference step of the bend–twist Hessian (rad); the contact
-            Hessian's is CONTACT_FD_STEP.
+            Hessian is exact.
     """
 
     force_tolerance: float = 1e-8
@@ -680,7 +674,7 @@ class QuasiStaticSolver:
         if len(c.pairs):
             count = _contact_kernels.contact_hessian_coo(
                 work.position, m.edge_nodes, m.edge_radius, *c.kernel_args(),
-                CONTACT_FD_STEP, rows, cols, vals, count,
+                rows, cols, vals, count,
             )
         n_free = self._free.size
         indptr, indices, data, diagonal = _kernels.assemble_csc(rows, cols, vals, count, self._dof_map, n_free)
