@@ -107,8 +107,10 @@ def test_a_catalogue_on_a_dask_cluster(tmp_path):
 def test_an_interrupted_catalogue_resumes(tmp_path):
     """SIGINT during the samples: exit 130 with one line, no half-written file, no worker left;
     the next run takes what the first finished from the cache and completes."""
+    # Cotton twills: ~0.2 s per sample on one core, so at the first progress line with 5 tasks done
+    # most are still to go (plain weaves had run past half of them once the solver was fast).
     labels = write_labels(tmp_path, "name,fibre,pattern,gsm,counts\n" + "".join(
-        f"plain-{gsm},cotton,plain,{gsm},25x25\n" for gsm in (150, 170, 190, 210)))
+        f"twill-{gsm},cotton,twill-2/1,{gsm},42x22\n" for gsm in (200, 220, 240, 260)))
     out = tmp_path / "out"
     command = [sys.executable, "-m", "yarnfit.cli", "catalogue", str(labels), "-o", str(out), "--samples",
                str(SAMPLES), "--workers", "2"]

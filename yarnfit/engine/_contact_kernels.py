@@ -263,7 +263,8 @@ def gather_pair_maps(pairs, row, edge_end_rotation, edge_offset, r0, t0, r1, t1,
 
 
 @njit(cache=True)
-def flat_pair_maps(pairs, images, edge_nodes, edge_tile, edge_end_rotation, edge_offset, lattice, rotation, translation):
+def flat_pair_maps(pairs, images, edge_nodes, edge_tile, edge_end_rotation, edge_offset, lattice, rotation,
+                   translation):
     """Rigid maps of the nodes ``(a0, a1, b0, b1)`` of each pair of a flat (or non-periodic) model
     into ``rotation (P, 4, 3, 3)`` and ``translation (P, 4, 3)``: a0 stays, a1 is edge a's end in
     its tile, b's nodes are translated by ``image @ lattice`` (b1 one edge tile further)."""

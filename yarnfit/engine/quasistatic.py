@@ -9,9 +9,9 @@ solver here is a damped Newton method on the exact energy of :mod:`yarnfit.engin
 - degrees of freedom: free node positions and world rotation vectors of free edge frames
   (``q ← exp(θ) ⊗ q``);
 - Hessian: analytic for stretch–shear and contact elements (the closest points' motion
-  included), central differences of the analytic gradient for bend–twist elements; assembled sparse with the step constraints' rows into a
-  saddle-point system, equilibrated and factorised symmetrically with a fill-reducing ordering
-  (:mod:`yarnfit.engine.linear`);
+  included), central differences of the analytic gradient for bend–twist elements; assembled
+  sparse with the step constraints' rows into a saddle-point system, equilibrated and factorised
+  symmetrically with a fill-reducing ordering (:mod:`yarnfit.engine.linear`);
   Levenberg–Marquardt damping ``μ diag(H)`` keeps every step a descent direction where the
   Hessian is indefinite or singular (a rod held only by points can spin its frames freely);
 - backtracking (Armijo) line search on the total potential, then a few chord steps with the same
