@@ -593,10 +593,10 @@ def bench_drape_stable_step() -> None:
 
 def bench_swatch() -> None:
     """The explicit yarn-level stretch test's strips at the suite's full size (``yarnfit validate``,
-    node budget included), weft direction, 2 / 5 / 10 % on one core: nodes, and per strain the
-    solve's wall time and Newton iterations. Cotton jersey and cotton twill (the largest strips of
-    the presets; a satin is cut to the same node budget). ``validation/swatch_convergence.py``
-    gives the strips of other sizes."""
+    node budget included), 2 / 5 / 10 % on one core: nodes, and per strain the solve's wall time and
+    Newton iterations. Cotton jersey along the weft, cotton twill along weft and warp (the warp strip,
+    1819 nodes, is the presets' largest; a satin is cut to the node budget).
+    ``validation/swatch_convergence.py`` gives the strips of other sizes."""
     import warnings
 
     from yarnfit.fabric import Fabric
@@ -606,18 +606,19 @@ def bench_swatch() -> None:
     numba.set_num_threads(1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for name in ("cotton-jersey", "cotton-twill"):
+        for name, directions in (("cotton-jersey", ("weft",)), ("cotton-twill", ("weft", "warp"))):
             relaxed = relax(Fabric.preset(name))
             out = stretch_repeat(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), name=name,
-                                 directions=("weft",))
-            curve = out["directions"]["weft"]
-            key = "swatch_" + name.replace("-", "_")
-            report(f"{key}_weft_nodes", curve["nodes"], "nodes")
-            for point in curve["points"][1:]:
-                percent = f"{100 * point['strain']:g}pct"
-                report(f"{key}_weft_{percent}_seconds", point["seconds"], "s (one core)")
-                report(f"{key}_weft_{percent}_iterations", point["iterations"], "iterations")
-                report(f"{key}_weft_{percent}_converged", int(point["converged"]), "bool")
+                                 directions=directions)
+            for direction in directions:
+                curve = out["directions"][direction]
+                key = f"swatch_{name.replace('-', '_')}_{direction}"
+                report(f"{key}_nodes", curve["nodes"], "nodes")
+                for point in curve["points"][1:]:
+                    percent = f"{100 * point['strain']:g}pct"
+                    report(f"{key}_{percent}_seconds", point["seconds"], "s (one core)")
+                    report(f"{key}_{percent}_iterations", point["iterations"], "iterations")
+                    report(f"{key}_{percent}_converged", int(point["converged"]), "bool")
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
