@@ -409,13 +409,11 @@ CCD_CONVERGED = 1e-2
 @njit(cache=True)
 def _moved_distance(a0, a1, b0, b1, move, alpha):
     """Centreline distance of a pair's segments with their points moved by ``alpha · move (4, 3)``."""
-    p = np.empty((4, 3))
-    for k in range(3):
-        p[0, k] = a0[k] + alpha * move[0, k]
-        p[1, k] = a1[k] + alpha * move[1, k]
-        p[2, k] = b0[k] + alpha * move[2, k]
-        p[3, k] = b1[k] + alpha * move[3, k]
-    return segment_closest_points(row3(p, 0), row3(p, 1), row3(p, 2), row3(p, 3))[2]
+    return segment_closest_points(
+        (a0[0] + alpha * move[0, 0], a0[1] + alpha * move[0, 1], a0[2] + alpha * move[0, 2]),
+        (a1[0] + alpha * move[1, 0], a1[1] + alpha * move[1, 1], a1[2] + alpha * move[1, 2]),
+        (b0[0] + alpha * move[2, 0], b0[1] + alpha * move[2, 1], b0[2] + alpha * move[2, 2]),
+        (b1[0] + alpha * move[3, 0], b1[1] + alpha * move[3, 1], b1[2] + alpha * move[3, 2]))[2]
 
 
 @njit(cache=True)
@@ -465,10 +463,11 @@ def tunneling_step_limit(pos, dx, edge_nodes, pairs, pair_rotation, pair_transla
     """
     alpha = 1.0
     move = np.empty((4, 3))
+    mean = np.empty(3)
     for p in range(pairs.shape[0]):
         a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
         nodes = _pair_nodes(edge_nodes, pairs, p)
-        mean = np.zeros(3)
+        mean[:] = 0.0
         for m in range(4):
             d = mat_vec(pair_rotation[p, m], (dx[nodes[m], 0], dx[nodes[m], 1], dx[nodes[m], 2]))
             for k in range(3):
@@ -537,6 +536,17 @@ def _point_segment(p, b0, b1):
 
 
 @njit(cache=True)
+def _out_of_reach(multiplier, first, n_samples, stiffness, lowest_gap, delta):
+    """Every one of a pair's ``n_samples`` constraints (multipliers from ``first``) is off its ramp
+    (``λ − k g ≤ −δ``) already at ``lowest_gap`` (m), the segments' distance less ``ra + rb``, which
+    no sample's gap is below."""
+    largest_multiplier = 0.0
+    for c in range(n_samples):
+        largest_multiplier = max(largest_multiplier, multiplier[first + c])
+    return largest_multiplier - stiffness * lowest_gap <= -delta
+
+
+@njit(cache=True)
 def _pair_sample_terms(a0, a1, b0, b1, samples_a, samples_b, radius_sum, multiplier, first, stiffness, smoothing,
                        out_grad, out_gap, out_force):
     """Augmented-Lagrangian terms of the sampled constraints of one edge pair.
@@ -560,11 +570,8 @@ def _pair_sample_terms(a0, a1, b0, b1, samples_a, samples_b, radius_sum, multipl
     delta = smoothing * stiffness * radius_sum
     energy = 0.0
     n_samples = samples_a + samples_b
-    largest_multiplier = 0.0
-    for c in range(n_samples):
-        largest_multiplier = max(largest_multiplier, multiplier[first + c])
     lowest_gap = segment_closest_points(a0, a1, b0, b1)[2] - radius_sum
-    if largest_multiplier - stiffness * lowest_gap <= -delta:
+    if _out_of_reach(multiplier, first, n_samples, stiffness, lowest_gap, delta):
         for c in range(n_samples):
             out_gap[first + c] = lowest_gap
             out_force[first + c] = 0.0
@@ -741,10 +748,7 @@ def contact_hessian_coo(pos, edge_nodes, edge_radius, edge_samples, pairs, pair_
         rsum = edge_radius[ea] + edge_radius[eb]
         k = stiffness[p]
         delta = smoothing * k * rsum
-        largest_multiplier = 0.0
-        for c in range(sa + sb):
-            largest_multiplier = max(largest_multiplier, multiplier[first + c])
-        if largest_multiplier - k * (segment_closest_points(a0, a1, b0, b1)[2] - rsum) <= -delta:
+        if _out_of_reach(multiplier, first, sa + sb, k, segment_closest_points(a0, a1, b0, b1)[2] - rsum, delta):
             continue  # every constraint off its ramp: no curvature
         for i in range(3):
             points[0, i] = a0[i]

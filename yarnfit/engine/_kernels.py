@@ -689,6 +689,21 @@ def rotate_frames(quat, theta, out):
 
 
 @njit(cache=True)
+def _counting_sort(keys, order, n_keys):
+    """``order`` (indices into ``keys``, values in ``[0, n_keys)``) stably sorted by key."""
+    start = np.zeros(n_keys + 1, dtype=np.int64)
+    for k in order:
+        start[keys[k] + 1] += 1
+    for i in range(n_keys):
+        start[i + 1] += start[i]
+    out = np.empty(order.shape[0], dtype=np.int64)
+    for k in order:
+        out[start[keys[k]]] = k
+        start[keys[k]] += 1
+    return out
+
+
+@njit(cache=True)
 def assemble_csc(rows, cols, vals, count, dof_map, n_free):
     """Sum the first ``count`` COO triplets over full DOFs into a CSC matrix over the free DOFs
     (``dof_map``: full DOF → free index, −1 for a pinned one), in canonical form: row indices
@@ -721,25 +736,7 @@ def assemble_csc(rows, cols, vals, count, dof_map, n_free):
         v[u] = 0.0
         u += 1
     # Stable counting sort by row, then by column: (column, row) order, ties in written order.
-    start = np.zeros(n_free + 1, dtype=np.int64)
-    for k in range(total):
-        start[r[k] + 1] += 1
-    for i in range(n_free):
-        start[i + 1] += start[i]
-    by_row = np.empty(total, dtype=np.int64)
-    for k in range(total):
-        by_row[start[r[k]]] = k
-        start[r[k]] += 1
-    start[:] = 0
-    for k in range(total):
-        start[c[k] + 1] += 1
-    for j in range(n_free):
-        start[j + 1] += start[j]
-    order = np.empty(total, dtype=np.int64)
-    for t in range(total):
-        k = by_row[t]
-        order[start[c[k]]] = k
-        start[c[k]] += 1
+    order = _counting_sort(c, _counting_sort(r, np.arange(total), n_free), n_free)
     indptr = np.zeros(n_free + 1, dtype=np.int64)
     indices = np.empty(total, dtype=np.int64)
     data = np.empty(total)
