@@ -1,11 +1,13 @@
-"""The yarnfit.shell plugin's strain-stiffening membrane (config keys ``s00p2`` … ``s22n3``), run
-inside MuJoCo: forces against an independent numpy implementation of the energy
+"""The yarnfit.shell plugin's strain-stiffening membrane (config keys ``s00p2`` … ``s22n3``, ``c01``,
+``c10``) and compression terms (``s00c s11c s22c``), run inside MuJoCo: forces, with constant-strain
+triangles and node-smoothed strains, against an independent numpy implementation of the energy
 
-    W_m = h [½ εᵀ S ε + Σ_d φ_d(ε_d)],   φ_d(x) = k2 x³/3 + k3 x⁴/4,
+    W_m = h [½ εᵀ S ε + Σ_d φ_d(y_d) + Σ_d ½ q_d min(ε_d, 0)²],   y = D ε,   φ_d(x) = k2 x³/3 + k3 x⁴/4,
 
-((k2, k3) = (s<dd>p2, s<dd>p3) for x ≥ 0, (s<dd>n2, s<dd>n3) for x < 0), its damping (the tangent's
-Rayleigh form), rigid motions, uniform patches against the closed-form stress
-``σ_d = (S ε)_d + k2 ε_d² + k3 ε_d³``, bad keys, and all keys 0 giving the StVK plugin as it was."""
+((k2, k3) = (s<dd>p2, s<dd>p3) for x ≥ 0, (s<dd>n2, s<dd>n3) for x < 0; q_d = s<dd>c), its damping
+(the tangent's Rayleigh form), rigid motions, uniform patches against the closed-form stress
+``σ = h [S ε + Dᵀ φ'(y) + q min(ε, 0)]``, bad keys, and all keys 0 giving the StVK plugin as it
+was."""
 
 import json
 import math
@@ -16,11 +18,13 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq, least_squares
 
-from test_plugin import MATERIAL, ReferenceShell, central_gradient, forces, scene, vertex_forces
+from test_plugin import MATERIAL, ReferenceShell, central_gradient, compile_sheet, forces, scene, vertex_forces
 
 DIRECTIONS = ("s00", "s11", "s22")
 SIDES = ("p2", "p3", "n2", "n3")
-KEYS = [direction + side for direction in DIRECTIONS for side in SIDES]
+# The compression keys q_d: the tangent along ε_d gains q_d where ε_d < 0.
+COMPRESSION_KEYS = [direction + "c" for direction in DIRECTIONS]
+KEYS = [direction + side for direction in DIRECTIONS for side in SIDES] + COMPRESSION_KEYS
 # Stiffening on both sides of all three directions (Pa), against MATERIAL's s00 = 3e6, s11 = 1.5e6,
 # s22 = 2e5: at 10 % strain the added stress is 0.7–2.3 times the linear one. Softening x² terms
 # (s00n2 > 0, s11p2 < 0, s22n2 > 0) with x³ terms that turn them round; least tangents
@@ -33,11 +37,28 @@ STIFFENING = {
     "s22p2": 2.0e6, "s22p3": 5.0e7, "s22n2": 1.0e6, "s22n3": 6.0e7,
     "c01": 0.2, "c10": 0.4,
 }
+# Compression terms of both signs (Pa): the weft half as stiff in compression (q0 = −s00/2), the
+# warp more than twice as stiff (q1 = 1.33 s11), negative shear at a quarter of s22 (q2 = −0.75
+# s22). With STIFFENING's least tangents the least tangent S + Dᵀ diag(m) D + diag(min(q, 0)) has
+# entries 00 = 1.3e6, 11 = 1.5e6, 22 = 4.4e4 Pa and a determinant of its normal block of 1.6e12 Pa²:
+# convex.
+COMPRESSION = {"s00c": -1.5e6, "s11c": 2.0e6, "s22c": -1.5e5}
+NONLINEAR = {**STIFFENING, **COMPRESSION}
 # Central differences of a smooth energy at 1e-7 m on 0.1 m cells (test_plugin's FD_STEP): truncation
 # ~1e-10 relative (φ is C² at 0 and polynomial on each side, so a step across ε_d = 0 adds only a
 # jump in the third derivative times the step²), round-off ~ε W/(δ |∇W|) ~ 1e-9; 1e-6 is the
 # issue's bound.
 GRADIENT_RTOL = 1e-6
+# The compression terms are only C¹ at ε_d = 0: a difference step straddling it errs by up to
+# ~q δε/4, δε ~ 1e-6 the strain a 1e-7 m step makes on 0.1 m cells, i.e. ~1e-5 of a 6 % strain's
+# stress. So no strain (of a triangle or smoothing domain) may lie within this of 0, where the step
+# would straddle it; 1e-4 is a hundred steps.
+STRAIN_MARGIN = 1e-4
+# The compression terms' share of the forces on the distorted flex, or of a uniform patch's
+# compressed stress component, must be at least this: 1e4 times the gradient tolerance (and far
+# more than the patches'), so that a missing or wrong term fails (measured 1.3–24 % on the flex,
+# 3–300 % on the patches).
+COMPRESSION_SHARE = 0.01
 # Strain rates by central differences along the velocity: the strains are quadratic in the
 # positions, so the difference is exact up to round-off ~ε |ε|/step ~ 1e-10 relative.
 RATE_STEP = 1e-6
@@ -81,16 +102,23 @@ def coupling_map(coefficients):
     return np.array([[1.0, c01, 0.0], [c10, 1.0, 0.0], [0.0, 0.0, 1.0]])
 
 
-def stiffening_energy(eps, coefficients):
-    """Σ_d φ_d(y_d) per triangle (Pa, per unit thickness) for strains ``eps (T, 3)``, y = D ε."""
-    y = np.asarray(eps, float) @ coupling_map(coefficients).T
+def compression(coefficients):
+    """(q0, q1, q2) (Pa) of the keys ``s00c s11c s22c``."""
+    return np.array([coefficients.get(key, 0.0) for key in COMPRESSION_KEYS])
+
+
+def nonlinear_energy(eps, coefficients):
+    """Σ_d φ_d(y_d) + Σ_d ½ q_d min(ε_d, 0)² per triangle or domain (Pa, per unit thickness) for
+    strains ``eps (T, 3)``, y = D ε."""
+    eps = np.asarray(eps, float)
+    y = eps @ coupling_map(coefficients).T
     total = np.zeros(len(y))
     for d, direction in enumerate(DIRECTIONS):
         p2, p3, n2, n3 = (coefficients.get(direction + side, 0.0) for side in SIDES)
         x = y[:, d]
         k2, k3 = np.where(x >= 0, p2, n2), np.where(x >= 0, p3, n3)
         total += k2 * x**3 / 3 + k3 * x**4 / 4
-    return total
+    return total + 0.5 * np.minimum(eps, 0) ** 2 @ compression(coefficients)
 
 
 def stiffening_stress(eps, coefficients, order=1):
@@ -106,31 +134,60 @@ def stiffening_stress(eps, coefficients, order=1):
     return out
 
 
+def compression_stress(eps, coefficients, order=1):
+    """q_d min(ε_d, 0) (``order=1``, the stress) or q_d [ε_d < 0] (``order=2``, the tangent) for
+    strains ``eps (..., 3)`` (Pa), on ε itself."""
+    eps = np.asarray(eps, float)
+    return compression(coefficients) * (np.minimum(eps, 0) if order == 1 else eps < 0)
+
+
 class StiffeningShell(ReferenceShell):
     """test_plugin's independent reference (StVK membrane and the discrete bending) plus the
-    stiffening terms A0 h Σ_d φ_d(ε_d) per triangle."""
+    nonlinear terms A h [Σ_d φ_d(y_d) + Σ_d ½ q_d min(ε_d, 0)²] per triangle, or with ``domains``
+    (membrane="node", each triangle corner's smoothing domain (T, 3)) per domain at its smoothed
+    strain ε_d = Σ over its corners of (A_t/3)/A_d ε_t, A_d the sum of those thirds."""
 
-    def __init__(self, model, material, coefficients, angle=0.0):
-        super().__init__(model, material, angle)
+    def __init__(self, model, material, coefficients, angle=0.0, domains=None):
+        super().__init__(model, material, angle, domains=domains)
         self.coefficients = coefficients
         self.h = material["thickness"]
 
-    def energy(self, x):
+    def membrane_strains(self, x):
+        """The strains the nonlinear terms see, (N, 3), and their reference areas (N,): per
+        triangle, or per smoothing domain."""
         eps, _ = self.strains(x)
-        return super().energy(x) + self.h * float(self.area @ stiffening_energy(eps, self.coefficients))
+        if self.domains is None:
+            return eps, self.area
+        share = np.zeros(self.domains.max() + 1)
+        np.add.at(share, self.domains.ravel(), np.repeat(self.area / 3, 3))
+        smoothed = np.zeros((len(share), 3))
+        for k in range(3):
+            np.add.at(smoothed, self.domains[:, k], (self.area / 3 / share[self.domains[:, k]])[:, None] * eps)
+        return smoothed, share
+
+    def energy(self, x):
+        eps, area = self.membrane_strains(x)
+        return super().energy(x) + self.h * float(area @ nonlinear_energy(eps, self.coefficients))
 
 
 def closed_form_stress(eps, coefficients, material=MATERIAL):
-    """σ = h (S ε + φ'(ε)) (N/m, Voigt) for strains ``eps (3,)``."""
+    """σ = h (S ε + Dᵀ φ'(D ε) + q min(ε, 0)) (N/m, Voigt) for strains ``eps (3,)``."""
     S = np.array([[material["s00"], material["s01"], 0], [material["s01"], material["s11"], 0],
                   [0, 0, material["s22"]]])
     D = coupling_map(coefficients)
-    return material["thickness"] * (S @ eps + D.T @ stiffening_stress(np.asarray(eps, float), coefficients))
+    eps = np.asarray(eps, float)
+    return material["thickness"] * (S @ eps + D.T @ stiffening_stress(eps, coefficients)
+                                    + compression_stress(eps, coefficients))
 
 
-def model_with(coefficients=STIFFENING, **options):
+def model_with(coefficients=STIFFENING, membrane="triangle", **options):
     extra = {**coefficients, **options.pop("extra", {})}
-    return mujoco.MjModel.from_xml_string(scene(extra=extra, **options))
+    if membrane == "triangle":
+        return mujoco.MjModel.from_xml_string(scene(extra=extra, **options))
+    # scene() writes every value with repr, which quotes a word: the key goes in through the spec.
+    spec = mujoco.MjSpec.from_string(scene(extra=extra, **options))
+    spec.plugins[0].config = {**spec.plugins[0].config, "membrane": membrane}
+    return compile_sheet(spec)
 
 
 def vertex_dofs(model):
@@ -173,25 +230,79 @@ def test_forces_are_minus_the_gradient_of_the_energy(angle):
     assert np.abs(qfrc - linear).max() > STIFFENING_SHARE * np.abs(qfrc).max()
 
 
-def test_damping_is_the_tangent_times_the_strain_rate():
-    """With damping β the forces gain −β Jεᵀ A h (S + diag φ''(ε)) Jε v − β Jκᵀ A h³ B Jκ v.
-    Reference: the strain rates J v by central differences of the reference strains, then
-    Jᵀ(stress) as the gradient of the work of that fixed stress."""
+# Compression keys on the distorted flex: (keys, angle). Each key alone, softer and stiffer in
+# compression than in tension, then all three with the stiffening and its coupling, on the bias.
+COMPRESSED = {
+    "weft softer": ({"s00c": -1.5e6}, 0.0),
+    "warp stiffer": ({"s11c": 2.0e6}, 0.0),
+    "negative shear softer": ({"s22c": -1.5e5}, 0.0),
+    "negative shear stiffer": ({"s22c": 3.0e5}, 0.0),
+    "all, with stiffening, bias": (NONLINEAR, 0.4),
+}
+
+
+@pytest.mark.parametrize("case", sorted(COMPRESSED))
+def test_compression_forces_are_minus_the_gradient_of_the_energy(case):
+    """The compression terms h ½ q_d min(ε_d, 0)² act where ε_d < 0 and nowhere else: on a flex
+    with strains of both signs in every direction the forces are minus the reference energy's
+    gradient."""
+    coefficients, angle = COMPRESSED[case]
+    model = model_with(coefficients, angle=angle)
+    qpos = distorted(model)
+    qfrc, x = forces(model, qpos)
+    reference = StiffeningShell(model, MATERIAL, coefficients, angle)
+    eps, _ = reference.strains(x)
+    # Some triangles compressed and others stretched along every direction, none at the kink.
+    assert np.all(eps.max(axis=0) > LARGE_STRAIN) and np.all(eps.min(axis=0) < -LARGE_STRAIN)
+    assert np.abs(eps).min() > STRAIN_MARGIN
+    gradient = central_gradient(reference.energy, x)
+    np.testing.assert_allclose(vertex_forces(model, qfrc), -gradient, rtol=0,
+                               atol=GRADIENT_RTOL * np.abs(gradient).max())
+    without = {k: v for k, v in coefficients.items() if k not in COMPRESSION_KEYS}
+    other, _ = forces(model_with(without, angle=angle), qpos)
+    assert np.abs(qfrc - other).max() > COMPRESSION_SHARE * np.abs(qfrc).max()
+
+
+def test_node_membrane_carries_the_nonlinear_terms_on_the_smoothed_strains():
+    """membrane="node" (one domain per vertex on the one-panel grid): the stiffening and
+    compression terms act on each domain's smoothed strain, and the forces are minus the gradient
+    of the reference energy over those domains."""
+    model = model_with(NONLINEAR, membrane="node", angle=0.4)
+    qpos = distorted(model)
+    qfrc, x = forces(model, qpos)
+    reference = StiffeningShell(model, MATERIAL, NONLINEAR, 0.4, domains=model.flex_elem.reshape(-1, 3))
+    smoothed, _ = reference.membrane_strains(x)
+    assert np.all(smoothed.max(axis=0) > 0) and np.all(smoothed.min(axis=0) < 0)
+    assert np.abs(smoothed).min() > STRAIN_MARGIN
+    gradient = central_gradient(reference.energy, x)
+    np.testing.assert_allclose(vertex_forces(model, qfrc), -gradient, rtol=0,
+                               atol=GRADIENT_RTOL * np.abs(gradient).max())
+    other, _ = forces(model_with(STIFFENING, membrane="node", angle=0.4), qpos)
+    assert np.abs(qfrc - other).max() > COMPRESSION_SHARE * np.abs(qfrc).max()
+
+
+@pytest.mark.parametrize("coefficients", [STIFFENING, NONLINEAR], ids=["stiffening", "with compression"])
+def test_damping_is_the_tangent_times_the_strain_rate(coefficients):
+    """With damping β the forces gain −β Jεᵀ A h (S + Dᵀ diag φ''(y) D + diag q_d [ε_d < 0]) Jε v
+    − β Jκᵀ A h³ B Jκ v. Reference: the strain rates J v by central differences of the reference
+    strains, then Jᵀ(stress) as the gradient of the work of that fixed stress."""
     beta = 0.01  # s
-    model = model_with(extra={"damping": beta})
+    model = model_with(coefficients, extra={"damping": beta})
     rng = np.random.default_rng(11)
     qpos = distorted(model)
     qvel = rng.standard_normal(model.nv)
     damped, x = forces(model, qpos, qvel)
     elastic, _ = forces(model, qpos)
-    reference = StiffeningShell(model, MATERIAL, STIFFENING)
+    reference = StiffeningShell(model, MATERIAL, coefficients)
     v = vertex_forces(model, qvel)
     plus, minus = reference.strains(x + RATE_STEP * v), reference.strains(x - RATE_STEP * v)
     eps_rate, kappa_rate = ((p - m) / (2 * RATE_STEP) for p, m in zip(plus, minus))
     eps, _ = reference.strains(x)
-    tangent = reference.h * stiffening_stress(eps, STIFFENING, order=2)  # (T, 3) on y, N/m
-    D = coupling_map(STIFFENING)
-    stress = reference.area[:, None] * (eps_rate @ reference.S + (tangent * (eps_rate @ D.T)) @ D)
+    tangent = reference.h * stiffening_stress(eps, coefficients, order=2)  # (T, 3) on y, N/m
+    compressed = reference.h * compression_stress(eps, coefficients, order=2)  # (T, 3) on ε, N/m
+    D = coupling_map(coefficients)
+    stress = reference.area[:, None] * (eps_rate @ reference.S + (tangent * (eps_rate @ D.T)) @ D
+                                        + compressed * eps_rate)
     moment = reference.area[:, None] * (kappa_rate @ reference.B)
 
     def work(y):
@@ -220,7 +331,7 @@ def rotation():
 
 
 def test_rigid_motions_of_the_rest_mesh_carry_no_force():
-    model = model_with(extra={"damping": 0.01})
+    model = model_with(NONLINEAR, extra={"damping": 0.01})
     _, rest = forces(model, model.qpos0)
     moved = rest @ rotation().T + SHIFT
     qvel = np.zeros(model.nv)  # moving rigidly too
@@ -232,7 +343,7 @@ def test_rigid_motions_of_the_rest_mesh_carry_no_force():
 def test_forces_turn_with_a_rigid_motion_of_a_strained_mesh():
     """Frame indifference at large strain: the strained flex turned and shifted has its forces
     turned, and a rigid velocity field on it adds no damping force."""
-    model = model_with(extra={"damping": 0.01})
+    model = model_with(NONLINEAR, extra={"damping": 0.01})
     dofs = vertex_dofs(model)
     qfrc, x = forces(model, distorted(model))
     R = rotation()
@@ -259,14 +370,12 @@ PATCHES = {
 }
 
 
-@pytest.mark.parametrize("case", sorted(PATCHES))
-def test_uniform_patch_matches_the_closed_form_stress(case):
-    """Linear triangles hold a uniform deformation exactly. Under x = F X the force on a vertex of
-    the right edge (x = max, not a corner) is −Δy P e_x, on one of the top edge −Δx P e_y, zero
-    inside, with P = F Σ the first Piola stress: Σ = F⁻¹ [P e_x, P e_y] is compared with the
-    closed form σ = h (S ε + φ'(ε))."""
-    F = np.array(PATCHES[case])
-    model = model_with()
+def patch_stress(model, F):
+    """The stress (Voigt, N/m) and strain ε (3,) of the flex under the uniform in-plane deformation
+    x = F X. Linear triangles hold it exactly: the force on a vertex of the right edge (x = max, not
+    a corner) is −Δy P e_x, on one of the top edge −Δx P e_y, zero inside, with P = F Σ the first
+    Piola stress, so Σ = F⁻¹ [P e_x, P e_y]. Checks on the way that Σ is symmetric, every boundary
+    vertex alike, and no force inside or out of plane."""
     _, rest = forces(model, model.qpos0)
     x = rest.copy()
     x[:, :2] = rest[:, :2] @ F.T
@@ -282,10 +391,7 @@ def test_uniform_patch_matches_the_closed_form_stress(case):
     measured = np.array([Sigma[0, 0], Sigma[1, 1], Sigma[0, 1]])
     E = 0.5 * (F.T @ F - np.eye(2))
     eps = np.array([E[0, 0], E[1, 1], 2 * E[0, 1]])
-    expected = closed_form_stress(eps, STIFFENING)
-    scale = np.abs(expected).max()
-    np.testing.assert_allclose(measured, expected, rtol=0, atol=PATCH_RTOL * scale)
-    assert abs(Sigma[1, 0] - Sigma[0, 1]) < PATCH_RTOL * scale  # a symmetric Σ, as it must be
+    assert abs(Sigma[1, 0] - Sigma[0, 1]) < PATCH_RTOL * np.abs(measured).max()  # a symmetric Σ, as it must be
     # Every boundary vertex alike, nothing inside, no force out of plane.
     force_scale = np.abs(f).max()
     for edge in (right_edge, top_edge):
@@ -293,10 +399,48 @@ def test_uniform_patch_matches_the_closed_form_stress(case):
                                    atol=INTERIOR_RTOL * force_scale)
     assert np.abs(f[inside]).max() < INTERIOR_RTOL * force_scale
     assert np.abs(f[:, 2]).max() < INTERIOR_RTOL * force_scale
+    return measured, eps
+
+
+@pytest.mark.parametrize("case", sorted(PATCHES))
+def test_uniform_patch_matches_the_closed_form_stress(case):
+    """A uniform deformation's stress (:func:`patch_stress`) against the closed form
+    σ = h (S ε + Dᵀ φ'(D ε))."""
+    measured, eps = patch_stress(model_with(), np.array(PATCHES[case]))
+    expected = closed_form_stress(eps, STIFFENING)
+    np.testing.assert_allclose(measured, expected, rtol=0, atol=PATCH_RTOL * np.abs(expected).max())
     # The stiffening terms carry a large part of the stress in the loaded direction.
     linear = closed_form_stress(eps, {})
     loaded = np.argmax(np.abs(expected))
     assert abs(expected[loaded] - linear[loaded]) > STIFFENING_SHARE * abs(expected[loaded])
+
+
+# Uniform deformations with one Voigt strain negative: (F, that direction). Weft compressed alone
+# (ε = (−0.095, 0, 0)), warp compressed with the weft stretched (ε = (0.105, −0.095, 0)), shear
+# reversed (ε = (0, 0.045, −0.3)).
+COMPRESSED_PATCHES = {
+    "weft compressed": ([[0.9, 0.0], [0.0, 1.0]], 0),
+    "warp compressed, weft stretched": ([[1.1, 0.0], [0.0, 0.9]], 1),
+    "shear reversed": ([[1.0, -0.3], [0.0, 1.0]], 2),
+}
+
+
+@pytest.mark.parametrize("coefficients", [COMPRESSION, NONLINEAR], ids=["compression", "with stiffening"])
+@pytest.mark.parametrize("case", sorted(COMPRESSED_PATCHES))
+def test_compressed_patch_gains_q_times_the_compressive_strain(case, coefficients):
+    """In a uniform state the compression terms add h q_d ε_d to the stress component whose strain
+    is negative, and nothing to the others: with the compression keys alone the weft-compressed
+    patch carries σ0 = h (s00 ε0 + s01 ε1 + q0 ε0), σ1 = h (s01 ε0 + s11 ε1)."""
+    F, direction = COMPRESSED_PATCHES[case]
+    measured, eps = patch_stress(model_with(coefficients), np.array(F))
+    assert eps[direction] < 0 and np.all(np.delete(eps, direction) >= 0)
+    h, q = MATERIAL["thickness"], compression(coefficients)
+    without = {k: v for k, v in coefficients.items() if k not in COMPRESSION_KEYS}
+    added = np.zeros(3)
+    added[direction] = h * q[direction] * eps[direction]
+    expected = closed_form_stress(eps, without) + added
+    np.testing.assert_allclose(measured, expected, rtol=0, atol=PATCH_RTOL * np.abs(expected).max())
+    assert abs(added[direction]) > COMPRESSION_SHARE * abs(expected[direction])
 
 
 def uniaxial_prediction(direction, strain):
@@ -384,6 +528,22 @@ BAD = {
                                     r"non-convex.*c10 = 2.*'s11n2' = 1\.3e\+07.*00 entry = -2\.2e\+06"),
     "not convex, shear": ({"s22p2": -1.0e7, "s22p3": 1.0e8}, r"non-convex.*'s22p2' = -1e\+07 and 's22p3' = 1e\+08 "
                           r"give m2 = -333333.*22 entry = -133333"),
+    "compression not finite": ({"s11c": float("nan")}, "config key 's11c' must be a finite number"),
+    # The least tangent gains diag(min(q, 0)): s00 + q0 = −5e5.
+    "not convex, weft compression": ({"s00c": -3.5e6}, r"non-convex.*'s00c' = -3\.5e\+06; then its 00 entry = -500000"),
+    # s11 + q1 = 1e5 > 0 alone, but s00 (s11 + q1) = 3e11 < s01² = 3.6e11.
+    "not convex, coupled compression": ({"s11c": -1.4e6}, r"non-convex.*'s11c' = -1\.4e\+06.*"
+                                        r"determinant of the normal block = -6e\+10"),
+    "not convex, negative shear": ({"s22c": -2.5e5}, r"non-convex.*'s22c' = -250000; .*22 entry = -50000"),
+    # Neither alone (s22 + m2 = 1.7e5, s22 + q2 = 2e4) but both: both named.
+    "not convex, softening and compression": ({"s22n2": 3.0e6, "s22n3": 1.0e8, "s22c": -1.8e5},
+                                              r"non-convex.*'s22n2' = 3e\+06 and 's22n3' = 1e\+08 give m2 = -30000; "
+                                              r"'s22c' = -180000.*22 entry = -10000"),
+    # With STIFFENING and its coupling: 00 entry s00 + m0 + c10² m1 + q0 = 3e6 − 1.67e5 − 4.8e3 − 2.9e6.
+    "not convex, compression with stiffening": ({**STIFFENING, "s00c": -2.9e6},
+                                                r"non-convex.*c01 = 0\.2, c10 = 0\.4; 's00n2' = 1e\+07 and "
+                                                r"'s00n3' = 2e\+08 give m0 = -166667; 's00c' = -2\.9e\+06.*"
+                                                r"00 entry = -71466\.7"),
 }
 
 
@@ -396,16 +556,19 @@ def test_bad_stiffening_keys_fail_compilation_naming_the_key(case):
 
 def test_softening_within_convexity_compiles():
     """The bound is S + diag(m) positive definite, not every k2 ≥ 0: a softening x² term held by
-    its x³ term compiles (m1 = −(5e6)²/(3 · 1e7) = −8.3e5 against s11 = 1.5e6)."""
+    its x³ term compiles (m1 = −(5e6)²/(3 · 1e7) = −8.3e5 against s11 = 1.5e6), and so does a
+    negative compression key within it (s00 + q0 = 5e5, (s00 + q0) s11 = 7.5e11 > s01² = 3.6e11)."""
     assert model_with({"s11p2": -5.0e6, "s11p3": 1.0e7}).nplugin == 1
+    assert model_with({"s00c": -2.5e6}).nplugin == 1
 
 
 # -- all keys 0 ------------------------------------------------------------------------------------
 
 
 def test_all_keys_zero_is_the_stvk_plugin_as_it_was():
-    """Without stiffening the membrane is the StVK one: forces (with damping, on the bias) equal
-    those the plugin gave before the keys existed, and keys given as 0 equal keys left out."""
+    """Without stiffening or compression the membrane is the StVK one: forces (with damping, on the
+    bias) equal those the plugin gave before the keys existed, and keys given as 0 (the compression
+    keys too) equal keys left out."""
     record = json.loads(STVK_FORCES.read_text())
     qpos, qvel = np.array(record["qpos"]), np.array(record["qvel"])
     options = {"angle": record["angle"], "extra": {"damping": record["damping"]}}
@@ -424,12 +587,12 @@ def test_the_plugin_law_is_yarnfits_shell_law():
     from yarnfit.shell import NonlinearMembrane, ShellMaterial
 
     shell = ShellMaterial(MATERIAL["thickness"], **{k: MATERIAL[k] for k in ("s00", "s01", "s11", "s22")},
-                          b00=1.0, b01=0.0, b11=1.0, b22=1.0, nonlinear=NonlinearMembrane.from_keys(STIFFENING))
+                          b00=1.0, b01=0.0, b11=1.0, b22=1.0, nonlinear=NonlinearMembrane.from_keys(NONLINEAR))
     rng = np.random.default_rng(5)
     for eps in rng.uniform(-0.15, 0.15, size=(20, 3)):
         I = np.array([[1 + 2 * eps[0], eps[2]], [eps[2], 1 + 2 * eps[1]]])
         gradient, _ = shell.energy_gradient(I, np.zeros((2, 2)))
         # dW/dI = (h/2) [[σ0, σ2], [σ2, σ1]] with σ the stress per thickness.
         stress = np.array([gradient[0, 0], gradient[1, 1], gradient[0, 1]]) * 2.0
-        np.testing.assert_allclose(stress, closed_form_stress(eps, STIFFENING), rtol=1e-12,
+        np.testing.assert_allclose(stress, closed_form_stress(eps, NONLINEAR), rtol=1e-12,
                                    atol=1e-12 * np.abs(stress).max())

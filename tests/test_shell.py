@@ -403,14 +403,58 @@ STIFF = dataclasses.replace(MATERIAL, nonlinear=STIFFENING)
 I_STRAINED = (np.array([[1.25, 0.18], [0.18, 0.9]]), np.array([[0.85, -0.15], [-0.15, 1.2]]))
 
 
-def test_stiffening_energy_gradient_matches_central_differences():
+# The compression side on every direction, within convexity: weft compression softer than its
+# tension, warp compression stiffer, negative shear softer (a twill's measured pattern, in kind).
+COMPRESSED = dataclasses.replace(MATERIAL, nonlinear=dataclasses.replace(
+    STIFFENING, compression=(-0.3 * MATERIAL.s00, 0.8 * MATERIAL.s11, -0.5 * MATERIAL.s22)))
+
+
+@pytest.mark.parametrize("material", [STIFF, COMPRESSED], ids=["stiffening", "compression"])
+def test_stiffening_energy_gradient_matches_central_differences(material):
+    # The compression terms are C¹ with a jump in W'' at ε_d = 0; the points keep every strain
+    # component ≥ 4 % from it, beyond the central difference's reach (δ ~ 1e-6), so the round-off
+    # bound holds as for the smooth terms.
     for I in I_STRAINED:
-        gI, _ = STIFF.energy_gradient(I, np.zeros((2, 2)))
+        gI, _ = material.energy_gradient(I, np.zeros((2, 2)))
         scale = np.max(np.abs(gI))
         for i in range(2):
             for j in range(2):
-                fd = _central_difference(lambda A: STIFF.energy_density(A, np.zeros((2, 2))), I, i, j)
+                fd = _central_difference(lambda A: material.energy_density(A, np.zeros((2, 2))), I, i, j)
                 assert abs(fd - gI[i, j]) <= FD_REL * scale, (i, j, fd, gI[i, j])
+
+
+def test_compression_terms_change_each_tangent_on_its_negative_side_only():
+    terms, h = COMPRESSED.nonlinear, MATERIAL.thickness
+    assert COMPRESSED.energy_density(np.eye(2), np.zeros((2, 2))) == 0.0
+    # At 1e-6 strain the stiffening terms are ~1e-6 of the quadratic: each side's W = ½ h (S_dd + q_d [ε_d < 0]) ε².
+    for d, sign in ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0), (2, 1.0), (2, -1.0)):
+        eps = np.zeros(3)
+        eps[d] = sign * 1e-6
+        tangent = MATERIAL.S[d, d] + (terms.compression[d] if sign < 0 else 0.0)
+        I = np.eye(2) + 2.0 * np.array([[eps[0], eps[2] / 2], [eps[2] / 2, eps[1]]])
+        assert COMPRESSED.energy_density(I, np.zeros((2, 2))) == pytest.approx(0.5 * h * tangent * 1e-12, rel=1e-4)
+    # The Hessian is the stress's derivative (central differences of the stress, exact for the
+    # compression terms away from zero; the quartic's truncation is ~δ² relative).
+    rng = np.random.default_rng(3)
+    for eps in rng.uniform(-0.15, 0.15, (20, 3)):
+        step = 1e-7
+        fd = np.stack([(terms.stress(eps + step * e) - terms.stress(eps - step * e)) / (2 * step) for e in np.eye(3)], 1)
+        np.testing.assert_allclose(terms.hessian(eps), fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
+    # The least tangent takes the softer compression sides; the largest the stiffer one.
+    least = terms.least_tangent(MATERIAL.s00, MATERIAL.s01, MATERIAL.s11, MATERIAL.s22)
+    smooth = STIFFENING.least_tangent(MATERIAL.s00, MATERIAL.s01, MATERIAL.s11, MATERIAL.s22)
+    np.testing.assert_allclose(least - smooth, np.diag([-0.3 * MATERIAL.s00, 0.0, -0.5 * MATERIAL.s22]))
+    largest = terms.largest_tangent(MATERIAL.s00, MATERIAL.s01, MATERIAL.s11, MATERIAL.s22, 0.1)
+    np.testing.assert_allclose(largest - STIFFENING.largest_tangent(MATERIAL.s00, MATERIAL.s01, MATERIAL.s11,
+                                                                    MATERIAL.s22, 0.1),
+                               np.diag([0.0, 0.8 * MATERIAL.s11, 0.0]))
+    COMPRESSED.check_positive_definite()
+    # Softer than the tangent allows: non-convex, refused.
+    soft = dataclasses.replace(MATERIAL, nonlinear=NonlinearMembrane.from_keys({"s22c": -1.5 * MATERIAL.s22}))
+    with pytest.raises(ValueError, match="non-convex"):
+        soft.check_positive_definite()
+    with pytest.raises(ValueError, match="s11c"):
+        NonlinearMembrane.from_keys({"s11c": float("inf")})
 
 
 def test_stiffening_terms_leave_the_small_strain_tangent_and_the_rest_state_alone():
@@ -463,7 +507,15 @@ def test_a_stiffening_material_reads_back_and_old_files_still_read():
     assert data["nonlinear"]["model"] == "green-polynomial"
     assert set(data["nonlinear"]["stress_terms_pa"]) == set(NONLINEAR_KEYS)
     assert ShellMaterial.from_dict(json.loads(json.dumps(data))) == STIFF
+    assert ShellMaterial.from_dict(json.loads(json.dumps(COMPRESSED.to_dict()))) == COMPRESSED
     assert ShellMaterial.from_dict(MATERIAL.to_dict()).nonlinear is None
+    # A file written before the compression side existed has none.
+    old = {**data, "nonlinear": {k: v for k, v in data["nonlinear"].items() if k != "compression_pa"}}
+    assert ShellMaterial.from_dict(old).nonlinear.compression == (0.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match="nonlinear.compression_pa.s11c must be a number"):
+        bad = COMPRESSED.to_dict()
+        bad["nonlinear"]["compression_pa"]["s11c"] = "stiff"
+        ShellMaterial.from_dict(bad)
     with pytest.raises(ValueError, match="nonlinear.model must be 'green-polynomial'"):
         ShellMaterial.from_dict({**data, "nonlinear": {**data["nonlinear"], "model": "ogden"}})
 

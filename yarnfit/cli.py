@@ -89,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("preset", nargs="?", help="a built-in fabric (see `yarnfit materials`)")
     add_fabric_arguments(fit)
     fit.add_argument("--samples", type=int, default=None, metavar="N",
-                     help="about how many deformation samples (at least 16; default 55)")
+                     help="about how many deformation samples (at least 16; default 57)")
     fit.add_argument("--model", choices=("full", "paper"), default="full",
                      help="full: fit b01 too (default); paper: b01 = 0, the paper's 7 parameters")
     fit.add_argument("--strict", action="store_true",
@@ -171,7 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
     catalogue.add_argument("labels", metavar="LABELS.csv", help="the labels table")
     catalogue.add_argument("-o", "--output", required=True, metavar="DIR", help="where the results go")
     catalogue.add_argument("--samples", type=int, default=None, metavar="N",
-                           help="about how many deformation samples per fabric (at least 16; default 55)")
+                           help="about how many deformation samples per fabric (at least 16; default 57)")
     catalogue.add_argument("--model", choices=("full", "paper"), default="full", help="as for `yarnfit fit`")
     catalogue.add_argument("--validate", action="store_true",
                            help="also run the validation scenes (quick: stretch, sphere, cusick) on each fabric")
@@ -606,8 +606,10 @@ def fit_summary(fitted, output, recording_path) -> str:
         lines.append(f"  stiffening      {_stiffening_summary(fit)}")
     if fit.reference_energy or any(fit.residual_stress.values()):
         r = fit.residual_stress
-        lines.append(f"  residual stress {r['n0']:.3g} / {r['n1']:.3g} N/m weft / warp, moments {r['m0']:.3g} / "
-                     f"{r['m1']:.3g} N; rest energy {fit.reference_energy:.3g} J/m² (fitted, left out of the shell)")
+        stress = (f"residual stress {r['n0']:.3g} / {r['n1']:.3g} N/m weft / warp (fitted), "
+                  if any(r[n] for n in ("n0", "n1", "n2")) else "")
+        lines.append(f"  rest state      {stress}moments {r['m0']:.3g} / {r['m1']:.3g} N (from ±κ), rest energy "
+                     f"{fit.reference_energy:.3g} J/m²: left out of the shell")
     lines += [f"  note            {note}" for note in fit.notes]
     t = fitted.seconds
     lines.append(f"  time            relax {t['relax']:.1f} s, samples {t['homogenize']:.1f} s, fit {t['fit']:.2f} s "

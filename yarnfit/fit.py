@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -59,6 +59,7 @@ from .samples import BENDING_FAMILIES, FAMILIES, MEMBRANE_FAMILIES, Group, Sampl
 from .shell import (
     BENDING_PARAMETERS,
     MEMBRANE_PARAMETERS,
+    NONLINEAR_COMPRESSION_KEYS,
     NONLINEAR_KEYS,
     PARAMETER_NAMES,
     NonlinearMembrane,
@@ -87,8 +88,13 @@ MODELS = ("full", "paper")
 MEMBRANE_MODELS = ("nonlinear", "linear")
 # Samples a side of a direction (its pure family's tension or compression, positive or negative
 # shear) needs before it carries stiffening terms: the tangent and the two terms are three
-# unknowns along that side's curve.
+# unknowns along that side's curve. A uniaxial sample that compresses the direction across its
+# pull counts twice (its energy and its zero transverse stress).
 MIN_SIDE_SAMPLES = 3
+# Samples a direction needs with its Voigt strain negative before its compression-side term q_d
+# (NonlinearMembrane.compression) is fitted: one unknown, the tangent's change across zero strain.
+# By default only the uniaxial samples compress (across their pull) and negative shear does.
+MIN_COMPRESSION_SAMPLES = 1
 # A stretch stiffness below this fraction of the other one is a direction that carries no energy
 # (a sheet of parallel yarns' warp): the nonlinear fit then holds s01 at 0, as the linear fit does
 # for a diagonal at its floor. Real fabrics' weft/warp ratios stay within 1e-3..1e3; the constrained
@@ -411,6 +417,7 @@ def fit_shell(
     weight_width: float | None = None,
     coupling_limit: float | None = COUPLING_LIMIT,
     membrane: str = "nonlinear",
+    residual_stress: bool = False,
 ) -> ShellFit:
     """Fit an orthotropic shell to yarn-level energies: the linear (StVK) model by weighted linear
     least squares, and (``membrane="nonlinear"``) the strain-stiffening membrane (module docstring).
@@ -429,6 +436,12 @@ def fit_shell(
         coupling_limit: ρ_max in (0, 1), or ``None`` to fit the couplings unbounded and raise
             :class:`IndefiniteFitError` when the optimum is not positive definite.
         membrane: ``"nonlinear"`` (the material carries the stiffening membrane) or ``"linear"``.
+        residual_stress: with an undeformed sample, also fit the membrane's terms linear in the
+            strain (``ShellFit.residual_stress`` n0 n1 n2) and leave them out of the shell. Off by
+            default: a relaxed repeat's rest state is its relaxed shape, force-free by construction
+            (``yarnfit.relax``), and fitted terms only took up what the membrane model missed
+            (cotton twill: −19.6 / 35.9 N/m, which put its shear tangent at 2e-4 Pa once the
+            compression-side terms came in, and the shell 20x off its own ±0.1 % shear samples).
 
     Returns:
         the :class:`ShellFit`. Per family: ``r2 = 1 − SS_res/SS_tot`` (unweighted, ``SS_tot`` about
@@ -485,7 +498,7 @@ def fit_shell(
     std_error = dict.fromkeys(PARAMETER_NAMES, 0.0)
     active: list[str] = []
     notes: list[str] = []
-    residual_stress = dict.fromkeys(_ALL_RESIDUAL, 0.0)
+    rest_stress = dict.fromkeys(_ALL_RESIDUAL, 0.0)
     reference = bool(np.any(undeformed))
 
     def linear_group(group, families, names, energies, residual):
@@ -544,22 +557,23 @@ def fit_shell(
                                                             False)
     parameters.update(values), std_error.update(errors)
     if reference:
-        residual_stress.update(_residual_moments(used, relative))
+        rest_stress.update(_residual_moments(used, relative))
     bending_active, bending_notes = at_bound, group_notes
     # Membrane: a quadratic cannot tell a residual stress from the curvature of the energy (a
     # linear fibre's Green-strain softening came out as 200 N/m of it), so the stiffening model,
-    # which follows the curve, measures the residual stress; the linear fit takes it as given.
-    # Its first fit (no residual terms) gives the floors and the constrained solve's start.
+    # which follows the curve, measures the residual stress (when asked); the linear fit takes it
+    # as given. Its first fit (no residual terms) gives the floors and the constrained solve's start.
     values, errors, at_bound, group_notes, _ = linear_group("membrane", membrane_families, membrane_names, relative,
                                                             False)
     start = ShellMaterial(h, **{**parameters, **values})
     stiffening_fit = None
-    if membrane == "nonlinear" or reference:
+    fit_stress = reference and residual_stress
+    if membrane == "nonlinear" or fit_stress:
         membrane_used = [(s, e) for s, e, u in zip(used, relative, undeformed) if s.is_membrane and not u]
-        stiffening_fit = _fit_nonlinear_membrane(membrane_used, h, start, coupling_limit, reference)
-        residual_stress.update(stiffening_fit[5])
-    if reference:
-        shifted = relative - linear_terms[:, :3] @ np.array([residual_stress[n] for n in RESIDUAL_STRESS_NAMES["membrane"]])
+        stiffening_fit = _fit_nonlinear_membrane(membrane_used, h, start, coupling_limit, fit_stress)
+        rest_stress.update(stiffening_fit[5])
+    if fit_stress:
+        shifted = relative - linear_terms[:, :3] @ np.array([rest_stress[n] for n in RESIDUAL_STRESS_NAMES["membrane"]])
         values, errors, at_bound, group_notes, _ = linear_group("membrane", membrane_families, membrane_names, shifted,
                                                                 False)
     parameters.update(values), std_error.update(errors)
@@ -590,7 +604,7 @@ def fit_shell(
         membrane_stress = np.array([stress[n] for n in RESIDUAL_STRESS_NAMES["membrane"]])
         return shell + reference_energy + linear_terms[:, :3] @ membrane_stress
 
-    linear_families = _family_statistics(used, predicted(linear, residual_stress), target)
+    linear_families = _family_statistics(used, predicted(linear, rest_stress), target)
     material, strain_range = linear, {}
     if membrane == "nonlinear":
         tangent, errors, stiffening, membrane_notes, strain_range, _ = stiffening_fit
@@ -598,7 +612,7 @@ def fit_shell(
         std_error = {**std_error, **errors}
         material = ShellMaterial(h, **parameters, nonlinear=stiffening)
         notes += membrane_notes
-    fitted = predicted(material, residual_stress)
+    fitted = predicted(material, rest_stress)
     return ShellFit(
         material=material,
         model=model,
@@ -616,7 +630,7 @@ def fit_shell(
         linear_families=linear_families,
         strain_range=strain_range,
         reference_energy=reference_energy,
-        residual_stress=residual_stress,
+        residual_stress=rest_stress,
         notes=notes,
         coupling_limit=coupling_limit,
     )
@@ -712,8 +726,8 @@ def _fit_nonlinear_membrane(
     terms = {n: v for n, v in fitted.items() if n not in MEMBRANE_PARAMETERS}
     S = {k: fitted.get(k, 0.0) for k in MEMBRANE_PARAMETERS}
     stiffening = None
-    if terms:  # with the coupling it was fitted with (that of S to COUPLING_RTOL)
-        stiffening = NonlinearMembrane(NonlinearMembrane.from_keys(terms).coefficients, used)
+    if any(terms.values()):  # with the coupling it was fitted with (that of S to COUPLING_RTOL)
+        stiffening = replace(NonlinearMembrane.from_keys(terms), coupling=used)
     return (S, errors, stiffening, notes, strain_range, stress)
 
 
@@ -722,47 +736,101 @@ def _stiffening_pass(samples, eps, target, h, linear, coupling_limit, residual, 
     ``((values by name or None, errors, notes), stiffening-strain range per direction)``."""
     y = NonlinearMembrane((0.0,) * len(NONLINEAR_KEYS), coupling).stiffening_strain(eps)
     strain_range = {d: [float(y[:, k].min()), float(y[:, k].max())] for k, d in enumerate(("s00", "s11", "s22"))}
-    # Columns: the quadratic part (as design_matrix), then per free side h y³/3 and h y⁴/4.
-    columns = [0.5 * h * eps[:, 0] ** 2, h * eps[:, 0] * eps[:, 1], 0.5 * h * eps[:, 1] ** 2, 0.5 * h * eps[:, 2] ** 2]
+    # The terms: the quadratic part (as design_matrix), per free side y³/3 and y⁴/4, per compressed
+    # direction ½ min(ε, 0)², then the residual stress if asked.
     names = list(MEMBRANE_PARAMETERS)
     free_sides = []
     for k, direction in enumerate(("s00", "s11", "s22")):
         family = _SIDE_FAMILY[direction]
         for side, sign in (("p", 1.0), ("n", -1.0)):
+            # Its pure family's samples on that side, and a uniaxial sample's energy and
+            # transverse-stress rows where the sample compresses it across the pull.
             count = sum(s.family == family and sign * s.parameter > 0.0 for s in samples)
+            count += 2 * sum(s.family.uniaxial_axis == 1 - k and sign * y[i, k] > 0.0 for i, s in enumerate(samples))
             if count < MIN_SIDE_SAMPLES:
                 continue
-            x = np.where(sign * y[:, k] > 0.0, y[:, k], 0.0)
-            columns += [h * x**3 / 3.0, h * x**4 / 4.0]
             names += [f"{direction}{side}2", f"{direction}{side}3"]
             free_sides.append((k, direction, side))
+    names += [key for k, key in enumerate(NONLINEAR_COMPRESSION_KEYS)
+              if np.count_nonzero(eps[:, k] < 0.0) >= MIN_COMPRESSION_SAMPLES]
     if residual:
         # A direction's residual stress, like its stiffening, needs its own family's samples: with
         # fewer, the linear term takes up whatever the quadratic misses (−2.8 kN/m from one level).
         for k, direction in enumerate(("s00", "s11", "s22")):
             count = sum(s.family == _SIDE_FAMILY[direction] and s.parameter != 0.0 for s in samples)
             if count >= MIN_SIDE_SAMPLES:
-                columns.append(eps[:, k])
                 names.append(RESIDUAL_STRESS_NAMES["membrane"][k])
-    D = np.stack(columns, axis=1)
+    D = _membrane_columns(eps, names, h, coupling)
+    # A uniaxial sample's free direction is where the yarn-level energy is least, so the shell's
+    # stress across the pull vanishes there too: one more row each, dW/dε⊥ = 0, in energy units
+    # (times |ε⊥|, the energy a slope would put across the sample's own transverse strain) and
+    # weighted as the sample's energy row.
+    free = [(i, 1 - s.family.uniaxial_axis) for i, s in enumerate(samples) if s.family.uniaxial_axis is not None]
+    stress_rows = None
+    if free:
+        rows = np.stack([_membrane_columns(eps[i:i + 1], names, h, coupling, axis=axis)[0] * abs(eps[i, axis])
+                         for i, axis in free])
+        stress_rows = (rows, np.array([i for i, _ in free]))
     result = _solve_nonlinear_membrane(D, names, target, eps, free_sides, strain_range, linear, coupling_limit,
-                                       coupling)
+                                       coupling, stress_rows)
     fitted = result[0]
     if fitted is not None and min(fitted["s00"], fitted["s11"]) <= ZERO_STIFFNESS_REL * max(fitted["s00"], fitted["s11"]):
         # A direction that carries no energy has nothing to couple to: refit with s01 = 0.
         keep = [k for k, n in enumerate(names) if n != "s01"]
+        kept_rows = None if stress_rows is None else (stress_rows[0][:, keep], stress_rows[1])
         result = _solve_nonlinear_membrane(D[:, keep], [names[k] for k in keep], target, eps, free_sides, strain_range,
-                                           linear, coupling_limit, coupling)
+                                           linear, coupling_limit, coupling, kept_rows)
     return result, strain_range
+
+
+def _membrane_columns(eps: np.ndarray, names: list[str], h: float, coupling: tuple[float, float],
+                      axis: int | None = None) -> np.ndarray:
+    """The stiffening membrane's energy per reference area (J/m²) is linear in its parameters
+    once the coupling is held: ``W = columns @ values``. ``(n, len(names))`` columns at Voigt
+    strains ``eps (n, 3)``, one per parameter name: ``s00 s01 s11 s22`` (the quadratic part, as
+    :func:`design_matrix`), ``<direction><side>2`` / ``3`` (``h y³/3`` and ``h y⁴/4`` on that side of
+    the stiffening strain y), ``<direction>c`` (``½ h min(ε_d, 0)²``) and ``n0 n1 n2`` (``ε_d``, a
+    residual stress). With ``axis``, their derivatives in the Voigt strain ``ε_axis`` instead."""
+    D = NonlinearMembrane((0.0,) * len(NONLINEAR_KEYS), coupling).map
+    y = eps @ D.T
+    e0, e1, e2 = eps[:, 0], eps[:, 1], eps[:, 2]
+    if axis is None:
+        quadratic = {"s00": 0.5 * h * e0**2, "s01": h * e0 * e1, "s11": 0.5 * h * e1**2, "s22": 0.5 * h * e2**2}
+    else:
+        zero = np.zeros(len(eps))
+        quadratic = {"s00": h * e0 if axis == 0 else zero, "s01": h * (e1 if axis == 0 else e0 if axis == 1 else zero),
+                     "s11": h * e1 if axis == 1 else zero, "s22": h * e2 if axis == 2 else zero}
+    columns = []
+    for name in names:
+        if name in quadratic:
+            columns.append(quadratic[name])
+        elif name in NONLINEAR_COMPRESSION_KEYS:
+            k = NONLINEAR_COMPRESSION_KEYS.index(name)
+            compressed = np.minimum(eps[:, k], 0.0)
+            columns.append(0.5 * h * compressed**2 if axis is None else h * compressed * (k == axis))
+        elif name in RESIDUAL_STRESS_NAMES["membrane"]:
+            k = RESIDUAL_STRESS_NAMES["membrane"].index(name)
+            columns.append(eps[:, k] if axis is None else np.full(len(eps), float(k == axis)))
+        else:  # a side's term
+            k = ("s00", "s11", "s22").index(name[:3])
+            x = np.where((1.0 if name[3] == "p" else -1.0) * y[:, k] > 0.0, y[:, k], 0.0)
+            power = int(name[4])
+            if axis is None:
+                columns.append(h * x ** (power + 1) / (power + 1))
+            else:
+                columns.append(h * x**power * D[k, axis])
+    return np.stack(columns, axis=1)
 
 
 def _solve_nonlinear_membrane(
     D: np.ndarray, names: list[str], target: np.ndarray, eps: np.ndarray, free_sides: list[tuple[int, str, str]],
     strain_range: dict[str, list[float]], linear: ShellMaterial, coupling_limit: float | None,
-    coupling: tuple[float, float] = (0.0, 0.0),
+    coupling: tuple[float, float] = (0.0, 0.0), stress_rows: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[dict[str, float] | None, dict[str, float], list[str]]:
     """One relative-weighted solve of :func:`_fit_nonlinear_membrane` over the columns ``D``
-    named ``names``: ``(values by name or None if it failed, standard errors of S, notes)``."""
+    named ``names``: ``(values by name or None if it failed, standard errors of S, notes)``.
+    ``stress_rows`` ``(rows (m, p), sample index (m,))``: more rows whose target is 0, each
+    weighted as the sample it belongs to."""
     # Relative weights: the residual is divided by Ū, floored at RELATIVE_WEIGHT_FLOOR of the
     # quadratic law through the largest sample.
     magnitude = np.linalg.norm(eps, axis=1)
@@ -772,6 +840,9 @@ def _solve_nonlinear_membrane(
     if not np.all(scale > 0.0):
         raise ValueError("the membrane samples carry no energy: they cannot determine a membrane stiffness")
     A, b = D / scale[:, None], target / scale
+    if stress_rows is not None:
+        rows, index = stress_rows
+        A, b = np.vstack([A, rows / scale[index, None]]), np.concatenate([b, np.zeros(len(rows))])
     norms = np.linalg.norm(A, axis=0)
     if np.any(norms == 0.0):
         zero = [n for n, c in zip(names, norms) if c == 0.0]
@@ -783,9 +854,25 @@ def _solve_nonlinear_membrane(
     unbounded = np.linalg.lstsq(As, b, rcond=None)[0] / norms
     floor = DIAGONAL_FLOOR_REL * max(float(np.max(unbounded[diagonal])), max(linear.s00, linear.s11, linear.s22))
     lower = np.where(diagonal, floor, np.where(cubic, 0.0, -np.inf))
-    result = lsq_linear(As, b, bounds=(lower * norms, np.full(len(names), np.inf)), method="bvls")
+    upper = np.full(len(names), np.inf)
+    result = lsq_linear(As, b, bounds=(lower * norms, upper), method="bvls")
     notes = []
     x = _drop_negligible_terms(result.x / norms, names, free_sides, strain_range, linear) if result.success else None
+    if x is not None and _nonlinear_problems(x, names, coupling_limit, coupling):
+        # A side whose quartic ended on its bound (0) while its cubic softens is concave without
+        # end: a side the data barely bend (a compressed side that is straight within the fit's
+        # round-off) gets there from noise. Such sides may only stiffen; a second bounded solve.
+        index = {n: k for k, n in enumerate(names)}
+        for _, direction, side in free_sides:
+            i2, i3 = index[f"{direction}{side}2"], index[f"{direction}{side}3"]
+            if x[i3] == 0.0 and (x[i2] < 0.0 if side == "p" else x[i2] > 0.0):
+                if side == "p":
+                    lower[i2] = 0.0
+                else:
+                    upper[i2] = 0.0
+        again = lsq_linear(As, b, bounds=(lower * norms, upper * norms), method="bvls")
+        if again.success:
+            x = _drop_negligible_terms(again.x / norms, names, free_sides, strain_range, linear)
     if x is not None and not _nonlinear_problems(x, names, coupling_limit, coupling):
         values = x
     else:
@@ -822,9 +909,10 @@ def _split(values: np.ndarray, names: list[str],
            coupling: tuple[float, float] = (0.0, 0.0)) -> tuple[dict[str, float], NonlinearMembrane]:
     """``S`` by name and the stiffening terms (with ``coupling``) from a parameter vector named by ``names``."""
     named = dict(zip(names, np.asarray(values, dtype=float).tolist()))
-    terms = {n: (max(v, 0.0) if n.endswith("3") else v) for n, v in named.items() if n in NONLINEAR_KEYS}
+    terms = {n: (max(v, 0.0) if n.endswith("3") else v) for n, v in named.items()
+             if n in NONLINEAR_KEYS + NONLINEAR_COMPRESSION_KEYS}
     return ({k: named.get(k, 0.0) for k in MEMBRANE_PARAMETERS},
-            NonlinearMembrane(NonlinearMembrane.from_keys(terms).coefficients, coupling))
+            replace(NonlinearMembrane.from_keys(terms), coupling=coupling))
 
 
 def _nonlinear_problems(values: np.ndarray, names: list[str], coupling_limit: float | None,
@@ -859,27 +947,31 @@ def _constrained_nonlinear_solve(
     floor: float, linear: ShellMaterial, coupling_limit: float | None, coupling: tuple[float, float] = (0.0, 0.0),
 ) -> np.ndarray | None:
     """``min ‖As (x norms) − b‖`` over the parameters ``x`` (by ``names``) of an acceptable
-    membrane: with a softening allowance ``t_d >= 0`` per direction, ``H = S − Dᵀ diag(t) D``
-    (D the stiffening strains' map) positive definite with diagonals ``>= floor`` and coupling
-    ``|H01| <= ρ √(H00 H11)``, and on every free side ``soft(k2)² <= 3 k3 t_d`` (``soft`` the part
-    of ``k2`` that softens that side). Those say the least tangent ``S + Dᵀ diag(min φ'') D`` is
-    positive definite within the coupling bound. The set is convex (second-order cones and a
-    hyperbolic constraint), and so is the objective.
+    membrane: with a softening allowance ``t_d >= 0`` per direction and a compression allowance
+    ``u_d >= 0``, ``H = S − Dᵀ diag(t) D − diag(u)`` (D the stiffening strains' map) positive
+    definite with diagonals ``>= floor`` and coupling ``|H01| <= ρ √(H00 H11)``, on every free
+    side ``soft(k2)² <= 3 k3 t_d`` (``soft`` the part of ``k2`` that softens that side), and
+    every compression term ``q_d >= −u_d``. Those say the least tangent ``S + Dᵀ diag(min φ'') D +
+    diag(min(q, 0))`` is positive definite within the coupling bound. The set is convex
+    (second-order cones and a hyperbolic constraint), and so is the objective.
 
     Solved in a parametrisation that meets the constraints by construction, with simple bounds
     only (a general constrained solver stalled on this problem's scales): ``H_dd = floor + e_d``,
-    ``H01 = ρ r √(H00 H11)`` with ``r ∈ [−1, 1]``, ``t_d = τ_d²``, ``S = H + Dᵀ diag(t) D``, and
-    per side ``k3 = v²``, ``k2 = ∓√3 v τ_d ± c`` with ``e, τ, v, c >= 0``. Started from ``linear``
+    ``H01 = ρ r √(H00 H11)`` with ``r ∈ [−1, 1]``, ``t_d = τ_d²``, ``u_d = ω_d²``,
+    ``S = H + Dᵀ diag(t) D + diag(u)``, per side ``k3 = v²``, ``k2 = ∓√3 v τ_d ± c``, and per
+    compression term ``q_d = z_d − ω_d²``, with ``e, τ, v, c, ω, z >= 0``. Started from ``linear``
     (feasible). Returns a :class:`ConstrainedSolve`, or ``None`` if the solve fails (or stops at
     its evaluation limit no better than its start)."""
     index = {n: k for k, n in enumerate(names)}
     rho = 1.0 if coupling_limit is None else coupling_limit
     reference = max(linear.s00, linear.s11, linear.s22)
     diagonal = [n for n in ("s00", "s11", "s22")]
-    others = [n for n in names if n not in MEMBRANE_PARAMETERS and n not in NONLINEAR_KEYS]
+    compressions = [(k, key) for k, key in enumerate(NONLINEAR_COMPRESSION_KEYS) if key in index]
+    others = [n for n in names
+              if n not in MEMBRANE_PARAMETERS and n not in NONLINEAR_KEYS and n not in NONLINEAR_COMPRESSION_KEYS]
     coupled = "s01" in index
-    # θ = e (3), τ (3), r (1 if coupled), per side (v, c), then the other (residual-stress) terms;
-    # all but the last group in units of ``reference``.
+    # θ = e (3), τ (3), r (1 if coupled), per side (v, c), per compression term (ω, z), then the
+    # other (residual-stress) terms; all but the last group in units of ``reference``.
     sides = [(k, f"{direction}{side}", side) for k, direction, side in free_sides]
 
     D = NonlinearMembrane((0.0,) * len(NONLINEAR_KEYS), coupling).map
@@ -898,16 +990,21 @@ def _constrained_nonlinear_solve(
             H[0, 1] = H[1, 0] = rho * theta[at] * math.sqrt(H[0, 0] * H[1, 1])
             at += 1
         S = H + D.T @ np.diag(tau * tau * reference) @ D
-        for k, n in enumerate(diagonal):
-            x[index[n]] = S[k, k]
-        if coupled:
-            x[index["s01"]] = S[0, 1]
         for k, key, side in sides:
             v, c = theta[at], theta[at + 1]
             at += 2
             x[index[key + "3"]] = v * v * reference
             soft = math.sqrt(3.0) * v * tau[k] * reference
             x[index[key + "2"]] = (c * reference - soft) if side == "p" else (soft - c * reference)
+        for k, key in compressions:
+            omega, z = theta[at], theta[at + 1]
+            at += 2
+            S[k, k] += omega * omega * reference
+            x[index[key]] = (z - omega * omega) * reference
+        for k, n in enumerate(diagonal):
+            x[index[n]] = S[k, k]
+        if coupled:
+            x[index["s01"]] = S[0, 1]
         for n in others:
             x[index[n]] = theta[at]
             at += 1
@@ -930,6 +1027,10 @@ def _constrained_nonlinear_solve(
         low.append(-1.0), high.append(1.0)
     for _ in sides:
         start += [1e-3, 0.0]
+        low += [0.0, 0.0]
+        high += [np.inf, np.inf]
+    for _ in compressions:
+        start += [1e-3, 0.0]  # ω: off zero, where ω² would have no gradient
         low += [0.0, 0.0]
         high += [np.inf, np.inf]
     for _ in others:
@@ -956,7 +1057,8 @@ def _drop_negligible_terms(values: np.ndarray, names: list[str], free_sides: lis
     """``values`` with a side's two terms set to 0 where, at the side's largest sampled strain,
     they change the stress by less than NEGLIGIBLE_TERM_REL of the stiffest direction's linear
     stress there: round-off of a direction that carries no energy (a parallel-yarn sheet's warp),
-    whose sign would otherwise decide its convexity."""
+    whose sign would otherwise decide its convexity; and a compression term below
+    NEGLIGIBLE_TERM_REL of that stiffness (data whose two sides agree)."""
     values = values.copy()
     reference = max(linear.s00, linear.s11, linear.s22)
     index = {n: k for k, n in enumerate(names)}
@@ -965,6 +1067,9 @@ def _drop_negligible_terms(values: np.ndarray, names: list[str], free_sides: lis
         i2, i3 = index[f"{direction}{side}2"], index[f"{direction}{side}3"]
         if abs(values[i2] * x * x) + abs(values[i3] * x**3) < NEGLIGIBLE_TERM_REL * reference * abs(x):
             values[i2] = values[i3] = 0.0
+    for key in NONLINEAR_COMPRESSION_KEYS:
+        if key in index and abs(values[index[key]]) < NEGLIGIBLE_TERM_REL * reference:
+            values[index[key]] = 0.0
     return values
 
 

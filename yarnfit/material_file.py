@@ -20,13 +20,14 @@
   ``iterations``, ``residual`` and ``worst_overlap``;
 - ``shell``: ``thickness_m``, ``membrane_pa`` {s00, s01, s11, s22} (the small-strain tangent),
   ``bending_pa`` {b00, b01, b11, b22} and, for the strain-stiffening membrane, ``nonlinear``
-  {``model``, ``stress_terms_pa``} (:attr:`MaterialFile.shell` reads it back; a reader that knows
-  only StVK reads the tangent);
+  {``model``, ``stress_terms_pa``, ``stiffening_strain``, ``compression_pa``} (:attr:`MaterialFile.shell`
+  reads it back, a file without ``compression_pa`` as having none; a reader that knows only StVK
+  reads the tangent, the tension side's);
 - ``engineering``: the small-strain constants of ``docs/design.md`` §3 (``weft_stretch_n_per_m``, …);
 - ``fit``: the fit's quality (model, membrane, parameters and standard errors, R² and relative RMS
   per family, the ``linear`` fit beside it (parameters and quality: :attr:`MaterialFile.linear_shell`),
-  the strain range the stiffening was fitted over, the rest energy and residual stress fitted and
-  left out of the shell, active bounds, weights, used and excluded samples);
+  the strain range the stiffening was fitted over, the rest energy (and the residual stress when
+  fitted) left out of the shell, active bounds, weights, used and excluded samples);
 - ``samples``: every sample — ``family``, ``parameter``, ``I``, ``II``, ``energy_density_j_m2``,
   ``converged``, ``residual`` {force, torque, penetration, energy_change}, ``iterations``,
   ``seconds`` — including those that did not converge (excluded from the fit, never used);

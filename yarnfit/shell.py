@@ -14,7 +14,9 @@ Conventions (``docs/design.md`` §3), SI units throughout:
 * Strain stiffening (optional, :class:`NonlinearMembrane`, ``docs/design.md`` §3): the membrane
   energy gains ``h Σ_d φ_d(y_d)`` with ``φ_d(y) = k2 y³/3 + k3 y⁴/4`` per direction ``d``, one pair
   ``(k2, k3)`` (Pa) for ``y_d ≥ 0`` and one for ``y_d < 0``, on the stiffening strains
-  ``y = (ε0 + c01 ε1, ε1 + c10 ε0, ε2)``. ``S`` stays the tangent at zero strain.
+  ``y = (ε0 + c01 ε1, ε1 + c10 ε0, ε2)``, and ``h Σ_d ½ q_d min(ε_d, 0)²``: each Voigt direction's
+  tangent is ``S_dd + q_d`` where its strain is negative (weft or warp compression, negative
+  shear). ``S`` is the tangent at zero strain on the tension side (every ``ε_d ≥ 0``).
 * Moduli (paper Eq. shell_stiffness_moduli), ``D = 1 − ν_tp ν_pt``: ``s00 = E_t/D``, ``s11 = E_p/D``,
   ``s01 = ν_pt E_t/D = ν_tp E_p/D``, ``s22 = μ``.
 
@@ -43,6 +45,7 @@ __all__ = [
     "BENDING_PARAMETERS",
     "GF_CM2_PER_CM",
     "MEMBRANE_PARAMETERS",
+    "NONLINEAR_COMPRESSION_KEYS",
     "NONLINEAR_COUPLING_KEYS",
     "NONLINEAR_KEYS",
     "NonlinearMembrane",
@@ -67,6 +70,9 @@ NONLINEAR_SIDES = ("p", "n")
 NONLINEAR_KEYS = tuple(f"{d}{side}{power}" for d in NONLINEAR_DIRECTIONS for side in NONLINEAR_SIDES for power in (2, 3))
 # The stiffening strains' coupling (NonlinearMembrane.coupling): y0 = ε0 + c01 ε1, y1 = ε1 + c10 ε0.
 NONLINEAR_COUPLING_KEYS = ("c01", "c10")
+# The compression-side terms (NonlinearMembrane.compression, Pa): q_d added to the tangent S_dd where
+# the Voigt strain ε_d < 0 (weft, warp compression; negative shear). Plugin config and file keys.
+NONLINEAR_COMPRESSION_KEYS = ("s00c", "s11c", "s22c")
 NONLINEAR_MODEL = "green-polynomial"
 
 # 1 gf·cm²/cm = 1 gf·cm = 9.80665e-3 N × 1e-2 m (N·m): KES-F and cantilever bending rigidity units.
@@ -158,24 +164,39 @@ class NonlinearMembrane:
     k3 y⁴/4`` (Pa) with one pair ``(k2, k3)`` for ``y ≥ 0`` and one for ``y < 0``. The stress (the
     derivative in ε) gains ``Dᵀ φ'(y)`` with ``D = ∂y/∂ε``, ``φ' = k2 y² + k3 y³``. φ is C² at zero,
     so the material's ``S`` stays the exact small-strain tangent; frame-invariant, a function of
-    the Green strain. Why the stress and not the strain along a direction: a knit's membrane is
+    the Green strain.
+
+    **Compression side** (``compression`` = ``(q0, q1, q2)``, Pa): the energy also gains
+    ``Σ_d ½ q_d min(ε_d, 0)²`` on the Voigt strains themselves, so where ``ε_d < 0`` (weft or warp
+    compression, negative shear) that direction's tangent is ``S_dd + q_d``; ``S`` is then the
+    tension side's tangent at zero strain. C¹ at zero, not C². What it is for: a fabric pulled at
+    free width compresses across the pull, and how much it contracts, so how soft the pull is,
+    depends on the *transverse* direction's compression stiffness, which differs from its
+    tension stiffness and between the two directions (a twill's warp gives under compression, its
+    weft does not: free-width over fixed-width energy 0.11 pulled along weft, 0.87 along warp; any
+    quadratic ``S`` gives both ``1 − s01²/(s00 s11)``). Acting on ε, not y: a knit's ``S`` is near
+    rank one, where both stiffening strains follow the one stiff combination (the yarn length) and
+    vanish at free width. Why the stress and not the strain along a direction: a knit's membrane is
     near rank one; pulled at free width its courses lengthen while its wales shorten and the yarn
     hardly stretches (``y0 = (1 − s01²/s00 s11) ε0``, 2 % of ε0 for cotton jersey), while at fixed
     width (``y0 = ε0``) its loops jam and it stiffens eightfold. Stiffening on ε0 alone put the
     jersey's free-width pull at 3.4 kN/m at 10 % against 10 N/m in its yarn swatch.
 
     What it cannot represent: a coupling s01 that changes with strain (so a Poisson ratio that
-    does), stiffening that depends on more than each direction's stiffening strain, hysteresis and
-    friction (it is elastic), and buckling (a flat membrane under compression).
+    does, beyond the tension/compression switch), stiffening that depends on more than each
+    direction's stiffening strain and sign, hysteresis and friction (it is elastic), and buckling
+    (a flat membrane under compression).
 
     Attributes:
         coefficients: the twelve ``k`` (Pa) in :data:`NONLINEAR_KEYS` order, a tuple of floats;
             every ``k3`` (``…3``) is >= 0.
         coupling: ``(c01, c10)``, dimensionless (``(0, 0)``: each direction's own strain).
+        compression: ``(q0, q1, q2)`` (Pa), the compression-side tangent changes, any sign.
     """
 
     coefficients: tuple[float, ...]
     coupling: tuple[float, float] = (0.0, 0.0)
+    compression: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         values = tuple(self.coefficients) if not isinstance(self.coefficients, Mapping) else None
@@ -191,19 +212,25 @@ class NonlinearMembrane:
         if len(coupling) != 2:
             raise ValueError(f"NonlinearMembrane.coupling must be (c01, c10), got {self.coupling!r}")
         coupling = tuple(finite_number(v, k) for k, v in zip(NONLINEAR_COUPLING_KEYS, coupling))
+        compression = tuple(self.compression)
+        if len(compression) != 3:
+            raise ValueError(f"NonlinearMembrane.compression must be (q0, q1, q2), got {self.compression!r}")
+        compression = tuple(finite_number(v, k) for k, v in zip(NONLINEAR_COMPRESSION_KEYS, compression))
         object.__setattr__(self, "coefficients", values)
         object.__setattr__(self, "coupling", coupling)
+        object.__setattr__(self, "compression", compression)
 
     @classmethod
     def from_keys(cls, terms: Mapping[str, float]) -> NonlinearMembrane:
-        """From ``{key: value}`` (:data:`NONLINEAR_KEYS` in Pa, ``c01`` and ``c10``); a key left
-        out is 0, an unknown one is an error."""
-        allowed = NONLINEAR_KEYS + NONLINEAR_COUPLING_KEYS
+        """From ``{key: value}`` (:data:`NONLINEAR_KEYS` in Pa, ``c01`` and ``c10``,
+        :data:`NONLINEAR_COMPRESSION_KEYS` in Pa); a key left out is 0, an unknown one is an error."""
+        allowed = NONLINEAR_KEYS + NONLINEAR_COUPLING_KEYS + NONLINEAR_COMPRESSION_KEYS
         unknown = sorted(set(terms) - set(allowed))
         if unknown:
             raise ValueError(f"unknown nonlinear membrane keys: {', '.join(unknown)} (allowed: {', '.join(allowed)})")
         return cls(tuple(terms.get(key, 0.0) for key in NONLINEAR_KEYS),
-                   tuple(terms.get(key, 0.0) for key in NONLINEAR_COUPLING_KEYS))
+                   tuple(terms.get(key, 0.0) for key in NONLINEAR_COUPLING_KEYS),
+                   tuple(terms.get(key, 0.0) for key in NONLINEAR_COMPRESSION_KEYS))
 
     @classmethod
     def coupling_of(cls, s00: float, s01: float, s11: float) -> tuple[float, float]:
@@ -212,9 +239,10 @@ class NonlinearMembrane:
 
     @property
     def keys(self) -> dict[str, float]:
-        """Every value by name: the twelve terms (Pa, :data:`NONLINEAR_KEYS`), then ``c01``, ``c10``
-        (the plugin's config keys)."""
-        return {**dict(zip(NONLINEAR_KEYS, self.coefficients)), **dict(zip(NONLINEAR_COUPLING_KEYS, self.coupling))}
+        """Every value by name: the twelve terms (Pa, :data:`NONLINEAR_KEYS`), ``c01``, ``c10``, then
+        the compression side's ``s00c s11c s22c`` (Pa) (the plugin's config keys)."""
+        return {**dict(zip(NONLINEAR_KEYS, self.coefficients)), **dict(zip(NONLINEAR_COUPLING_KEYS, self.coupling)),
+                **dict(zip(NONLINEAR_COMPRESSION_KEYS, self.compression))}
 
     @property
     def table(self) -> np.ndarray:
@@ -229,7 +257,8 @@ class NonlinearMembrane:
 
     @property
     def is_zero(self) -> bool:
-        return not any(self.coefficients)
+        """No term at all: the membrane is its quadratic part."""
+        return not any(self.coefficients) and not any(self.compression)
 
     def stiffening_strain(self, eps: np.ndarray) -> np.ndarray:
         """``y`` for Voigt strains ``eps (…, 3)``, same shape."""
@@ -244,23 +273,31 @@ class NonlinearMembrane:
         return k2, k3
 
     def energy(self, eps: np.ndarray) -> np.ndarray:
-        """``Σ_d φ_d(y_d)`` (Pa = J/m³) for Voigt strains ``eps (…, 3)``; shape ``(…)``."""
+        """``Σ_d φ_d(y_d) + Σ_d ½ q_d min(ε_d, 0)²`` (Pa = J/m³) for Voigt strains ``eps (…, 3)``;
+        shape ``(…)``."""
+        eps = np.asarray(eps, dtype=np.float64)
         y = self.stiffening_strain(eps)
         k2, k3 = self._sided(y)
-        return np.sum(k2 * y**3 / 3.0 + k3 * y**4 / 4.0, axis=-1)
+        compressed = np.minimum(eps, 0.0)
+        return np.sum(k2 * y**3 / 3.0 + k3 * y**4 / 4.0 + 0.5 * np.array(self.compression) * compressed**2, axis=-1)
 
     def stress(self, eps: np.ndarray) -> np.ndarray:
-        """``Dᵀ φ'(y)`` (Pa), the derivative of :meth:`energy` in ε, shaped like ``eps (…, 3)``."""
+        """``Dᵀ φ'(y) + q min(ε, 0)`` (Pa), the derivative of :meth:`energy` in ε, shaped like
+        ``eps (…, 3)``."""
+        eps = np.asarray(eps, dtype=np.float64)
         y = self.stiffening_strain(eps)
         k2, k3 = self._sided(y)
-        return (k2 * y**2 + k3 * y**3) @ self.map
+        return (k2 * y**2 + k3 * y**3) @ self.map + np.array(self.compression) * np.minimum(eps, 0.0)
 
     def hessian(self, eps: np.ndarray) -> np.ndarray:
-        """``Dᵀ diag(φ''(y)) D`` ``(…, 3, 3)`` (Pa), ``φ'' = 2 k2 y + 3 k3 y²``."""
+        """``Dᵀ diag(φ''(y)) D + diag(q [ε < 0])`` ``(…, 3, 3)`` (Pa), ``φ'' = 2 k2 y + 3 k3 y²``."""
+        eps = np.asarray(eps, dtype=np.float64)
         y = self.stiffening_strain(eps)
         k2, k3 = self._sided(y)
         D = self.map
-        return np.einsum("ki,...k,kj->...ij", D, 2.0 * k2 * y + 3.0 * k3 * y**2, D)
+        compressed = np.where(eps < 0.0, np.array(self.compression), 0.0)
+        return (np.einsum("ki,...k,kj->...ij", D, 2.0 * k2 * y + 3.0 * k3 * y**2, D)
+                + compressed[..., :, None] * np.eye(3))
 
     def softening(self) -> np.ndarray:
         """``(3,)`` least ``φ_d''`` over all strains (Pa, <= 0): ``−k2²/(3 k3)`` on a side whose
@@ -273,11 +310,12 @@ class NonlinearMembrane:
         return least
 
     def least_tangent(self, s00: float, s01: float, s11: float, s22: float) -> np.ndarray:
-        """``S + Dᵀ diag(softening()) D`` ``(3, 3)``: below every tangent the membrane has."""
+        """``S + Dᵀ diag(softening()) D + diag(min(q, 0))`` ``(3, 3)``: below every tangent the
+        membrane has."""
         m = self.softening()
         if np.any(np.isinf(m)):
             return np.full((3, 3), -np.inf)
-        return self._tangent_with(m, s00, s01, s11, s22)
+        return self._tangent_with(m, s00, s01, s11, s22) + np.diag(np.minimum(self.compression, 0.0))
 
     def stiffest(self, bound: float) -> np.ndarray:
         """``(3,)`` largest ``φ_d''`` (Pa, >= 0) over stiffening strains ``|y_d| <= bound`` on both
@@ -291,9 +329,9 @@ class NonlinearMembrane:
         return largest
 
     def largest_tangent(self, s00: float, s01: float, s11: float, s22: float, bound: float) -> np.ndarray:
-        """``S + Dᵀ diag(stiffest(bound)) D`` ``(3, 3)`` (Pa): above every tangent the membrane has
-        while each stiffening strain stays within ``±bound``."""
-        return self._tangent_with(self.stiffest(bound), s00, s01, s11, s22)
+        """``S + Dᵀ diag(stiffest(bound)) D + diag(max(q, 0))`` ``(3, 3)`` (Pa): above every tangent
+        the membrane has while each stiffening strain stays within ``±bound``."""
+        return self._tangent_with(self.stiffest(bound), s00, s01, s11, s22) + np.diag(np.maximum(self.compression, 0.0))
 
     def _tangent_with(self, second: np.ndarray, s00: float, s01: float, s11: float, s22: float) -> np.ndarray:
         """``S + Dᵀ diag(second) D`` ``(3, 3)`` (Pa) for ``φ_d'' = second (3,)``."""
@@ -312,14 +350,17 @@ class NonlinearMembrane:
 
     def to_dict(self) -> dict:
         """JSON form: ``{"model": "green-polynomial", "stress_terms_pa": {key: Pa},
-        "stiffening_strain": {"c01": …, "c10": …}}``."""
+        "stiffening_strain": {"c01": …, "c10": …}, "compression_pa": {"s00c": …, "s11c": …,
+        "s22c": …}}``."""
         return {"model": NONLINEAR_MODEL, "stress_terms_pa": dict(zip(NONLINEAR_KEYS, self.coefficients)),
-                "stiffening_strain": dict(zip(NONLINEAR_COUPLING_KEYS, self.coupling))}
+                "stiffening_strain": dict(zip(NONLINEAR_COUPLING_KEYS, self.coupling)),
+                "compression_pa": dict(zip(NONLINEAR_COMPRESSION_KEYS, self.compression))}
 
     @classmethod
     def from_dict(cls, data: Mapping, where: str = "shell material") -> NonlinearMembrane:
-        """Inverse of :meth:`to_dict`; ValueError ``<where>: …`` naming the key at fault."""
-        _check_keys(data, ("model", "stress_terms_pa", "stiffening_strain"), where, "nonlinear.")
+        """Inverse of :meth:`to_dict`; ValueError ``<where>: …`` naming the key at fault. A file
+        without ``compression_pa`` (written before it existed) has none."""
+        _check_keys(data, ("model", "stress_terms_pa", "stiffening_strain"), where, "nonlinear.", ("compression_pa",))
         if data["model"] != NONLINEAR_MODEL:
             raise ValueError(f"{where}: nonlinear.model must be {NONLINEAR_MODEL!r}, got {data['model']!r}")
         _check_keys(data["stress_terms_pa"], NONLINEAR_KEYS, where, "nonlinear.stress_terms_pa.")
@@ -328,6 +369,10 @@ class NonlinearMembrane:
                  for k in NONLINEAR_KEYS}
         terms.update({k: _json_number(data["stiffening_strain"][k], where, f"nonlinear.stiffening_strain.{k}")
                       for k in NONLINEAR_COUPLING_KEYS})
+        if "compression_pa" in data:
+            _check_keys(data["compression_pa"], NONLINEAR_COMPRESSION_KEYS, where, "nonlinear.compression_pa.")
+            terms.update({k: _json_number(data["compression_pa"][k], where, f"nonlinear.compression_pa.{k}")
+                          for k in NONLINEAR_COMPRESSION_KEYS})
         try:
             return cls.from_keys(terms)
         except ValueError as exc:

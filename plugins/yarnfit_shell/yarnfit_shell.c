@@ -23,12 +23,19 @@
 // membrane energy per reference area gains h sum_d phi_d(y_d), phi_d(y) = k2 y^3/3 + k3 y^4/4 with
 // (k2, k3) from the positive-side keys (s<dd>p2, s<dd>p3) for y >= 0 and the negative-side keys
 // (s<dd>n2, s<dd>n3) for y < 0, so the stress gains h D^T phi'(y), phi' = k2 y^2 + k3 y^3. phi is C2
-// at 0: the tangent at zero strain is exactly S. No hysteresis. init demands a convex energy in eps
-// (the least tangent S + D^T diag(min phi_d'') D positive definite).
+// at 0: the tangent at zero strain is exactly S. No hysteresis.
+//
+// Compression (optional keys s00c, s11c, s22c = q_d in Pa, any sign, default 0): the membrane energy
+// per reference area gains h sum_d (1/2) q_d min(eps_d, 0)^2, on eps itself (not on y): where a
+// Voigt strain is negative (weft or warp compression, negative shear) its tangent is S_dd + q_d
+// instead of S_dd, so a fabric can be softer or stiffer in compression than in tension along each
+// yarn, and in negative than in positive shear (a twill). The stress gains h q_d min(eps_d, 0).
+// The term is C1 at 0 (its tangent jumps there by q_d). init demands a convex energy in eps: the
+// least tangent S + D^T diag(min phi_d'') D + diag(min(q_d, 0)) positive definite.
 //
 // Damping (Kelvin-Voigt, stiffness-proportional, the Rayleigh form of the tangent stiffness):
 // stresses use eps + damping * d(eps)/dt and kappa + damping * d(kappa)/dt for the quadratic
-// energy; the nonlinear terms add damping * h D^T diag(phi''(y)) D d(eps)/dt.
+// energy; the nonlinear terms add damping * h (D^T diag(phi''(y)) D + diag(q_d [eps_d < 0])) d(eps)/dt.
 //
 // Split with MuJoCo's built-in elasticity: the configuration is always the full material. When
 // the flex also carries <elasticity elastic2d="stretch" young poisson thickness>, the keys
@@ -87,12 +94,14 @@ static const char* const kStiffeningKeys[3][kNumStiffening] = {
   {"s11p2", "s11p3", "s11n2", "s11n3"},
   {"s22p2", "s22p3", "s22n2", "s22n3"},
 };
+// The compression keys q_d per Voigt direction: the tangent gains q_d where eps_d < 0.
+static const char* const kCompressionKeys[3] = {"s00c", "s11c", "s22c"};
 
 static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
   "builtin_young", "builtin_poisson", "builtin_thickness",
   "s00p2", "s00p3", "s00n2", "s00n3", "s11p2", "s11p3", "s11n2", "s11n3", "s22p2", "s22p3", "s22n2", "s22n3",
-  "c01", "c10", "rest", "membrane",
+  "s00c", "s11c", "s22c", "c01", "c10", "rest", "membrane",
 };
 enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 
@@ -102,7 +111,8 @@ typedef struct {
   double builtin_young, builtin_poisson, builtin_thickness;
   double stiffening[3][kNumStiffening];  // k2, k3 for y >= 0, k2, k3 for y < 0, per direction (Pa)
   double c01, c10;      // the stiffening strains' coupling: y0 = eps0 + c01 eps1, y1 = eps1 + c10 eps0
-  int stiffens;         // any stiffening key nonzero: else the membrane is exactly StVK
+  double compression[3];  // q_d: the tangent gains q_d where eps_d < 0, per direction (Pa)
+  int stiffens;         // any stiffening or compression key nonzero: else the membrane is exactly StVK
   int node_membrane;    // membrane="node": strains smoothed over each vertex's third of its
                         // triangles (per panel), not constant per triangle; see plugins/README.md
   int ndomain;          // node membrane: smoothing domains (a vertex, or a vertex and panel)
@@ -207,11 +217,12 @@ static double least_tangent(double k2, double k3, int side) {
   return -k2 * k2 / (3 * k3);
 }
 
-// The strain-stiffening keys: every x^3 coefficient >= 0 (a negative one softens at large strain
-// without bound), a softening x^2 term only with a positive x^3 term, and an energy convex in eps:
-// its Hessian S + diag(phi_d''(eps_d)) is at least S + diag(m) with m_d the least phi_d'' over both
-// sides, which must be positive definite. Convexity keeps the stress a monotone function of the
-// strain (no snap-through in the material law itself) and the tangent used by damping dissipative.
+// The strain-stiffening and compression keys: every x^3 coefficient >= 0 (a negative one softens at
+// large strain without bound), a softening x^2 term only with a positive x^3 term, and an energy
+// convex in eps: its Hessian S + D^T diag(phi_d''(y_d)) D + diag(q_d [eps_d < 0]) is at least
+// S + D^T diag(m) D + diag(min(q_d, 0)) with m_d the least phi_d'' over both sides, which must be
+// positive definite. Convexity keeps the stress a monotone function of the strain (no snap-through
+// in the material law itself) and the tangent used by damping dissipative.
 static int check_stiffening(const Shell* s) {
   static const int kSide[2] = {+1, -1};  // kP2, kP3 are the positive side; kN2, kN3 the negative
   double least[3];
@@ -241,27 +252,40 @@ static int check_stiffening(const Shell* s) {
       }
     }
   }
-  // The least tangent S + D^T diag(m) D (m <= 0), D = [[1, c01], [c10, 1]] on the normal block.
-  double a = s->s00 + least[0] + s->c10 * s->c10 * least[1];
-  double b = s->s11 + s->c01 * s->c01 * least[0] + least[1];
+  // The least tangent S + D^T diag(m) D + diag(softest) (m, softest <= 0), D = [[1, c01], [c10, 1]]
+  // on the normal block; softest_d = min(q_d, 0), the compression term's least tangent.
+  double softest[3];
+  for (int d = 0; d < 3; d++) softest[d] = s->compression[d] < 0 ? s->compression[d] : 0;
+  double a = s->s00 + least[0] + s->c10 * s->c10 * least[1] + softest[0];
+  double b = s->s11 + s->c01 * s->c01 * least[0] + least[1] + softest[1];
   double off = s->s01 + s->c01 * least[0] + s->c10 * least[1];
-  double c = s->s22 + least[2];
+  double c = s->s22 + least[2] + softest[2];
   double det = a * b - off * off;
   int bad[3] = {!(a > 0) || !(det > 0), !(b > 0) || !(det > 0), !(c > 0)};
   if (!bad[0] && !bad[1] && !bad[2]) return 0;
-  // S alone is positive definite (checked before), so a failing direction has a softening side.
-  char culprits[400] = "";
+  // S alone is positive definite (checked before), so a failing direction has a softening side or
+  // a negative compression key.
+  char culprits[600] = "";
   for (int d = 0; d < 3; d++) {
-    if (!bad[d] || !(least[d] < 0)) continue;
+    if (!bad[d]) continue;
     size_t used = strlen(culprits);
-    const char* const* keys = kStiffeningKeys[d] + 2 * least_side[d];
-    snprintf(culprits + used, sizeof(culprits) - used, "%s'%s' = %g and '%s' = %g give m%d = %g", used ? "; " : "",
-             keys[0], s->stiffening[d][2 * least_side[d]], keys[1], s->stiffening[d][2 * least_side[d] + 1], d,
-             least[d]);
+    if (least[d] < 0) {
+      const char* const* keys = kStiffeningKeys[d] + 2 * least_side[d];
+      snprintf(culprits + used, sizeof(culprits) - used, "%s'%s' = %g and '%s' = %g give m%d = %g", used ? "; " : "",
+               keys[0], s->stiffening[d][2 * least_side[d]], keys[1], s->stiffening[d][2 * least_side[d] + 1], d,
+               least[d]);
+      used = strlen(culprits);
+    }
+    if (softest[d] < 0) {
+      snprintf(culprits + used, sizeof(culprits) - used, "%s'%s' = %g", used ? "; " : "", kCompressionKeys[d],
+               s->compression[d]);
+    }
   }
-  mju_error(YF_NAME ": the stiffening terms make the membrane energy non-convex: S + D^T diag(m) D must be "
-            "positive definite, m_d the least phi_d'' (Pa), D from c01 = %g, c10 = %g; %s; then its 00 entry = %g, "
-            "11 entry = %g, determinant of the normal block = %g, 22 entry = %g", s->c01, s->c10, culprits, a, b, det, c);
+  // Kept short: the compiler cuts its error message at ~500 characters, and the keys come first.
+  mju_error(YF_NAME ": non-convex membrane energy: S + D^T diag(m) D + diag(min(q, 0)) must be positive "
+            "definite, m_d the least phi_d'', q_d the s<dd>c keys (Pa), D from c01 = %g, c10 = %g; %s; then its "
+            "00 entry = %g, 11 entry = %g, determinant of the normal block = %g, 22 entry = %g",
+            s->c01, s->c10, culprits, a, b, det, c);
   return -1;
 }
 
@@ -286,6 +310,8 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
       if (read_number(m, instance, kStiffeningKeys[d][k], 0, 0, &s->stiffening[d][k])) return -1;
       if (s->stiffening[d][k] != 0) s->stiffens = 1;
     }
+    if (read_number(m, instance, kCompressionKeys[d], 0, 0, &s->compression[d])) return -1;
+    if (s->compression[d] != 0) s->stiffens = 1;
   }
   const char* positive[] = {"s00", "s11", "s22", "b00", "b11", "b22", "thickness"};
   const double values[] = {s->s00, s->s11, s->s22, s->b00, s->b11, s->b22, s->thickness};
@@ -943,9 +969,10 @@ static void shell_destroy(mjData* d, int instance) {
   d->plugin_data[instance] = 0;
 }
 
-// Stress (N/m, Voigt) of the strain-stiffening terms at elastic strain eps and strain rate rate:
-// h D^T (phi'(y) + damping phi''(y) D rate), y = D eps, phi' = k2 y^2 + k3 y^3, phi'' = 2 k2 y + 3 k3 y^2,
-// (k2, k3) of the side of zero y_d lies on.
+// Stress (N/m, Voigt) of the strain-stiffening and compression terms at elastic strain eps and
+// strain rate rate: h D^T (phi'(y) + damping phi''(y) D rate), y = D eps, phi' = k2 y^2 + k3 y^3,
+// phi'' = 2 k2 y + 3 k3 y^2, (k2, k3) of the side of zero y_d lies on; plus, where eps_d < 0,
+// h q_d (eps_d + damping rate_d).
 static void stiffening_stress(const Shell* s, const double eps[3], const double rate[3], double stress[3]) {
   double y[3] = {eps[0] + s->c01 * eps[1], eps[1] + s->c10 * eps[0], eps[2]};
   double yrate[3] = {rate[0] + s->c01 * rate[1], rate[1] + s->c10 * rate[0], rate[2]};
@@ -960,6 +987,9 @@ static void stiffening_stress(const Shell* s, const double eps[3], const double 
   stress[0] = along[0] + s->c10 * along[1];  // D^T along
   stress[1] = s->c01 * along[0] + along[1];
   stress[2] = along[2];
+  for (int d = 0; d < 3; d++) {  // on eps itself, not y
+    if (eps[d] < 0) stress[d] += s->thickness * s->compression[d] * (eps[d] + s->damping * rate[d]);
+  }
 }
 
 // Deformation gradient of one triangle from its rest inverse Dinv and vertex positions x (3 x 3):
@@ -990,9 +1020,10 @@ static void green_strain(const double F[12], int damped, double eps[6]) {
 }
 
 // Membrane stress of a reference area `area` (m^2) at strain eps (6, with its rate): sig (3) =
-// area dW/deps for W = (1/2) eps^T C eps (plus the stiffening terms h sum_d phi_d(y_d)), with the
-// damping stress of the rate added: C times it (so the quadratic part's stress is evaluated at
-// eps + damping * rate) and the stiffening terms' tangent times it.
+// area dW/deps for W = (1/2) eps^T C eps (plus the stiffening and compression terms
+// h sum_d [phi_d(y_d) + (1/2) q_d min(eps_d, 0)^2]), with the damping stress of the rate added:
+// C times it (so the quadratic part's stress is evaluated at eps + damping * rate) and the
+// nonlinear terms' tangent times it.
 static void membrane_stress(const Shell* s, double area, const double eps[6], double sig[3]) {
   const double* c = s->membrane;
   // The quadratic part with its damping, as StVK: C (eps + damping * rate).
