@@ -528,7 +528,7 @@ SMALL_PULL = 1e-6
 SMALL_PULL_REL = 1e-3
 
 
-@pytest.mark.parametrize("material", [MATERIAL, STIFF], ids=["linear", "stiffening"])
+@pytest.mark.parametrize("material", [MATERIAL, STIFF, COMPRESSED], ids=["linear", "stiffening", "compression"])
 @pytest.mark.parametrize("angle", [0.0, 0.3, math.pi / 4, 1.2, math.pi / 2])
 def test_uniaxial_pull_at_small_strain_is_the_rotated_compliance(material, angle):
     stiffness, poisson = material.uniaxial_stiffness(angle)

@@ -431,8 +431,16 @@ def shell_curve(material, family: Family, parameters) -> tuple[np.ndarray, np.nd
     family = Family.named(family)
     if family.uniaxial_axis is not None:
         # The shell's own free width: the Schur complement, not the yarn-level sample's μ.
-        energy = [material.uniaxial_tension(family.uniaxial_axis, 1.0 + value)[1] for value in p]
-        return p, np.asarray(energy, dtype=np.float64)
+        energy = []
+        for value in p:
+            try:
+                energy.append(material.uniaxial_tension(family.uniaxial_axis, 1.0 + value)[1])
+            except ValueError:
+                # Beyond here no free width balances the pull (the width collapses: polyester
+                # satin's weft at 26 %, as its yarn-level sample at 40 % contracted past half its
+                # width): the curve ends there, as the tension figure's does.
+                break
+        return p[:len(energy)], np.asarray(energy, dtype=np.float64)
     forms = [family.deformation(value) for value in p]
     energy = material.energy_density(np.array([I for I, _ in forms]), np.array([II for _, II in forms]))
     return p, np.asarray(energy, dtype=np.float64)

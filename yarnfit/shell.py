@@ -31,6 +31,7 @@ with ``m = B κ``. A symmetric variation that changes both ``I_01`` and ``I_10``
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -560,7 +561,10 @@ class ShellMaterial:
         """The engineering constants every material report carries (units in the key).
 
         Stretch and shear stiffnesses are per unit width (N/m); the uniaxial ones leave the
-        transverse direction free. Bending rigidities (N·m) are ``B_dir`` with ``½ B_dir k²`` the
+        transverse direction free, which a small pull compresses when ``s01 > 0``: with compression
+        terms (:attr:`NonlinearMembrane.compression`) its tangent there is ``s11 + q1`` (``s00 + q0``
+        for a warp pull), :meth:`pull_tangent`. Shear is the positive side's, ``h s22`` (a negative
+        shear meets ``h (s22 + q2)``). Bending rigidities (N·m) are ``B_dir`` with ``½ B_dir k²`` the
         energy per area of a cylindrical bend of curvature ``k`` whose curvature direction is along
         weft, along warp, or at 45° (bias).
 
@@ -569,11 +573,13 @@ class ShellMaterial:
         """
         self._require_positive_definite("engineering constants", membrane=True, bending=True)
         h = self.thickness
+        across_weft = float(self.pull_tangent(0.0)[1, 1])  # s11, or s11 + q1 where the pull compresses it
+        across_warp = float(self.pull_tangent(0.5 * math.pi)[0, 0])
         return {
-            "weft_stretch_n_per_m": h * (self.s00 - self.s01**2 / self.s11),
-            "warp_stretch_n_per_m": h * (self.s11 - self.s01**2 / self.s00),
-            "poisson_weft": self.s01 / self.s11,
-            "poisson_warp": self.s01 / self.s00,
+            "weft_stretch_n_per_m": h * (self.s00 - self.s01**2 / across_weft),
+            "warp_stretch_n_per_m": h * (self.s11 - self.s01**2 / across_warp),
+            "poisson_weft": self.s01 / across_weft,
+            "poisson_warp": self.s01 / across_warp,
             "shear_n_per_m": h * self.s22,
             "bending_weft_nm": h**3 * self.b00,
             "bending_warp_nm": h**3 * self.b11,
@@ -600,12 +606,38 @@ class ShellMaterial:
         W = W + 0.5 * h**3 * np.einsum("...i,ij,...j->...", kap, self.B, kap)
         return float(W) if single else W
 
+    def pull_tangent(self, angle: float) -> np.ndarray:
+        """``(3, 3)`` (Pa): the small-strain tangent a pull at ``angle`` (rad) from weft meets, every
+        other stress free: ``S`` plus each compression term ``q_d`` whose strain that pull makes
+        negative. The law is piecewise linear at small strain (one piece per sign pattern of ε);
+        the pull's strain is the one pattern consistent with itself, which a convex membrane has
+        (its stress is a monotone function of its strain). Without compression terms, ``S``."""
+        S = self.S
+        q = np.zeros(3) if self.nonlinear is None else np.array(self.nonlinear.compression)
+        if not np.any(q):
+            return S
+        c, s = math.cos(angle), math.sin(angle)
+        load = np.array([c * c, s * s, c * s])
+        # Strains within round-off of zero may sit on either side (a pull along weft has no shear).
+        tolerance = 1e-12
+        for compressed in itertools.product((False, True), repeat=3):
+            tangent = S + np.diag(np.where(compressed, q, 0.0))
+            if not np.all(np.linalg.eigvalsh(tangent) > 0.0):
+                continue
+            eps = np.linalg.solve(tangent, load)
+            scale = tolerance * float(np.abs(eps).max())
+            if all((e <= scale) if k else (e >= -scale) for e, k in zip(eps, compressed)):
+                return tangent
+        raise ValueError(f"no small-strain state of a pull at {angle!r} rad is consistent with its compression terms "
+                         f"(a non-convex membrane?)")
+
     def uniaxial_stiffness(self, angle: float) -> tuple[float, float]:
         """Small-strain uniaxial stiffness (N/m) and Poisson ratio for a pull at ``angle`` (rad)
-        from weft, the transverse direction free: the rotated compliance of ``h S``. At 0 and π/2
-        these are ``weft_stretch_n_per_m``, ``poisson_weft`` and the warp ones."""
+        from weft, the transverse direction free: the rotated compliance of ``h`` times the pull's
+        tangent (:meth:`pull_tangent`: ``S``, with the compression terms the pull engages). At 0
+        and π/2 these are ``weft_stretch_n_per_m``, ``poisson_weft`` and the warp ones."""
         c, s = math.cos(angle), math.sin(angle)
-        compliance = np.linalg.inv(self.thickness * self.S)
+        compliance = np.linalg.inv(self.thickness * self.pull_tangent(angle))
         load = np.array([c * c, s * s, c * s])
         across = np.array([s * s, c * c, -c * s])
         along = float(load @ compliance @ load)
