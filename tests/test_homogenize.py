@@ -46,7 +46,6 @@ from yarnfit.samples import (
     levels_for,
     magnitudes,
     sample_design,
-    uniaxial_levels,
 )
 from yarnfit.yarn import YarnConstruction
 
@@ -175,7 +174,7 @@ def test_images_on_a_cylinder_are_rotations_about_its_axis():
 def test_the_design_samples_every_family_in_tension_and_compression_only_on_request():
     ranges = SampleRanges(stretch=0.2, curvature=100.0)
     design = sample_design(ranges, 3)
-    assert len(design) == design_size(3) == 1 + 3 * 13 + 4
+    assert len(design) == design_size(3) == 1 + 3 * 13 + 2
     assert {s.family for s in design} == set(FAMILIES)
     # First the undeformed sample, the energy reference of the others.
     assert design[0].family == "weft_stretch" and design[0].parameter == 0.0
@@ -184,9 +183,9 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
     strains = np.geomspace(SMALLEST_STRAIN, 0.2, 3)
     curvatures = np.geomspace(SMALLEST_CURVATURE, 100.0, 3)
     assert [s.parameter for s in design[1:] if s.family == "weft_stretch"] == pytest.approx(strains)
-    # Uniaxial tension at the middle level and the range; it starts from the pure stretch.
+    # Uniaxial tension at the middle level; it starts from the pure stretch.
     uniaxial = [s for s in design if s.family == "warp_uniaxial"]
-    assert [s.parameter for s in uniaxial] == pytest.approx(strains[1:3])
+    assert [s.parameter for s in uniaxial] == pytest.approx(strains[1:2])
     assert np.allclose(uniaxial[0].I, np.diag([1.0, (1.0 + strains[1]) ** 2]))
     for family, largest, values in (("shear", 0.2, strains), ("weft_bend", 100.0, curvatures),
                                     ("bias_bend", 100.0, curvatures), ("saddle_bend", 100.0, curvatures)):
@@ -202,8 +201,7 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
         SampleRanges(stretch=0.2, curvature=100.0, compression=-0.1)
     with pytest.raises(ValueError, match="at least 16"):
         levels_for(15)
-    assert [levels_for(n) for n in (16, 29, 44, 57)] == [1, 2, 3, 4]
-    assert uniaxial_levels(1) == (0,) and uniaxial_levels(2) == (1,) and uniaxial_levels(4) == (2, 3)
+    assert [levels_for(n) for n in (16, 29, 42, 55)] == [1, 2, 3, 4]
     assert levels_for(DEFAULT_SAMPLES) == DEFAULT_LEVELS
 
 

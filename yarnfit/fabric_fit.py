@@ -27,7 +27,7 @@ from .shell import ShellMaterial
 from .tasks import Backend
 
 # Four magnitudes per family and sign, from 0.1 % (1 /m) to the range, uniaxial tension at the
-# third and the fourth, and the undeformed sample (57 in all): the fewest that give each side of a direction its
+# third, and the undeformed sample (55 in all): the fewest that give each side of a direction its
 # tangent and two stiffening terms from more than three points (with the biaxial samples), at
 # about a second per small-strain sample.
 DEFAULT_LEVELS = 4
