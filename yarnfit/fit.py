@@ -34,14 +34,17 @@ the small-strain behaviour the StVK model is meant to capture.
 
 The strain-stiffening membrane (``membrane="nonlinear"``, the default; ``docs/design.md`` §3) adds
 per Voigt direction and strain sign the stress terms ``k2 ε² + k3 ε³`` (:data:`~yarnfit.shell.NONLINEAR_KEYS`)
-to a quadratic part ``S`` that is then the small-strain tangent. Its energy is still linear in its
-parameters; it is fitted to the *relative* energy error of every membrane sample (weight
-``1/Ū²``), so a sample at 0.1 % strain counts as much as one at the range and ``S`` is the
-tangent the small strains measure. A side (tension or compression, positive or negative shear)
-carries terms only if its own pure family has at least :data:`MIN_SIDE_SAMPLES` samples there;
-the others extrapolate with the tangent. The fit keeps the membrane convex in the Green strain at
-every strain (``S + diag(min φ'')`` positive definite, within the coupling bound), which the
-plugin checks again. The bending group is the linear fit's in both models.
+and, where a Voigt strain is negative, a tangent change ``q_d``
+(:data:`~yarnfit.shell.NONLINEAR_COMPRESSION_KEYS`) to a quadratic part ``S`` that is then the
+small-strain tangent in tension. Its energy is still linear in its parameters; it is fitted to the
+*relative* energy error of every membrane sample (weight ``1/Ū²``), so a sample at 0.1 % strain
+counts as much as one at the range and ``S`` is the tangent the small strains measure, and to a
+uniaxial sample's zero transverse stress. A side (tension or compression, positive or negative
+shear) carries terms only if its own pure family has at least :data:`MIN_SIDE_SAMPLES` samples
+there (a uniaxial sample compressing it counting twice); the others extrapolate with the tangent.
+The fit keeps the membrane convex in the Green strain at every strain (``S + Dᵀ diag(min φ'') D +
+diag(min(q, 0))`` positive definite, within the coupling bound), which the plugin checks again.
+The bending group is the linear fit's in both models.
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@
   ``friction``, and ``shrink``, ``repeat_size_m``, ``yarn_length_per_area_m_per_m2``,
   ``areal_density_kg_m2`` (of the relaxed repeat) and the relaxation's ``converged``,
   ``iterations``, ``residual`` and ``worst_overlap``;
-- ``shell``: ``thickness_m``, ``membrane_pa`` {s00, s01, s11, s22} (the small-strain tangent),
+- ``shell``: ``thickness_m``, ``membrane_pa`` {s00, s01, s11, s22} (the small-strain tangent in tension),
   ``bending_pa`` {b00, b01, b11, b22} and, for the strain-stiffening membrane, ``nonlinear``
   {``model``, ``stress_terms_pa``, ``stiffening_strain``, ``compression_pa``} (:attr:`MaterialFile.shell`
   reads it back, a file without ``compression_pa`` as having none; a reader that knows only StVK

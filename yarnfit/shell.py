@@ -414,7 +414,7 @@ class ShellMaterial:
         s00, s01, s11, s22: membrane stiffnesses (Pa), entries of ``S``.
         b00, b01, b11, b22: bending stiffnesses (Pa), entries of ``B``.
         nonlinear: the membrane's strain-stiffening terms, or ``None`` (StVK); ``S`` is the
-            small-strain tangent either way.
+            small-strain tangent either way (in tension, where the terms carry a compression side).
     """
 
     thickness: float
