@@ -50,6 +50,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ..mujoco.scenes import ClothMaterial, build_scene, compile_quietly
+from ..mujoco.split import DEFAULT_STIFFENING_BOUND
 from ..record import Recording, markdown_table
 from . import DIRECTIONS, SceneResult
 
@@ -145,7 +146,8 @@ def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bo
     if not levels:
         raise ValueError(f"max_strain must be at least {STRAIN_LEVELS[0]}, got {max_strain!r}")
     built = build_scene(material, "stretch", resolution=resolution or RESOLUTION[quick], size=length, width=width,
-                        angle=angle, max_strain=levels[-1], mesh=MESH, membrane=MEMBRANE)
+                        angle=angle, max_strain=levels[-1], mesh=MESH, membrane=MEMBRANE,
+                        stiffening_bound=max(DEFAULT_STIFFENING_BOUND, levels[-1]))
     model = compile_quietly(built.spec)
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
