@@ -41,7 +41,7 @@ small-strain tangent in tension. Its energy is still linear in its parameters; i
 counts as much as one at the range and ``S`` is the tangent the small strains measure, and to a
 uniaxial sample's zero transverse stress. A side (tension or compression, positive or negative
 shear) carries terms only if its own pure family has at least :data:`MIN_SIDE_SAMPLES` samples
-there (a uniaxial sample compressing it counting twice); the others extrapolate with the tangent.
+there; the others extrapolate with the tangent.
 The fit keeps the membrane convex in the Green strain at every strain (``S + Dᵀ diag(min φ'') D +
 diag(min(q, 0))`` positive definite, within the coupling bound), which the plugin checks again.
 The bending group is the linear fit's in both models.
@@ -91,8 +91,7 @@ MODELS = ("full", "paper")
 MEMBRANE_MODELS = ("nonlinear", "linear")
 # Samples a side of a direction (its pure family's tension or compression, positive or negative
 # shear) needs before it carries stiffening terms: the tangent and the two terms are three
-# unknowns along that side's curve. A uniaxial sample that compresses the direction across its
-# pull counts twice (its energy and its zero transverse stress).
+# unknowns along that side's curve.
 MIN_SIDE_SAMPLES = 3
 # Samples a direction needs with its Voigt strain negative before its compression-side term q_d
 # (NonlinearMembrane.compression) is fitted: one unknown, the tangent's change across zero strain.
@@ -746,10 +745,7 @@ def _stiffening_pass(samples, eps, target, h, linear, coupling_limit, residual, 
     for k, direction in enumerate(("s00", "s11", "s22")):
         family = _SIDE_FAMILY[direction]
         for side, sign in (("p", 1.0), ("n", -1.0)):
-            # Its pure family's samples on that side, and a uniaxial sample's energy and
-            # transverse-stress rows where the sample compresses it across the pull.
             count = sum(s.family == family and sign * s.parameter > 0.0 for s in samples)
-            count += 2 * sum(s.family.uniaxial_axis == 1 - k and sign * y[i, k] > 0.0 for i, s in enumerate(samples))
             if count < MIN_SIDE_SAMPLES:
                 continue
             names += [f"{direction}{side}2", f"{direction}{side}3"]
@@ -857,25 +853,9 @@ def _solve_nonlinear_membrane(
     unbounded = np.linalg.lstsq(As, b, rcond=None)[0] / norms
     floor = DIAGONAL_FLOOR_REL * max(float(np.max(unbounded[diagonal])), max(linear.s00, linear.s11, linear.s22))
     lower = np.where(diagonal, floor, np.where(cubic, 0.0, -np.inf))
-    upper = np.full(len(names), np.inf)
-    result = lsq_linear(As, b, bounds=(lower * norms, upper), method="bvls")
+    result = lsq_linear(As, b, bounds=(lower * norms, np.full(len(names), np.inf)), method="bvls")
     notes = []
     x = _drop_negligible_terms(result.x / norms, names, free_sides, strain_range, linear) if result.success else None
-    if x is not None and _nonlinear_problems(x, names, coupling_limit, coupling):
-        # A side whose quartic ended on its bound (0) while its cubic softens is concave without
-        # end: a side the data barely bend (a compressed side that is straight within the fit's
-        # round-off) gets there from noise. Such sides may only stiffen; a second bounded solve.
-        index = {n: k for k, n in enumerate(names)}
-        for _, direction, side in free_sides:
-            i2, i3 = index[f"{direction}{side}2"], index[f"{direction}{side}3"]
-            if x[i3] == 0.0 and (x[i2] < 0.0 if side == "p" else x[i2] > 0.0):
-                if side == "p":
-                    lower[i2] = 0.0
-                else:
-                    upper[i2] = 0.0
-        again = lsq_linear(As, b, bounds=(lower * norms, upper * norms), method="bvls")
-        if again.success:
-            x = _drop_negligible_terms(again.x / norms, names, free_sides, strain_range, linear)
     if x is not None and not _nonlinear_problems(x, names, coupling_limit, coupling):
         values = x
     else:

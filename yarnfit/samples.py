@@ -66,7 +66,7 @@ class Group(StrEnum):
 _TENSION_AND_COMPRESSION = "tension and compression"
 _TENSION = "tension"
 _BOTH_SIGNS = "both signs"
-_UNIAXIAL_TENSION = "the middle tension level"
+_MIDDLE_TENSION = "the middle tension level"
 
 
 def _stretched(axis: int | None):
@@ -126,8 +126,8 @@ class Family(StrEnum):
     BIAXIAL_STRETCH = ("biaxial_stretch", Group.MEMBRANE, "λ − 1", "", "s01", None, False, _TENSION, _stretched(None))
     SHEAR = ("shear", Group.MEMBRANE, "I12", "", "s22", None, False, _BOTH_SIGNS, _sheared)
     # The transverse stretch is found by the solve; the deformation is where its search starts.
-    WEFT_UNIAXIAL = ("weft_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0, True, _UNIAXIAL_TENSION, _stretched(0))
-    WARP_UNIAXIAL = ("warp_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 1, True, _UNIAXIAL_TENSION, _stretched(1))
+    WEFT_UNIAXIAL = ("weft_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0, True, _MIDDLE_TENSION, _stretched(0))
+    WARP_UNIAXIAL = ("warp_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 1, True, _MIDDLE_TENSION, _stretched(1))
     WEFT_BEND = ("weft_bend", Group.BENDING, "curvature", "1/m", "b00", None, False, _BOTH_SIGNS,
                  _bent(lambda e: np.diag([e, 0.0])))
     WARP_BEND = ("warp_bend", Group.BENDING, "curvature", "1/m", "b11", None, False, _BOTH_SIGNS,
@@ -404,7 +404,7 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
                 [[-ranges.compression * largest] if ranges.compression > 0 else [], values]),
             _TENSION: values,
             _BOTH_SIGNS: np.concatenate([-values[::-1], values]),
-            _UNIAXIAL_TENSION: values[uniaxial_level(levels):uniaxial_level(levels) + 1],
+            _MIDDLE_TENSION: values[uniaxial_level(levels):uniaxial_level(levels) + 1],
         }
         for family in FAMILIES:
             if family.group is group:
