@@ -159,3 +159,29 @@ def test_a_yarn_point_just_past_the_shells_measured_strain_is_compared_by_extens
     warp = compare_shell_yarn(stretch, yarn)["warp"]
     assert warp["strain"] == [0.05, 0.1]
     np.testing.assert_allclose(warp["shell_force_n_per_m"], [50.0 + 0.0005 / 0.0495 * 50, 100.0 + 0.001 / 0.0495 * 50])
+
+
+def _figures(summary: dict) -> dict:
+    """A scene summary without what differs between two identical runs: timings and file paths."""
+    return {key: value for key, value in summary.items()
+            if not any(word in key for word in ("seconds", "ms_per_step", "mesh", "path"))}
+
+
+def test_scenes_run_side_by_side_give_the_same_figures(tmp_path):
+    """Two workers (the command line's default on 2 cores) and one scene after another in this
+    process: the same figures, bit for bit (each scene is deterministic and runs alone in its
+    process), every scene's recording written, and the failure of a scene raised by the suite."""
+    from yarnfit.tasks import LocalPool
+    from yarnfit.validate.suite import run_suite
+
+    material = material_file(tmp_path)
+    scenes = ("cusick", "sphere")
+    alone, _ = run_suite(material, scenes, quick=True, logs=tmp_path / "alone")
+    with LocalPool(2) as backend:
+        side, path = run_suite(material, scenes, quick=True, logs=tmp_path / "side", backend=backend)
+    for scene in scenes:
+        assert _figures(side["scenes"][scene]) == _figures(alone["scenes"][scene])
+        assert (path.parent / f"{scene}.rrd").is_file() and side["wall_seconds"][scene] > 0
+    assert [v["passed"] for v in side["verdicts"]] == [v["passed"] for v in alone["verdicts"]]
+    with pytest.raises(ValueError, match="unknown scene 'drape'"):
+        run_suite(material, ("cusick", "drape"), quick=True, logs=tmp_path / "bad")

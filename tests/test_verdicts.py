@@ -75,7 +75,7 @@ def test_checks_of_scenes_not_run_are_not_listed():
 
 @pytest.mark.parametrize("strict, code", [(False, 0), (True, 1)])
 def test_strict_exits_1_when_a_check_fails(strict, code, monkeypatch, tmp_path, capsys):
-    summary = {"material": {"name": "woven"}, "wall_seconds": {"wall": 1.0},
+    summary = {"material": {"name": "woven"}, "scenes": {"wall": {}}, "wall_seconds": {"wall": 1.0},
                "verdicts": [v.to_dict() for v in verdicts(SUMMARY, "woven")]}
     monkeypatch.setattr(suite_module, "run_suite", lambda *a, **k: (summary, tmp_path / "summary.json"))
     argv = ["validate", str(tmp_path / "m.json"), "--scenes", "wall"] + (["--strict"] if strict else [])

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -211,6 +212,9 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--logs", default="logs", metavar="DIR", help="where recordings and summary.json go")
     validate.add_argument("--strict", action="store_true",
                           help="exit 1 when a check misses its criterion (each is printed as pass, FAIL or n/a)")
+    validate.add_argument("--workers", type=int, default=None, metavar="N",
+                          help="run the scenes side by side on N worker processes (default: one per core; "
+                               "1 runs them one after another in this process, each reporting its progress)")
     return parser
 
 
@@ -667,6 +671,7 @@ def _plural(count: int, noun: str) -> str:
 def cmd_validate(args: argparse.Namespace) -> int:
     from .validate import SCENES as VALIDATION_SCENES
     from .validate.reference import read_reference
+    from .tasks import LocalPool
     from .validate.suite import run_suite
     from .validate.verdicts import Verdict
 
@@ -681,8 +686,11 @@ def cmd_validate(args: argparse.Namespace) -> int:
     def progress(message: str) -> None:
         print(f"  {message}", file=sys.stderr, flush=True)
 
-    summary, path = run_suite(args.material, scenes, quick=args.quick, logs=args.logs, reference=reference,
-                              progress=progress)
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    with LocalPool(min(args.workers or os.cpu_count() or 1, len(scenes))) as backend:
+        summary, path = run_suite(args.material, scenes, quick=args.quick, logs=args.logs, reference=reference,
+                                  progress=progress, backend=backend)
     print(f"validated {summary['material']['name']}: {path}")
     if {"stretch", "yarn"} & set(summary.get("scenes", {})):  # the scenes with curves to draw
         from .plots import validation_figures
@@ -693,7 +701,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
         except ValueError as error:  # summary.json is written: say why the figures are not
             print(f"yarnfit validate: figures not drawn: {error_line(error)}", file=sys.stderr)
     for scene, seconds in summary["wall_seconds"].items():
-        print(f"  {scene:<8} {seconds:7.1f} s  {path.parent / (scene + '.rrd')}")
+        recording = path.parent / (scene + ".rrd") if scene in summary["scenes"] else ""
+        print(f"  {scene:<8} {seconds:7.1f} s  {recording}")
     results = [Verdict(**v) for v in summary["verdicts"]]
     for verdict in results:
         print(f"  {verdict.line()}")
