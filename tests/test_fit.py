@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -13,11 +14,13 @@ from yarnfit.engine import Residual
 from yarnfit.fit import (
     COUPLING_LIMIT,
     DIAGONAL_FLOOR_REL,
+    STRETCH_DOMINATED_SHARE,
     IndefiniteFitError,
     design_matrix,
     fit_residual_jacobian,
     fit_shell,
     sample_weights,
+    stretch_dominated_notes,
     weighted_residuals,
 )
 from yarnfit.samples import BENDING_FAMILIES, FAMILIES, MEMBRANE_FAMILIES, OPTIONAL_FAMILIES, SampleResult, SampleSpec
@@ -586,3 +589,35 @@ def test_sample_arrays_are_read_only_copies():
     assert result.I[0, 0] == 1.21
     with pytest.raises(ValueError):
         result.I[0, 0] = 2.0
+
+
+def test_a_uniaxial_sample_that_pulls_its_yarns_is_noted():
+    """A free-width pull whose rods store at least STRETCH_DOMINATED_SHARE of Ū in stretch gets a
+    note naming it, its share and its width; one that bends its yarns, a pure stretch (fixed width)
+    and a sample without a known share get none."""
+    I, II = forms("warp_uniaxial", 0.02)
+    residual = Residual(force=1e-10, torque=0.0, energy_change=0.0, penetration=0.0)
+    jammed = SampleResult(SampleSpec("warp_uniaxial", I, II, 0.02), 6.8, True, residual, stretch_share=0.98)
+    notes = stretch_dominated_notes([jammed])
+    assert len(notes) == 1 and "warp_uniaxial sample at 2 %" in notes[0] and "98 %" in notes[0]
+    assert f"width {1 - 0.2 * 0.02:.3f}" in notes[0] and "warp stiffness is the yarn's" in notes[0]
+    bending = dataclasses.replace(jammed, stretch_share=STRETCH_DOMINATED_SHARE * 0.99)
+    unknown = dataclasses.replace(jammed, stretch_share=math.nan)
+    I, II = forms("warp_stretch", 0.02)
+    fixed_width = SampleResult(SampleSpec("warp_stretch", I, II, 0.02), 6.8, True, residual, stretch_share=0.98)
+    assert stretch_dominated_notes([bending, unknown, fixed_width]) == []
+
+
+@pytest.mark.parametrize("share", [math.nan, 0.0, 0.42, 1.0])
+def test_the_stretch_share_reads_back_and_bad_ones_are_refused(share):
+    I, II = forms("weft_uniaxial", 0.05)
+    result = SampleResult(SampleSpec("weft_uniaxial", I, II, 0.05), 1.0, True,
+                          Residual(1e-10, 0.0, 0.0, 0.0), stretch_share=share)
+    data = json.loads(json.dumps(result.to_dict()))
+    back = SampleResult.from_dict(data)
+    assert back.stretch_share == pytest.approx(share, nan_ok=True)
+    del data["stretch_share"]  # a file written before the share was kept
+    assert math.isnan(SampleResult.from_dict(data).stretch_share)
+    for bad in (-0.1, 1.5):
+        with pytest.raises(ValueError, match="stretch_share must lie in"):
+            dataclasses.replace(result, stretch_share=bad)

@@ -412,6 +412,31 @@ def fit_residual_jacobian(
     return r, J
 
 
+# A uniaxial (free-width) sample whose rods store at least this share of Ū in centreline stretch
+# and shear is reported: its structure did not give way, its yarns were pulled. Measured at 2 %
+# (session 28): pulls that give way by bending store 0.3–8 % there (every jersey's course-wise
+# pull, cotton jersey's wale-wise one, the twill's weft), jammed ones 83–98 % (wool and polyester
+# jersey along the wales, where four rigid yarn diameters already fill a wale; the twill's warp).
+STRETCH_DOMINATED_SHARE = 0.5
+
+
+def stretch_dominated_notes(samples: Sequence[SampleResult]) -> list[str]:
+    """One note per uniaxial sample that pulled its yarns rather than bending them (stretch share
+    at least :data:`STRETCH_DOMINATED_SHARE`; samples without a known share are skipped)."""
+    notes = []
+    for sample in samples:
+        axis = sample.family.uniaxial_axis
+        if axis is None or not sample.converged or not sample.stretch_share >= STRETCH_DOMINATED_SHARE:
+            continue
+        across = float(np.sqrt(sample.I[1 - axis, 1 - axis]))
+        notes.append(f"the {sample.family} sample at {100 * sample.parameter:.3g} % stores "
+                     f"{100 * sample.stretch_share:.0f} % of its energy in stretching the yarn (width {across:.3f}): "
+                     f"the structure is jammed across the pull and the yarn itself is pulled, so the fitted "
+                     f"{'weft' if axis == 0 else 'warp'} stiffness is the yarn's (rigid yarn cross-sections: "
+                     f"docs/design.md §4)")
+    return notes
+
+
 def fit_shell(
     samples: Iterable[SampleResult],
     thickness: float,
@@ -614,6 +639,7 @@ def fit_shell(
         std_error = {**std_error, **errors}
         material = ShellMaterial(h, **parameters, nonlinear=stiffening)
         notes += membrane_notes
+    notes += stretch_dominated_notes(used)
     fitted = predicted(material, rest_stress)
     return ShellFit(
         material=material,

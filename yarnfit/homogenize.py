@@ -42,7 +42,7 @@ from .engine.model import aligned_frames
 from .engine.rotations import rotate_frames
 from .engine.tiling import CurvedTiling, retile
 from .relax import RelaxedRepeat, yarn_centroid_constraints
-from .samples import SampleRanges, SampleResult, SampleSpec
+from .samples import SampleRanges, SampleResult, SampleSpec, stretch_share
 from .shell import as_first_fundamental_form, as_second_fundamental_form
 from .tasks import Backend, LocalPool, Task, run_tasks
 
@@ -272,6 +272,7 @@ def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticO
         iterations=iterations,
         seconds=time.perf_counter() - start,
         position=result.state.node_position,
+        stretch_share=stretch_share(result.energy),
     )
 
 
@@ -526,6 +527,7 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
         iterations=iterations,
         seconds=time.perf_counter() - start,
         position=result.state.node_position,
+        stretch_share=stretch_share(result.energy),
     )
 
 

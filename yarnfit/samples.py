@@ -42,6 +42,7 @@ __all__ = [
     "levels_for",
     "magnitudes",
     "sample_design",
+    "stretch_share",
     "uniaxial_level",
 ]
 
@@ -217,13 +218,28 @@ class SampleSpec:
         return self.family.group is Group.MEMBRANE
 
 
+# A stretch share may exceed 1 by round-off when bending and twist hold nothing (a straight yarn).
+STRETCH_SHARE_SLACK = 1e-9
+
+
+def stretch_share(terms) -> float:
+    """Fraction of the rods' internal energy in stretch and shear (``terms``: an
+    :class:`~yarnfit.engine.EnergyTerms`); NaN for a zero or negative total."""
+    internal = terms.internal
+    return (terms.stretch + terms.shear) / internal if internal > 0.0 else math.nan
+
+
 @dataclass(frozen=True, eq=False)
 class SampleResult:
     """A solved sample: its ``spec`` (for a uniaxial family, with the transverse stretch found),
     ``energy_density`` Ū (J/m² of reference area; NaN only if not ``converged``), ``converged``,
     the solver's ``residual`` (:class:`~yarnfit.engine.Residual`; NaN only if not converged: no
-    state was reached), ``iterations`` (Newton iterations of every solve), wall ``seconds`` and the
-    final node positions ``position (N, 3)`` (m; ``None`` when not kept).
+    state was reached), ``iterations`` (Newton iterations of every solve), wall ``seconds``, the
+    final node positions ``position (N, 3)`` (m; ``None`` when not kept) and ``stretch_share``, the
+    fraction of Ū the rods store in stretching and shearing their centrelines (the rest is bending
+    and twist; NaN when unknown: no state, a zero Ū, or a file written before it was kept). A
+    knit's or a woven's structure gives way by bending its yarns; a share near 1 at a small strain
+    says the structure is jammed and the yarn itself is pulled (``docs/design.md`` §4).
 
     Non-converged samples are reported and never fitted. ValueError names the field at fault."""
 
@@ -234,6 +250,7 @@ class SampleResult:
     iterations: int = 0
     seconds: float = 0.0
     position: np.ndarray | None = None
+    stretch_share: float = math.nan
 
     def __post_init__(self) -> None:
         if not isinstance(self.spec, SampleSpec):
@@ -252,8 +269,12 @@ class SampleResult:
                 raise ValueError(f"SampleResult.residual.{name} must be finite for a converged sample, got {value!r}")
             if value < 0.0:
                 raise ValueError(f"SampleResult.residual.{name} must be >= 0, got {value!r}")
+        share = real_number(self.stretch_share, "SampleResult.stretch_share")
+        if not (math.isnan(share) or 0.0 <= share <= 1.0 + STRETCH_SHARE_SLACK):
+            raise ValueError(f"SampleResult.stretch_share must lie in [0, 1] or be NaN, got {share!r}")
         object.__setattr__(self, "converged", converged)
         object.__setattr__(self, "energy_density", energy)
+        object.__setattr__(self, "stretch_share", share)
 
     # The spec's fields, read through (the fit and the recording work with results).
     @property
@@ -297,6 +318,7 @@ class SampleResult:
                 ("penetration", r.penetration))},
             "iterations": self.iterations,
             "seconds": self.seconds,
+            "stretch_share": _finite_or_none(self.stretch_share),
         }
 
     @classmethod
@@ -322,7 +344,8 @@ class SampleResult:
             return cls(spec, number(data["energy_density_j_m2"], "energy_density_j_m2"), data["converged"],
                        Residual(*(number(residual.get(key), f"residual.{key}")
                                   for key in ("force", "torque", "energy_change", "penetration"))),
-                       int(data.get("iterations", 0)), float(data.get("seconds", 0.0)))
+                       int(data.get("iterations", 0)), float(data.get("seconds", 0.0)),
+                       stretch_share=number(data.get("stretch_share"), "stretch_share"))
         except (TypeError, ValueError) as exc:
             message = str(exc)
             raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None

@@ -128,7 +128,8 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
         tasks.append(Task("like_swatch", like_swatch_task, (str(material_path), Result("yarn"), quick),
                           cost=LIKE_SWATCH_COST, cached=False, label="shell strips of the yarn swatch's proportions"))
     if progress and not in_process:
-        progress(f"{len(tasks)} tasks on {getattr(backend, 'workers', None) or 'the cluster'}'s workers: "
+        workers = getattr(backend, "workers", None)
+        progress(f"{len(tasks)} tasks on {f'{workers} worker processes' if workers else 'the cluster'}: "
                  + ", ".join(task.label for task in tasks))
 
     def done(task, outcome, count, total):
