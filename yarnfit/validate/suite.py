@@ -12,9 +12,10 @@ strips (``fab_8x5``), both by :func:`compare_shell_yarn`; with ``stretch``,
 The scenes are independent (each reads the material file and writes its own recording), so they
 run as tasks of :mod:`yarnfit.tasks` on a :class:`~yarnfit.tasks.Backend`: one at a time in this
 process by default, or side by side on worker processes (``yarnfit validate`` uses every core).
-On 2 cores the full suite of the cotton twill took 600 s one scene after another and 3xx s two at a
-time (session 28, ``yarnfit validate``); the figures are the same numbers either way, each scene
-being a deterministic computation of its own.
+On 2 cores the cotton twill's full suite took 613.5 s one scene after another and 407.7 s two at a
+time (session 28, ``yarnfit validate --workers 1`` against the default); every figure of the two
+summaries was the same, each scene being a deterministic computation of its own. Two scenes at once
+run ~1.5× slower each (stretch 204 → 291 s, yarn 183 → 282 s): they share the memory bus.
 """
 
 from __future__ import annotations
