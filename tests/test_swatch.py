@@ -13,7 +13,8 @@ import rerun as rr
 import yarnfit.validate.swatch as swatch_module
 from yarnfit.engine import Rod, RodMaterial, RodModel
 from yarnfit.engine.tiling import cut_rectangle
-from yarnfit.validate.swatch import STRAIN_TIMELINE, cut_swatch, stretch_repeat, stretch_swatch
+from yarnfit.validate.swatch import (STRAIN_TIMELINE, cut_swatch, edge_draw_in, free_side_ends, stretch_repeat,
+                                     stretch_swatch)
 
 E = 1e9  # Pa
 RADIUS = 1e-4  # m
@@ -118,6 +119,29 @@ def test_bias_strip_rotates_the_repeat():
     edge /= np.linalg.norm(edge, axis=1, keepdims=True)
     assert np.allclose(np.abs(edge[:, 0]), math.sqrt(0.5), atol=1e-12)
     assert np.allclose(edge[:, 0] * edge[:, 1], -0.5, atol=1e-12)
+
+
+def test_edge_draw_in_is_what_the_narrowing_does_not_explain():
+    # A warp strip of straight wefts: every weft piece crosses it with both ends cut at the long
+    # sides. Narrowed uniformly, the ends sit where the narrowing puts them (no draw-in); moved in
+    # by a further 20 µm, they are drawn in by exactly that. A weft strip's yarns end in the jaws.
+    model, material = straight_weft_repeat()
+    swatch = cut_swatch(model, model.node_rest_position, material, direction="warp", gauge=4 * PY, width=3 * PX,
+                        clamp=PY)
+    ends = free_side_ends(swatch)
+    assert len(ends) >= 4 and not swatch.model.node_pinned[ends].any()
+    rest = swatch.position
+    centre = 0.5 * (rest[:, 1].max() + rest[:, 1].min())
+    narrowed = rest.copy()
+    narrowed[:, 1] = centre + 0.9 * (rest[:, 1] - centre)
+    assert edge_draw_in(swatch, rest, 1.0) == 0.0
+    assert edge_draw_in(swatch, narrowed, 0.9) == pytest.approx(0.0, abs=1e-18)
+    drawn = narrowed.copy()
+    drawn[ends, 1] -= np.sign(rest[ends, 1] - centre) * 20e-6
+    assert edge_draw_in(swatch, drawn, 0.9) == pytest.approx(20e-6, rel=1e-9)
+    weft = cut_swatch(model, model.node_rest_position, material, direction="weft", gauge=4 * PX, width=2 * PY,
+                      clamp=PX)
+    assert len(free_side_ends(weft)) == 0 and math.isnan(edge_draw_in(weft, weft.position, 1.0))
 
 
 def test_small_weave_balances_with_contacts():

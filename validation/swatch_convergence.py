@@ -12,9 +12,13 @@ has to be.
         [--directions weft,warp,bias] [--json OUT.json] [--from-json A.json,B.json]
 
 The force and width measured at mid-length converge as the cut loops at the long sides and the
-jaws' constraint become a smaller part of the strip; the table shows how fast.
+jaws' constraint become a smaller part of the strip; the table shows how fast. Its edge draw-in
+(:func:`yarnfit.validate.swatch.edge_draw_in`) is how far the yarn ends cut at the long sides have
+slid in beyond the strip's narrowing: yarn a frictionless cut strip feeds to its loops from its
+free ends, which a periodic repeat cannot.
 
-Then the material's shell, nonlinear and linear, against the largest strip of each direction
+Then the material's shell (nonlinear) and its linear fit from the same samples (``fit.linear``)
+against the largest strip of each direction
 (issue 14's acceptance): a long strip of the shell pulled at the strip's angle with every other
 stress free (:meth:`yarnfit.shell.ShellMaterial.uniaxial_pull`), force per width and width ratio
 at each strain, with a verdict (force within SHELL_FORCE_RTOL, width within
@@ -89,7 +93,13 @@ def convergence_row(curve: dict) -> str:
     return (f"| {curve['direction']} | {gauge:g} × {width:g} | {curve['nodes']} | "
             + " | ".join(f"{p['force_n_per_m']:.4g}" for p in points) + " | "
             + " | ".join(f"{p['compression_ratio']:.3f}" for p in points) + " | "
+            + " | ".join(_micrometres(p.get("edge_draw_in_m")) for p in points) + " | "
             + f"{max(p['seconds'] for p in points):.1f} | {'yes' if curve['converged'] else 'NO'} |")
+
+
+def _micrometres(value) -> str:
+    """A length in µm for the table; '—' where it is not known (no end cut there, or an older run)."""
+    return "—" if value is None else f"{1e6 * value:.3g}"
 
 
 def shell_rows(file: MaterialFile, curves: dict) -> tuple[list[str], bool]:
@@ -99,7 +109,7 @@ def shell_rows(file: MaterialFile, curves: dict) -> tuple[list[str], bool]:
     for curve in curves.values():
         if curve["nodes"] > largest.get(curve["direction"], {"nodes": -1})["nodes"]:
             largest[curve["direction"]] = curve
-    shells = {"nonlinear": file.shell, "linear": file.shell.linear}
+    shells = {"nonlinear": file.shell, "linear": file.linear_shell}  # the linear (StVK) fit from the same samples
     rows, passed = [], True
     for direction, curve in largest.items():
         angle = math.radians(curve["angle_deg"])
@@ -149,8 +159,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
     strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
     print(f"\n| direction | repeats (gauge × width) | nodes | N/m at {strains} | compression at {strains} "
-          f"| slowest strain (s) | converged |")
-    print("|" + "---|" * 11)
+          f"| edge draw-in (µm) at {strains} | slowest strain (s) | converged |")
+    print("|" + "---|" * (5 + 3 * len(STRAINS)))
     order = sorted(curves.values(), key=lambda c: (c["direction"], c["nodes"]))
     print("\n".join(convergence_row(curve) for curve in order))
     rows, passed = shell_rows(file, curves)

@@ -32,7 +32,9 @@ Outputs per direction and strain:
   30° from it), plus one diameter (:func:`mid_width`; yarns lying along the plane and their loose
   cut ends at the long sides do not count);
   ``extent_ratio`` the same from every node within a quarter width of mid-length
-  (:func:`extent_width`: cut ends splaying out count).
+  (:func:`extent_width`: cut ends splaying out count); ``edge_draw_in_m`` how far the yarn ends cut
+  at the long sides lie inside where the strip's narrowing puts them (:func:`edge_draw_in`: yarn
+  slid in from the sides; null where none is cut in the middle half of the gauge).
 - the solver's residuals, iterations and wall time.
 
 Recording (:class:`SwatchRecording`, one ``rr.RecordingStream`` per file as in
@@ -205,6 +207,38 @@ def extent_width(swatch: Swatch, position: np.ndarray, band: float) -> float:
     return float(y.max() - y.min() + 2.0 * swatch.radius)
 
 
+def free_side_ends(swatch: Swatch) -> np.ndarray:
+    """Indices of the yarn ends cut at the long sides within the middle half of the gauge (where
+    :func:`mid_width` measures): the first and last node of every piece, unpinned, at rest within a
+    quarter gauge of mid-length."""
+    model = swatch.model
+    ends = np.unique(np.concatenate([model.rod_node_start[:-1], model.rod_node_start[1:] - 1]))
+    ends = ends[~model.node_pinned[ends]]
+    x = swatch.position[ends, 0]
+    mid = 0.5 * (swatch.position[swatch.moving, 0].min() + swatch.position[swatch.fixed, 0].max())
+    return ends[np.abs(x - mid) <= 0.25 * swatch.gauge]
+
+
+def edge_draw_in(swatch: Swatch, position: np.ndarray, compression_ratio: float) -> float:
+    """Mean distance (m) the yarn ends cut at the long sides (:func:`free_side_ends`) lie inside
+    where the strip's narrowing alone puts them: each end's rest offset from the strip's centre
+    line, scaled by ``compression_ratio``, against its offset now. Positive: yarn has slid in from
+    the cut sides (a frictionless cut knit feeds its loops from its free ends, which no periodic
+    repeat can). NaN when no end is cut there."""
+    ends = free_side_ends(swatch)
+    if len(ends) == 0:
+        return math.nan
+    rest_y = swatch.position[:, 1]
+    centre = 0.5 * (rest_y.max() + rest_y.min())
+    offset = rest_y[ends] - centre
+    return float(np.mean(np.sign(offset) * (compression_ratio * offset - (position[ends, 1] - centre))))
+
+
+def _finite_or_none(value: float) -> float | None:
+    """``value``, or ``None`` (JSON null) when it is NaN."""
+    return None if math.isnan(value) else value
+
+
 def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                    options: QuasiStaticOptions | None = None, width_band: float | None = None,
                    on_step: Callable[[int, float, np.ndarray, dict], None] | None = None,
@@ -227,8 +261,9 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     state = RodState.from_model(model)
     jaw0 = -swatch.gauge / 2
     points = [{"strain": 0.0, "force_n_per_m": 0.0, "fixed_force_n_per_m": 0.0, "rod_force_n_per_m": 0.0,
-               "compression_ratio": 1.0, "extent_ratio": 1.0, "width_m": width0, "converged": True, "iterations": 0, "seconds": 0.0,
-               "residual": None}]
+               "compression_ratio": 1.0, "extent_ratio": 1.0, "width_m": width0,
+               "edge_draw_in_m": 0.0 if len(free_side_ends(swatch)) else None, "converged": True, "iterations": 0,
+               "seconds": 0.0, "residual": None}]
     if on_step is not None:
         on_step(0, 0.0, rest, points[0])
     previous = 0.0
@@ -261,6 +296,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "compression_ratio": width / width0,
             "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
             "width_m": width,
+            "edge_draw_in_m": _finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
             "converged": bool(result.converged),
             "iterations": int(result.iterations),
             "seconds": time.perf_counter() - start,
