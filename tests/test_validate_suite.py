@@ -170,15 +170,21 @@ def _figures(summary: dict) -> dict:
 def test_scenes_run_side_by_side_give_the_same_figures(tmp_path):
     """Two workers (the command line's default on 2 cores) and one scene after another in this
     process: the same figures, bit for bit (each scene is deterministic and runs alone in its
-    process), every scene's recording written, and the failure of a scene raised by the suite."""
+    process), every scene's recording written and its progress forwarded, and an unknown scene
+    refused."""
     from yarnfit.tasks import LocalPool
     from yarnfit.validate.suite import run_suite
 
     material = material_file(tmp_path)
     scenes = ("cusick", "sphere")
     alone, _ = run_suite(material, scenes, quick=True, logs=tmp_path / "alone")
+    lines = []
     with LocalPool(2) as backend:
-        side, path = run_suite(material, scenes, quick=True, logs=tmp_path / "side", backend=backend)
+        side, path = run_suite(material, scenes, quick=True, logs=tmp_path / "side", backend=backend,
+                               progress=lines.append)
+    # The workers' own progress reaches the caller, each line naming its scene.
+    assert any(line.startswith("cusick drape:") for line in lines)
+    assert any(line.startswith("sphere drape:") for line in lines)
     for scene in scenes:
         assert _figures(side["scenes"][scene]) == _figures(alone["scenes"][scene])
         assert (path.parent / f"{scene}.rrd").is_file() and side["wall_seconds"][scene] > 0

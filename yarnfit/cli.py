@@ -214,7 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
                           help="exit 1 when a check misses its criterion (each is printed as pass, FAIL or n/a)")
     validate.add_argument("--workers", type=int, default=None, metavar="N",
                           help="run the scenes side by side on N worker processes (default: one per core; "
-                               "1 runs them one after another in this process, each reporting its progress)")
+                               "1 runs them one after another in this process)")
     return parser
 
 

@@ -22,7 +22,10 @@ from __future__ import annotations
 
 import json
 import math
+import multiprocessing
+import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable
 
@@ -71,8 +74,8 @@ LIKE_SWATCH_COST = 75.0
 def run_scene(material_path: str | Path, scene: str, quick: bool, folder: Path, reference=None,
               progress: Callable[[str], None] | None = None) -> tuple[dict, float]:
     """One scene of the suite on the material file: its summary and wall time (s). A task's
-    function (module level, picklable arguments but ``progress``, which only an in-process run
-    passes)."""
+    function (module level, picklable arguments; ``progress`` a picklable
+    :class:`ForwardedProgress` on worker processes)."""
     file = MaterialFile.read(material_path)
     if progress:
         progress(f"{scene}: running")
@@ -99,14 +102,54 @@ def like_swatch_task(material_path: str | Path, yarn: tuple[dict, float], quick:
     return like, time.perf_counter() - start
 
 
+class ForwardedProgress:
+    """A scene's progress callback in a worker process: each line goes, prefixed with the scene,
+    onto a queue the parent prints from (a ``multiprocessing.Manager`` queue: picklable, so it
+    reaches forked and spawned workers alike)."""
+
+    def __init__(self, queue, scene: str):
+        self.queue, self.scene = queue, scene
+
+    def __call__(self, message: str) -> None:
+        self.queue.put(message if message.startswith(self.scene) else f"{self.scene}: {message}")
+
+
+@contextmanager
+def _forwarded_progress(progress: Callable[[str], None] | None, backend: Backend):
+    """``None`` where progress cannot or need not be forwarded (no callback, scenes in this
+    process, or a cluster whose workers cannot reach this machine's queue); otherwise a queue of
+    the workers' lines, printed through ``progress`` by a thread here until the block ends."""
+    if progress is None or not isinstance(backend, LocalPool) or backend.workers == 1:
+        yield None
+        return
+    manager = multiprocessing.Manager()
+    try:
+        queue = manager.Queue()
+
+        def drain():
+            while (line := queue.get()) is not None:
+                progress(line)
+
+        printer = threading.Thread(target=drain, name="yarnfit-suite-progress", daemon=True)
+        printer.start()
+        try:
+            yield queue
+        finally:
+            queue.put(None)
+            printer.join(timeout=5.0)
+    finally:
+        manager.shutdown()
+
+
 def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, logs: str | Path = "logs",
               reference=None, progress: Callable[[str], None] | None = None,
               backend: Backend | None = None) -> tuple[dict, Path]:
     """Run ``scenes`` on the material file; returns the summary and the path of ``summary.json``.
 
-    ``backend`` runs the scenes (default: one after another in this process, each reporting its own
-    progress; on worker processes only each scene's start and end are reported). The first scene
-    that fails raises its exception once the others have finished."""
+    ``backend`` runs the scenes (default: one after another in this process). Each scene reports its
+    own progress, prefixed with its name when it runs on a local worker process (a cluster's
+    workers report only each scene's end). The first scene that fails raises its exception once the
+    others have finished."""
     unknown = [scene for scene in scenes if scene not in SCENES]
     if unknown:
         raise ValueError(f"unknown scene {unknown[0]!r}; scenes: {', '.join(SCENES)}")
@@ -121,17 +164,6 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
                "quick": quick, "scenes": {}, "wall_seconds": {}}
     backend = LocalPool(1) if backend is None else backend
     in_process = isinstance(backend, LocalPool) and backend.workers == 1
-    tasks = [Task(scene, run_scene, (str(material_path), scene, quick, folder, reference,
-                                     progress if in_process else None),
-                  cost=SCENE_COST.get(scene, 0.0), cached=False, label=scene)
-             for scene in scenes]
-    if "stretch" in scenes and "yarn" in scenes:
-        tasks.append(Task("like_swatch", like_swatch_task, (str(material_path), Result("yarn"), quick),
-                          cost=LIKE_SWATCH_COST, cached=False, label="shell strips of the yarn swatch's proportions"))
-    if progress and not in_process:
-        workers = getattr(backend, "workers", None)
-        progress(f"{len(tasks)} tasks on {f'{workers} worker processes' if workers else 'the cluster'}: "
-                 + ", ".join(task.label for task in tasks))
 
     def done(task, outcome, count, total):
         if not progress:
@@ -141,7 +173,23 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
         else:
             progress(f"{task.label}: done in {outcome[1]:.1f} s ({count}/{total})")
 
-    outcomes = run_tasks(tasks, backend, on_done=done)
+    with _forwarded_progress(progress, backend) as queue:
+        def scene_progress(scene: str):
+            if in_process:
+                return progress
+            return None if queue is None else ForwardedProgress(queue, scene)
+
+        tasks = [Task(scene, run_scene, (str(material_path), scene, quick, folder, reference, scene_progress(scene)),
+                      cost=SCENE_COST.get(scene, 0.0), cached=False, label=scene)
+                 for scene in scenes]
+        if "stretch" in scenes and "yarn" in scenes:
+            tasks.append(Task("like_swatch", like_swatch_task, (str(material_path), Result("yarn"), quick),
+                              cost=LIKE_SWATCH_COST, cached=False, label="shell strips of the yarn swatch's proportions"))
+        if progress and not in_process:
+            workers = getattr(backend, "workers", None)
+            progress(f"{len(tasks)} tasks on {f'{workers} worker processes' if workers else 'the cluster'}: "
+                     + ", ".join(task.label for task in tasks))
+        outcomes = run_tasks(tasks, backend, on_done=done)
     failed = [outcomes[task.key] for task in tasks if isinstance(outcomes[task.key], BaseException)]
     first = next((error for error in failed if not isinstance(error, SkippedTask)), None)
     if first is not None:
