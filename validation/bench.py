@@ -1,7 +1,7 @@
 """Benchmarks of yarnfit, one section per stage.
 
     python validation/bench.py [engine] [relax] [fit] [mujoco] [plugin_nonlinear_stable_step] [swatch]
-                               [drape_stable_step] [body]
+                               [drape_stable_step] [body] [suite]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -653,9 +653,41 @@ def bench_body() -> None:
         report(f"body_{scale}_plugin_over_native", cost["plugin"] / cost["native"], "x")
 
 
+def bench_suite() -> None:
+    """``yarnfit validate``'s full suite on the cotton twill (fitted here with the default design):
+    wall time of each scene and of the whole suite with the scenes side by side on every core (the
+    command line's default) and one after another in this process, in the same run, and their
+    ratio (issue 14's target: the full suite of one material under 10 minutes). About 17 minutes on
+    2 cores."""
+    import tempfile
+    import warnings
+    from pathlib import Path
+
+    from yarnfit.fabric import Fabric
+    from yarnfit.fabric_fit import fit_fabric
+    from yarnfit.tasks import LocalPool
+    from yarnfit.validate.suite import run_suite
+
+    with warnings.catch_warnings(), tempfile.TemporaryDirectory() as folder:
+        warnings.simplefilter("ignore")
+        material = fit_fabric(Fabric.preset("cotton-twill")).write(Path(folder) / "cotton-twill.json")
+        total = {}
+        for variant, workers in (("side_by_side", None), ("one_after_another", 1)):
+            start = time.perf_counter()
+            with LocalPool(workers) as backend:
+                summary, _ = run_suite(material, logs=Path(folder) / variant, backend=backend)
+            total[variant] = time.perf_counter() - start
+            for scene, seconds in summary["wall_seconds"].items():
+                report(f"suite_cotton_twill_{variant}_{scene}_seconds", seconds, "s")
+            report(f"suite_cotton_twill_{variant}_seconds", total[variant],
+                   f"s ({backend.workers} worker{'s' if backend.workers > 1 else ''})")
+        report("suite_cotton_twill_side_by_side_over_one_after_another",
+               total["side_by_side"] / total["one_after_another"], "x")
+
+
 SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco,
             "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step, "swatch": bench_swatch,
-            "drape_stable_step": bench_drape_stable_step, "body": bench_body}
+            "drape_stable_step": bench_drape_stable_step, "body": bench_body, "suite": bench_suite}
 
 
 def main(argv: list[str] | None = None) -> int:
