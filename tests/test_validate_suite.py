@@ -191,3 +191,38 @@ def test_scenes_run_side_by_side_give_the_same_figures(tmp_path):
     assert [v["passed"] for v in side["verdicts"]] == [v["passed"] for v in alone["verdicts"]]
     with pytest.raises(ValueError, match="unknown scene 'drape'"):
         run_suite(material, ("cusick", "drape"), quick=True, logs=tmp_path / "bad")
+
+
+def test_ctrl_c_stops_scenes_running_side_by_side(tmp_path):
+    """Ctrl-C in a terminal (SIGINT to the whole process group) while two scenes run on worker
+    processes: exit 130 within STOP_SECONDS with one line and no traceback, no process of the run
+    left (workers, the progress queue's manager), no summary and no part-written recording."""
+    import os
+    import signal
+    import time
+
+    from test_tasks import STOP_SECONDS, checkout_env, default_sigint
+
+    material = material_file(tmp_path)
+    logs = tmp_path / "logs"
+    command = [sys.executable, "-m", "yarnfit.cli", "validate", str(material), "--scenes", "sphere,wall",
+               "--logs", str(logs), "--workers", "2"]
+    run = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                           env=checkout_env(), preexec_fn=default_sigint, start_new_session=True)
+    for line in run.stderr:  # the first line a worker forwards: both scenes are running
+        if "drape:" in line:
+            break
+    else:
+        pytest.fail("the suite ended before its scenes reported")
+    helpers = subprocess.run(["pgrep", "-P", str(run.pid)], capture_output=True, text=True).stdout.split()
+    assert len(helpers) >= 3  # two workers and the manager
+    start = time.perf_counter()
+    os.killpg(run.pid, signal.SIGINT)
+    rest = run.stderr.read()
+    assert run.wait(timeout=10) == 130
+    assert time.perf_counter() - start < STOP_SECONDS
+    lines = [line for line in rest.splitlines() if line.strip() and "drape:" not in line]  # forwarded lines may trail
+    assert lines == ["yarnfit validate: interrupted"] and "Traceback" not in rest, rest
+    time.sleep(0.2)
+    assert [pid for pid in helpers if os.path.exists(f"/proc/{pid}")] == []
+    assert list((logs / "woven").iterdir()) == []

@@ -216,7 +216,7 @@ class Recording:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         # Streamed to a hidden sibling and renamed on close: an interrupted run leaves no
         # half-written recording under the name the user asked for (discard() removes it).
-        self.partial = self.path.with_name(f".{self.path.name}.part")
+        self.partial = self.partial_path(self.path)
         self.stream = rr.RecordingStream(APPLICATION_ID)
         # The file sink must be attached before anything is logged, or that data is lost.
         self.stream.save(self.partial)
@@ -224,6 +224,13 @@ class Recording:
         self.stream.send_recording_name(name)
         self.stream.send_blueprint(layout)
         self.stream.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+
+    @staticmethod
+    def partial_path(path) -> Path:
+        """Where the recording bound for ``path`` is streamed until it is closed (a hidden sibling);
+        what a process stopped mid-recording leaves behind."""
+        path = Path(path)
+        return path.with_name(f".{path.name}.part")
 
     def close(self) -> None:
         """Flush everything logged, close the file (writing its footer) and give it its name.

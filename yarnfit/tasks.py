@@ -48,8 +48,8 @@ from . import __version__
 from .checks import error_line
 from .outputs import write_atomically
 
-__all__ = ["Backend", "DaskBackend", "LocalPool", "Result", "SkippedTask", "Task", "TaskCache", "make_backend",
-           "run_tasks"]
+__all__ = ["Backend", "DaskBackend", "LocalPool", "Result", "SkippedTask", "Task", "TaskCache", "ignore_sigint",
+           "make_backend", "run_tasks"]
 
 
 @dataclass(frozen=True)
@@ -154,7 +154,9 @@ def _canonical(value):
 # -- backends -------------------------------------------------------------------------------------
 
 
-def _ignore_sigint() -> None:
+def ignore_sigint() -> None:
+    """A helper process's initializer: SIGINT ignored (Ctrl-C reaches the whole process group; the
+    parent alone decides what stops, and stops its helpers itself)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
@@ -225,7 +227,7 @@ class LocalPool(Backend):
             # start at once with the parent's compiled kernels.
             method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
             self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context(method),
-                                             initializer=_ignore_sigint)
+                                             initializer=ignore_sigint)
         return self._pool
 
     @property

@@ -26,12 +26,13 @@ import multiprocessing
 import threading
 import time
 from contextlib import contextmanager
+from multiprocessing.managers import SyncManager
 from pathlib import Path
 from typing import Callable
 
 from .. import __version__
 from ..material_file import MaterialFile
-from ..tasks import Backend, LocalPool, Result, SkippedTask, Task, run_tasks
+from ..tasks import Backend, LocalPool, Result, SkippedTask, Task, ignore_sigint, run_tasks
 from . import DRAPES, SCENES, jsonable
 from .verdicts import verdicts
 
@@ -122,7 +123,10 @@ def _forwarded_progress(progress: Callable[[str], None] | None, backend: Backend
     if progress is None or not isinstance(backend, LocalPool) or backend.workers == 1:
         yield None
         return
-    manager = multiprocessing.Manager()
+    # Its server process ignores SIGINT like the workers: Ctrl-C reaches the whole process group,
+    # and a manager stopped by it would fail the workers' next line instead of the run stopping.
+    manager = SyncManager(ctx=multiprocessing.get_context())
+    manager.start(ignore_sigint)
     try:
         queue = manager.Queue()
 
@@ -165,7 +169,10 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
     backend = LocalPool(1) if backend is None else backend
     in_process = isinstance(backend, LocalPool) and backend.workers == 1
 
+    finished = set()
+
     def done(task, outcome, count, total):
+        finished.add(task.key)
         if not progress:
             return
         if isinstance(outcome, BaseException):
@@ -189,7 +196,17 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
             workers = getattr(backend, "workers", None)
             progress(f"{len(tasks)} tasks on {f'{workers} worker processes' if workers else 'the cluster'}: "
                      + ", ".join(task.label for task in tasks))
-        outcomes = run_tasks(tasks, backend, on_done=done)
+        try:
+            outcomes = run_tasks(tasks, backend, on_done=done)
+        except KeyboardInterrupt:
+            # Workers stopped mid-scene leave their recordings part-written (an in-process scene's
+            # is discarded by the command line, yarnfit.record.Recording.discard_open).
+            if not in_process:
+                from ..record import Recording
+
+                for scene in set(scenes) - finished:
+                    Recording.partial_path(folder / f"{scene}.rrd").unlink(missing_ok=True)
+            raise
     failed = [outcomes[task.key] for task in tasks if isinstance(outcomes[task.key], BaseException)]
     first = next((error for error in failed if not isinstance(error, SkippedTask)), None)
     if first is not None:
