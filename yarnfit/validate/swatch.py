@@ -472,16 +472,18 @@ def blueprint():
 
 
 def summary_markdown(out: dict) -> str:
-    """Markdown table of a run: per direction and strain, force per width, compression ratio,
-    convergence, iterations, residuals and wall time."""
+    """Markdown table of a run: per direction and strain, force per width, compression ratio, edge
+    draw-in, convergence, iterations, residuals and wall time."""
     rows = []
     for direction, curve in out["directions"].items():
         for p in curve["points"][1:]:
             res = p["residual"]["force"] if p["residual"] else float("nan")
+            draw_in = p.get("edge_draw_in_m")
             rows.append((direction, f"{100 * p['strain']:g} %", f"{p['force_n_per_m']:.5g}", f"{p['compression_ratio']:.4f}",
+                         "—" if draw_in is None else f"{1e6 * draw_in:.3g}",
                          "yes" if p["converged"] else "**no**", p["iterations"], f"{res:.2e}", f"{p['seconds']:.1f}"))
-    header = ("direction", "strain", "force (N/m)", "compression ratio", "converged", "iterations", "force residual",
-              "seconds")
+    header = ("direction", "strain", "force (N/m)", "compression ratio", "edge draw-in (µm)", "converged", "iterations",
+              "force residual", "seconds")
     lines = [f"# yarn-level stretch: {out.get('name', '')}", "", markdown_table(rows, header)]
     for direction, curve in out["directions"].items():
         lines.append(f"\n{direction}: {curve['nodes']} nodes, {curve['pieces']} yarn pieces, gauge "
