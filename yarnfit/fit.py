@@ -414,7 +414,7 @@ def fit_residual_jacobian(
 
 # A uniaxial (free-width) sample whose rods store at least this share of Ū in centreline stretch
 # and shear is reported: its structure did not give way, its yarns were pulled. Measured at 2 %
-# (session 28): pulls that give way by bending store 0.3–8 % there (every jersey's course-wise
+# (session 28): pulls that give way by bending store 0.5–8 % there (every jersey's course-wise
 # pull, cotton jersey's wale-wise one, the twill's weft), jammed ones 83–98 % (wool and polyester
 # jersey along the wales, where four rigid yarn diameters already fill a wale; the twill's warp).
 STRETCH_DOMINATED_SHARE = 0.5
