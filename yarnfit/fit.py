@@ -58,6 +58,7 @@ import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
 from .checks import real_number
+from .jsonfile import finite_or_none
 from .samples import BENDING_FAMILIES, FAMILIES, MEMBRANE_FAMILIES, Group, SampleResult
 from .shell import (
     BENDING_PARAMETERS,
@@ -264,8 +265,8 @@ class ShellFit:
                 "parameter": sample.parameter,
                 "I": sample.I.tolist(),
                 "II_per_m": sample.II.tolist(),
-                "energy_density_j_per_m2": _json_float(sample.energy_density),
-                "residual": _json_float(sample.worst_residual),
+                "energy_density_j_per_m2": finite_or_none(sample.energy_density),
+                "residual": finite_or_none(sample.worst_residual),
             }
 
         used = []
@@ -278,7 +279,7 @@ class ShellFit:
             "model": self.model,
             "membrane": self.membrane,
             "parameters_pa": {k: float(v) for k, v in self.parameters.items()},
-            "std_error_pa": {k: _json_float(v) for k, v in self.std_error.items()},
+            "std_error_pa": {k: finite_or_none(v) for k, v in self.std_error.items()},
             "families": _json_families(self.families),
             "linear": {
                 "parameters_pa": {k: float(v) for k, v in self.linear.parameters.items()},
@@ -1275,9 +1276,6 @@ def _weights(weights: np.ndarray, n: int) -> np.ndarray:
 
 
 def _json_families(families: dict[str, dict]) -> dict[str, dict]:
-    return {name: {"r2": _json_float(f["r2"]), "relative_rms": _json_float(f["relative_rms"]), "samples": f["samples"]}
+    return {name: {"r2": finite_or_none(f["r2"]), "relative_rms": finite_or_none(f["relative_rms"]),
+                   "samples": f["samples"]}
             for name, f in families.items()}
-
-
-def _json_float(value: float) -> float | None:
-    return float(value) if math.isfinite(value) else None

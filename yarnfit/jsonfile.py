@@ -1,9 +1,17 @@
-"""Reading the JSON files users hand to yarnfit (fibre files, material files) with one-line errors."""
+"""Reading the JSON files users hand to yarnfit (fibre files, material files) with one-line errors,
+and the one rule for writing a number that may be NaN into strict JSON."""
 
 from __future__ import annotations
 
 import json
+import math
 import os
+
+
+def finite_or_none(value: float) -> float | None:
+    """``value`` as a float, or ``None`` (JSON null) when it is NaN or infinite: strict JSON has
+    neither, and yarnfit's files write an unknown figure as null."""
+    return float(value) if math.isfinite(value) else None
 
 
 def read_json(path: str | os.PathLike, what: str) -> tuple[str, object]:

@@ -23,6 +23,7 @@ import numpy as np
 
 from .checks import real_number
 from .engine import Residual
+from .jsonfile import finite_or_none
 from .shell import as_first_fundamental_form, as_second_fundamental_form
 
 __all__ = [
@@ -310,15 +311,15 @@ class SampleResult:
             "parameter": self.parameter,
             "I": self.I.tolist(),
             "II": self.II.tolist(),
-            "energy_density_j_m2": _finite_or_none(self.energy_density),
+            "energy_density_j_m2": finite_or_none(self.energy_density),
             "converged": self.converged,
             # A sample with no state to measure (every solve left the mapped tiles) has NaN residuals.
-            "residual": {key: _finite_or_none(value) for key, value in (
+            "residual": {key: finite_or_none(value) for key, value in (
                 ("force", r.force), ("torque", r.torque), ("energy_change", r.energy_change),
                 ("penetration", r.penetration))},
             "iterations": self.iterations,
             "seconds": self.seconds,
-            "stretch_share": _finite_or_none(self.stretch_share),
+            "stretch_share": finite_or_none(self.stretch_share),
         }
 
     @classmethod
@@ -477,10 +478,6 @@ def levels_for(samples: int) -> int:
 def identity_sample() -> SampleSpec:
     """The undeformed surface (``I = Id``, ``II = 0``): Ū must vanish."""
     return SampleSpec.at(Family.WEFT_STRETCH, 0.0)
-
-
-def _finite_or_none(value: float) -> float | None:
-    return value if math.isfinite(value) else None
 
 
 def _single_form(check, value: object, name: str) -> np.ndarray:

@@ -80,6 +80,7 @@ from ..engine import (
     energy_gradient,
 )
 from ..engine.tiling import cut_rectangle
+from ..jsonfile import finite_or_none
 from ..material_file import MaterialFile
 from ..record import Recording, folded_panels, markdown_table
 from . import DIRECTIONS, SceneResult
@@ -234,11 +235,6 @@ def edge_draw_in(swatch: Swatch, position: np.ndarray, compression_ratio: float)
     return float(np.mean(np.sign(offset) * (compression_ratio * offset - (position[ends, 1] - centre))))
 
 
-def _finite_or_none(value: float) -> float | None:
-    """``value``, or ``None`` (JSON null) when it is NaN."""
-    return None if math.isnan(value) else value
-
-
 def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                    options: QuasiStaticOptions | None = None, width_band: float | None = None,
                    on_step: Callable[[int, float, np.ndarray, dict], None] | None = None,
@@ -296,7 +292,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "compression_ratio": width / width0,
             "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
             "width_m": width,
-            "edge_draw_in_m": _finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
+            "edge_draw_in_m": finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
             "converged": bool(result.converged),
             "iterations": int(result.iterations),
             "seconds": time.perf_counter() - start,
