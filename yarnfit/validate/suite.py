@@ -72,12 +72,11 @@ SCENE_COST = {"stretch": 187.0, "yarn": 173.0, "body": 60.0, "wall": 57.0, "sphe
 LIKE_SWATCH_COST = 75.0
 
 
-def run_scene(material_path: str | Path, scene: str, quick: bool, folder: Path, reference=None,
+def run_scene(file: MaterialFile, scene: str, quick: bool, folder: Path, reference=None,
               progress: Callable[[str], None] | None = None) -> tuple[dict, float]:
-    """One scene of the suite on the material file: its summary and wall time (s). A task's
-    function (module level, picklable arguments; ``progress`` a picklable
-    :class:`ForwardedProgress` on worker processes)."""
-    file = MaterialFile.read(material_path)
+    """One scene of the suite on the material file (read once by :func:`run_suite`): its summary
+    and wall time (s). A task's function (module level, picklable arguments; ``progress`` a
+    picklable :class:`ForwardedProgress` on worker processes)."""
     if progress:
         progress(f"{scene}: running")
     start = time.perf_counter()
@@ -94,12 +93,11 @@ def run_scene(material_path: str | Path, scene: str, quick: bool, folder: Path, 
     return summary, time.perf_counter() - start
 
 
-def like_swatch_task(material_path: str | Path, yarn: tuple[dict, float], quick: bool) -> tuple[dict, float]:
-    """:func:`shell_strips_like_swatch` of the yarn scene's outcome, timed like a scene."""
-    from ..mujoco.scenes import ClothMaterial
-
+def like_swatch_task(material, yarn: tuple[dict, float], quick: bool) -> tuple[dict, float]:
+    """:func:`shell_strips_like_swatch` of the yarn scene's outcome (``material`` a
+    :class:`~yarnfit.mujoco.scenes.ClothMaterial`), timed like a scene."""
     start = time.perf_counter()
-    like = shell_strips_like_swatch(ClothMaterial.from_file(MaterialFile.read(material_path)), yarn[0], quick=quick)
+    like = shell_strips_like_swatch(material, yarn[0], quick=quick)
     return like, time.perf_counter() - start
 
 
@@ -186,11 +184,11 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
                 return progress
             return None if queue is None else ForwardedProgress(queue, scene)
 
-        tasks = [Task(scene, run_scene, (str(material_path), scene, quick, folder, reference, scene_progress(scene)),
+        tasks = [Task(scene, run_scene, (file, scene, quick, folder, reference, scene_progress(scene)),
                       cost=SCENE_COST.get(scene, 0.0), cached=False, label=scene)
                  for scene in scenes]
         if "stretch" in scenes and "yarn" in scenes:
-            tasks.append(Task("like_swatch", like_swatch_task, (str(material_path), Result("yarn"), quick),
+            tasks.append(Task("like_swatch", like_swatch_task, (material, Result("yarn"), quick),
                               cost=LIKE_SWATCH_COST, cached=False, label="shell strips of the yarn swatch's proportions"))
         if progress and not in_process:
             workers = getattr(backend, "workers", None)
