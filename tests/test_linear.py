@@ -108,3 +108,72 @@ def test_singular_system_raises():
     matrix = sp.csc_matrix(np.array([[1.0, 1.0], [1.0, 1.0]]))
     with pytest.raises(SingularSystemError):
         SymmetricSolve(matrix)(np.array([1.0, 0.0]))
+
+
+def _spd_banded(n: int, rng, band: int = 3) -> sp.csc_matrix:
+    """A symmetric positive definite banded matrix (diagonally dominant)."""
+    matrix = sp.lil_matrix((n, n))
+    for i in range(n):
+        matrix[i, i] = 2.0 * band + rng.random()
+        for k in range(1, band + 1):
+            if i + k < n:
+                matrix[i, i + k] = matrix[i + k, i] = rng.uniform(-1.0, 1.0)
+    return matrix.tocsc()
+
+
+def test_factor_cache_reuses_the_analysis_of_a_pattern():
+    """Matrices whose entries lie in the pattern analysed last are only refactorised numerically,
+    and each solve is still that matrix's own."""
+    rng = np.random.default_rng(5)
+    cache = linear.FactorCache()
+    first = _spd_banded(40, rng)
+    constraints = sp.csr_matrix(rng.standard_normal((2, 40)))
+    scale = sp.diags(rng.uniform(0.5, 1.5, 40))
+    same = sp.csc_matrix(scale @ first @ scale)  # other values, same pattern
+    fewer = sp.csc_matrix(sp.triu(first, 2) + sp.tril(first, -2) + sp.diags(first.diagonal()))  # a sub-pattern
+    for matrix in (first, same, fewer):
+        b = rng.standard_normal(40)
+        solve = SymmetricSolve(matrix, constraints, cache)
+        _assert_matches_dense(matrix, constraints, b, solve(b))
+        assert solve.method == "ldl"
+    assert (cache.analyses, cache.factorisations) == (1, 3)
+
+
+def test_factor_cache_analyses_the_union_of_patterns():
+    """A matrix with an entry outside the cached pattern is analysed over the union of both (a new
+    contact pair joins the pairs seen so far); the first pattern then fits in it again, until the
+    union outgrows UNION_FILL_LIMIT times the matrix factorised."""
+    rng = np.random.default_rng(6)
+    cache = linear.FactorCache()
+    base = _spd_banded(30, rng, band=1)
+    coupled = base.tolil()
+    coupled[0, 29] = coupled[29, 0] = 0.5  # a new pair
+    coupled = coupled.tocsc()
+    for matrix in (base, coupled, base):
+        b = rng.standard_normal(30)
+        _assert_matches_dense(matrix, None, b, SymmetricSolve(matrix, None, cache)(b))
+    assert (cache.analyses, cache.factorisations) == (2, 3)
+    # A matrix with far fewer entries than the union is analysed on its own pattern, though it fits
+    # in the union: the union's fill would cost more.
+    diagonal = sp.diags(1.0 + rng.random(30)).tocsc()
+    b = rng.standard_normal(30)
+    _assert_matches_dense(diagonal, None, b, SymmetricSolve(diagonal, None, cache)(b))
+    assert cache.analyses == 3
+
+
+def test_a_constraint_pinning_one_dof_is_factorised_with_threshold_pivoting():
+    """A constraint row that pins one DOF is eliminated first by the fill-reducing ordering and
+    meets an exactly zero pivot in LDLᵀ; its pattern is then factorised by SuperLU with threshold
+    pivoting, and the cache does not try LDLᵀ on that pattern again."""
+    rng = np.random.default_rng(7)
+    matrix = _spd_banded(30, rng)
+    constraints = sp.csr_matrix(([1.0, 1.0], ([0, 1], [4, 17])), shape=(2, 30))
+    cache = linear.FactorCache()
+    for _ in range(2):
+        b = rng.standard_normal(30)
+        solve = SymmetricSolve(matrix, constraints, cache)
+        x = solve(b)
+        assert solve.method == "threshold"
+        _assert_matches_dense(matrix, constraints, b, x)
+        assert x[4] == pytest.approx(0.0, abs=DENSE_AGREEMENT) and x[17] == pytest.approx(0.0, abs=DENSE_AGREEMENT)
+    assert (cache.analyses, cache.factorisations) == (1, 2)

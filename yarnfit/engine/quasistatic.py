@@ -11,7 +11,7 @@ solver here is a damped Newton method on the exact energy of :mod:`yarnfit.engin
 - Hessian: analytic for stretch–shear and contact elements (the closest points' motion
   included), central differences of the analytic gradient for bend–twist elements; assembled
   sparse with the step constraints' rows into a saddle-point system, equilibrated and factorised
-  symmetrically with a fill-reducing ordering (:mod:`yarnfit.engine.linear`);
+  as LDLᵀ with a fill-reducing ordering analysed once per pattern (:mod:`yarnfit.engine.linear`);
   Levenberg–Marquardt damping ``μ diag(H)`` keeps every step a descent direction where the
   Hessian is indefinite or singular (a rod held only by points can spin its frames freely);
 - backtracking (Armijo) line search on the total potential, then a few chord steps with the same
@@ -59,7 +59,7 @@ from . import _contact_kernels, _kernels
 from .contact import ContactPairs
 from .contact_lagrangian import ContactLagrangian, ContactSet
 from .energy import EnergyTerms, internal_forces
-from .linear import SingularSystemError, SymmetricSolve
+from .linear import FactorCache, SingularSystemError, SymmetricSolve
 from .model import RodModel, quaternion_d3
 from .state import Loads, RodState
 
@@ -319,6 +319,9 @@ class _Work:
     # Full gradient (every DOF, pinned ones included) of the last evaluation: the solve always
     # ends on an evaluation at the returned state, so this gives the reactions there.
     gradient: np.ndarray = field(default_factory=lambda: np.empty(0))
+    # The symbolic analysis of the Newton systems' sparsity pattern, reused while the contact
+    # pairs (hence the pattern) stay within it.
+    factors: FactorCache = field(default_factory=FactorCache)
 
     @property
     def point(self) -> tuple[np.ndarray, np.ndarray, float]:
@@ -698,7 +701,7 @@ class QuasiStaticSolver:
             damped = hessian.copy()
             damped.data[on_diagonal] += damping.value * scale
             try:
-                solve = SymmetricSolve(damped, a)
+                solve = SymmetricSolve(damped, a, work.factors)
                 d = solve(-g)
             except SingularSystemError:  # exactly singular: damp harder
                 damping.harden()
