@@ -165,3 +165,38 @@ def test_kept_image_maps_give_the_same_pairs_and_maps():
         assert len(fresh) > 0
         for name in ("pairs", "images", "rotation", "translation"):
             np.testing.assert_array_equal(getattr(kept, name), getattr(fresh, name))
+
+
+def _pair_set(pairs) -> set:
+    return {(int(a), int(b), int(i), int(j)) for (a, b), (i, j) in zip(pairs.pairs, pairs.images)}
+
+
+@pytest.mark.parametrize("model_name", ["curved", "stockinette"])
+def test_a_neighbour_list_gives_the_pairs_of_a_fresh_search(model_name):
+    """Queries of a NeighbourList along a random walk (steps of a fifth of the skin, so it searches
+    again every few steps) find what find_pairs finds at each configuration, with the same maps;
+    a swept query finds at least what find_pairs finds along the sweep."""
+    from yarnfit.engine.contact import NeighbourList
+
+    if model_name == "curved":
+        model, margin = curved_model(reach=3, turn=0.05, jitter=5e-5), 2e-4
+    else:
+        model = periodic_model(read_pyp(HYLC / "stockinette.pyp"))
+        margin = float(model.edge_radius.min())
+    maps = ImageMaps(model) if model.tiling is not None else None
+    neighbours = NeighbourList(model, margin, maps)
+    rng = np.random.default_rng(4)
+    x = np.array(model.node_rest_position)
+    for step in range(12):
+        x = x + 0.2 * neighbours.skin / np.sqrt(3.0) * rng.uniform(-1.0, 1.0, x.shape)
+        fresh = find_pairs(model, x, margin, None, maps, within=margin)
+        listed = neighbours.query(x, None, within=margin)
+        assert len(fresh) > 0 and _pair_set(listed) == _pair_set(fresh)
+        order = np.argsort(fresh.keys(model.n_edges))
+        same = np.argsort(listed.keys(model.n_edges))
+        np.testing.assert_array_equal(listed.rotation[same], fresh.rotation[order])
+        np.testing.assert_array_equal(listed.translation[same], fresh.translation[order])
+        end = x + 0.1 * neighbours.skin * rng.standard_normal(x.shape) / np.sqrt(3.0)
+        assert _pair_set(neighbours.query(x, end, within=margin)) >= _pair_set(
+            find_pairs(model, x, margin, end, maps, within=margin))
+    assert 1 < neighbours.searches < neighbours.queries / 2

@@ -417,25 +417,39 @@ def _moved_distance(a0, a1, b0, b1, move, alpha):
 
 
 @njit(cache=True)
+def _in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, pair_rotation, pair_translation, margin, p):
+    """Pair ``p``'s segments come within ``ra + rb + margin`` (m) of each other at ``pos`` or
+    anywhere on the straight way to ``pos_end``: their distance at ``pos`` less the largest move of
+    a node of each edge (rigid maps keep a move's length)."""
+    a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
+    travel = 0.0
+    for e in (pairs[p, 0], pairs[p, 1]):
+        move = 0.0
+        for m in range(2):
+            i = edge_nodes[e, m]
+            move = max(move, math.sqrt((pos_end[i, 0] - pos[i, 0]) ** 2 + (pos_end[i, 1] - pos[i, 1]) ** 2
+                                       + (pos_end[i, 2] - pos[i, 2]) ** 2))
+        travel += move
+    reach = edge_radius[pairs[p, 0]] + edge_radius[pairs[p, 1]] + margin + travel
+    # The segments are no closer than their midpoints less their half-lengths: most candidates of
+    # a widened search are rejected by that, without the closest points.
+    half_a = 0.5 * math.sqrt((a1[0] - a0[0]) ** 2 + (a1[1] - a0[1]) ** 2 + (a1[2] - a0[2]) ** 2)
+    half_b = 0.5 * math.sqrt((b1[0] - b0[0]) ** 2 + (b1[1] - b0[1]) ** 2 + (b1[2] - b0[2]) ** 2)
+    midpoints = math.sqrt((0.5 * (a0[0] + a1[0] - b0[0] - b1[0])) ** 2 + (0.5 * (a0[1] + a1[1] - b0[1] - b1[1])) ** 2
+                          + (0.5 * (a0[2] + a1[2] - b0[2] - b1[2])) ** 2)
+    if midpoints - half_a - half_b > reach:
+        return False
+    return segment_closest_points(a0, a1, b0, b1)[2] <= reach
+
+
+@njit(cache=True)
 def keep_pairs_in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, images, pair_rotation, pair_translation,
                         margin):
-    """Move to the front, in order and in place, the pairs whose segments come within
-    ``ra + rb + margin`` (m) of each other at ``pos`` or anywhere on the straight way to
-    ``pos_end`` (their distance at ``pos`` less the largest move of a node of each edge: rigid
-    maps keep a move's length); returns how many."""
+    """Move to the front, in order and in place, the pairs in reach (:func:`_in_reach`); returns
+    how many."""
     kept = 0
     for p in range(pairs.shape[0]):
-        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
-        distance = segment_closest_points(a0, a1, b0, b1)[2]
-        travel = 0.0
-        for e in (pairs[p, 0], pairs[p, 1]):
-            move = 0.0
-            for m in range(2):
-                i = edge_nodes[e, m]
-                move = max(move, math.sqrt((pos_end[i, 0] - pos[i, 0]) ** 2 + (pos_end[i, 1] - pos[i, 1]) ** 2
-                                           + (pos_end[i, 2] - pos[i, 2]) ** 2))
-            travel += move
-        if distance - travel > edge_radius[pairs[p, 0]] + edge_radius[pairs[p, 1]] + margin:
+        if not _in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, pair_rotation, pair_translation, margin, p):
             continue
         if kept != p:
             pairs[kept] = pairs[p]
@@ -444,6 +458,29 @@ def keep_pairs_in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, images, pa
             pair_translation[kept] = pair_translation[p]
         kept += 1
     return kept
+
+
+@njit(cache=True)
+def largest_squared_move(reference, position):
+    """Largest squared distance (m²) of a node of ``position (N, 3)`` from its ``reference``."""
+    largest = 0.0
+    for i in range(reference.shape[0]):
+        d = ((position[i, 0] - reference[i, 0]) ** 2 + (position[i, 1] - reference[i, 1]) ** 2
+             + (position[i, 2] - reference[i, 2]) ** 2)
+        largest = max(largest, d)
+    return largest
+
+
+@njit(cache=True)
+def pairs_in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, pair_rotation, pair_translation, margin):
+    """Indices, in order, of the pairs in reach (:func:`_in_reach`); the pairs are left as they are."""
+    kept = np.empty(pairs.shape[0], dtype=np.int64)
+    count = 0
+    for p in range(pairs.shape[0]):
+        if _in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, pair_rotation, pair_translation, margin, p):
+            kept[count] = p
+            count += 1
+    return kept[:count]
 
 
 @njit(cache=True)

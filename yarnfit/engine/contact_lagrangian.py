@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._contact_kernels import constraint_measures
-from .contact import ContactPairs, ImageMaps, find_pairs
+from .contact import ContactPairs, ImageMaps, NeighbourList
 from .model import RodModel
 
 __all__ = ["CONTACT_SAMPLE_SPACING", "CONTACT_SMOOTHING", "ContactLagrangian", "ContactSet"]
@@ -198,8 +198,9 @@ class ContactLagrangian:
             1, np.ceil(model.edge_rest_length / (CONTACT_SAMPLE_SPACING * model.edge_radius))).astype(np.int64)
         self._margin = options.contact_margin * float(model.edge_radius.min())
         self._memory = _Memory(model.n_edges)
-        # A curved tiling's image maps, built once per search range rather than at every query.
-        self._maps = ImageMaps(model)
+        # Candidates found once and kept while the nodes stay near (a curved tiling's image maps
+        # built once per search range with them, rather than at every query).
+        self._neighbours = NeighbourList(model, self._margin, ImageMaps(model))
         self.restart()
 
     def restart(self) -> None:
@@ -217,7 +218,7 @@ class ContactLagrangian:
             return ContactSet.none(self.edge_samples)
         # Only pairs whose segments come within the margin: every constraint of the others is
         # slack all the way, and they were 40 % of a strip's candidates (see find_pairs).
-        pairs = find_pairs(m, position, self._margin, position_end, self._maps, within=self._margin)
+        pairs = self._neighbours.query(position, position_end, within=self._margin)
         counts = self.edge_samples[pairs.pairs].sum(axis=1) if len(pairs) else np.zeros(0, dtype=np.int64)
         start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         multiplier, stiffening = self._memory.recall(pairs, start)
