@@ -762,3 +762,22 @@ def assemble_csc(rows, cols, vals, count, dof_map, n_free):
     for j in range(n_free):  # columns are never empty (each holds its diagonal), but keep indptr monotone
         indptr[j + 1] = max(indptr[j + 1], indptr[j])
     return indptr, indices[:n], data[:n], diagonal
+
+
+@njit(cache=True)
+def plus_row_norms(scale, rows):
+    """``scale + |rows|`` row by row (``(N,)`` and ``(N, 3)``)."""
+    out = np.empty(scale.shape[0])
+    for i in range(scale.shape[0]):
+        out[i] = scale[i] + math.sqrt(rows[i, 0] ** 2 + rows[i, 1] ** 2 + rows[i, 2] ** 2)
+    return out
+
+
+@njit(cache=True)
+def largest_row_norm(rows, mask):
+    """Largest ``|rows[i]|`` over the rows with ``mask[i]`` (0 if none)."""
+    largest = 0.0
+    for i in range(rows.shape[0]):
+        if mask[i]:
+            largest = max(largest, rows[i, 0] ** 2 + rows[i, 1] ** 2 + rows[i, 2] ** 2)
+    return math.sqrt(largest)

@@ -109,6 +109,21 @@ def _equilibrated_upper(m_indptr, m_indices, m_data, at_indptr, at_columns, at_d
 
 
 @njit(cache=True)
+def _constraint_weights(indptr, indices, data, weight):
+    """Per constraint row (CSR arrays of ``A``), one over its largest entry once its columns are
+    scaled by ``weight``: each row of ``W K W`` then has a largest entry of 1."""
+    m = indptr.shape[0] - 1
+    out = np.ones(m)
+    for i in range(m):
+        largest = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            largest = max(largest, abs(data[k] * weight[indices[k]]))
+        if largest > 0.0:
+            out[i] = 1.0 / largest
+    return out
+
+
+@njit(cache=True)
 def _symmetric_product(indptr, indices, data, x):
     """``K x`` for the symmetric ``K`` whose upper triangle is the CSC ``(indptr, indices, data)``."""
     out = np.zeros(x.shape[0])
@@ -218,6 +233,9 @@ class FactorCache:
             self._indptr, self._indices = pattern
             self._data = np.empty(pattern[1].shape[0])
             _scatter(self._indptr, self._indices, indptr, indices, data, self._data)
+            self._csc = sp.csc_matrix((self._data, self._indices, self._indptr), shape=(n, n))
+            # Later matrices of the pattern are scattered into the same values array.
+            self._data = self._csc.data
             self._solver = None
             self._zero_pivot = False
         if self._zero_pivot:
@@ -225,17 +243,13 @@ class FactorCache:
         try:
             if self._solver is None:
                 self.analyses += 1
-                self._solver = qdldl.Solver(self._matrix(self._data), upper=True)
+                self._solver = qdldl.Solver(self._csc, upper=True)
             else:
-                self._solver.update(self._matrix(self._data), upper=True)
+                self._solver.update(self._csc, upper=True)
         except RuntimeError as error:
             self._zero_pivot = True
             raise ZeroPivotError(str(error)) from None
         return self._solver
-
-    def _matrix(self, data: np.ndarray) -> sp.csc_matrix:
-        n = self._indptr.shape[0] - 1
-        return sp.csc_matrix((data, self._indices, self._indptr), shape=(n, n))
 
 
 class SingularSystemError(RuntimeError):
@@ -260,24 +274,22 @@ class SymmetricSolve:
         if not matrix.has_canonical_format:
             matrix = matrix.copy()
             matrix.sum_duplicates()
-        self._matrix = matrix
         self._n = matrix.shape[0]
         diagonal = np.abs(matrix.diagonal())
         weight = 1.0 / np.sqrt(np.where(diagonal > 0.0, diagonal, 1.0))
-        self._constraints = None
-        by_row = sp.csr_matrix((0, self._n))
         if constraints is not None and constraints.shape[0] > 0:
-            by_row = sp.csr_matrix(constraints)
-            by_row.sum_duplicates()
-            # Each constraint row scaled to a largest entry of 1 once its columns are weighted.
-            row_max = np.zeros(by_row.shape[0])
-            rows = np.repeat(np.arange(by_row.shape[0]), np.diff(by_row.indptr))
-            np.maximum.at(row_max, rows, np.abs(by_row.data * weight[by_row.indices]))
-            weight = np.concatenate([weight, 1.0 / np.where(row_max > 0.0, row_max, 1.0)])
-            self._constraints = by_row
+            by_row = constraints if sp.isspmatrix_csr(constraints) else sp.csr_matrix(constraints)
+            if not by_row.has_canonical_format:
+                by_row = by_row.copy()
+                by_row.sum_duplicates()
+            weight = np.concatenate([weight, _constraint_weights(by_row.indptr, by_row.indices, by_row.data, weight)])
+            a_indptr, a_indices, a_data = by_row.indptr, by_row.indices, by_row.data
+        else:
+            a_indptr, a_indices, a_data = np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)
         self._weight = weight
-        self._upper = _equilibrated_upper(matrix.indptr, matrix.indices, matrix.data, by_row.indptr, by_row.indices,
-                                          by_row.data, weight, self._n)
+        # Everything below works on these arrays: the caller may change its matrix afterwards.
+        self._upper = _equilibrated_upper(matrix.indptr, matrix.indices, matrix.data, a_indptr, a_indices, a_data,
+                                          weight, self._n)
         self._norm = float(_unequilibrated_norm(*self._upper, weight))
         self.method = "ldl"
         try:
@@ -330,10 +342,12 @@ class SymmetricSolve:
 
     def _use_pivoted(self) -> None:
         self.method = "partial"
-        system = self._matrix
-        if self._constraints is not None:
-            system = sp.csc_matrix(sp.bmat([[self._matrix, self._constraints.T], [self._constraints, None]]))
+        # K itself, W⁻¹ (W K W) W⁻¹, in full.
+        indptr, indices, data = self._upper
+        column = np.repeat(np.arange(self.size), np.diff(indptr))
+        upper = sp.csc_matrix((data / (self._weight[indices] * self._weight[column]), indices, indptr),
+                              shape=(self.size, self.size))
         try:
-            self._factors = spla.splu(system)
+            self._factors = spla.splu(sp.csc_matrix(upper + upper.T - sp.diags(upper.diagonal())))
         except RuntimeError as error:
             raise SingularSystemError(str(error)) from None

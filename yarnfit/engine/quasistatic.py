@@ -367,6 +367,7 @@ class QuasiStaticSolver:
         self._dof_map = np.full(3 * (n + e), -1, dtype=np.int64)
         self._dof_map[self._free] = np.arange(self._free.size)
         self._node_free = ~model.node_pinned
+        self._edge_free = ~model.edge_pinned
         if model.periodic:
             tiles = np.linalg.norm(model.lattice, axis=1)
             self._max_displacement = float(tiles[tiles > 0.0].min())
@@ -463,7 +464,7 @@ class QuasiStaticSolver:
                                         shape=(n_spin, self._free.size)))
         if not blocks:
             return None
-        return sp.vstack(blocks).tocsr()
+        return blocks[0] if len(blocks) == 1 else sp.vstack(blocks).tocsr()
 
     def _project(self, free_gradient: np.ndarray) -> np.ndarray:
         """The part of a free-DOF gradient the constraints do not balance (``g − Aᵀμ``, μ least
@@ -605,8 +606,8 @@ class QuasiStaticSolver:
         forces = internal_forces(m, position, quaternion)
         node_gradient = forces.node_gradient - node_force
         edge_gradient = forces.edge_gradient - moment
-        node_scale = forces.node_scale + np.linalg.norm(node_force, axis=1)
-        edge_scale = forces.edge_scale + np.linalg.norm(moment, axis=1)
+        node_scale = _kernels.plus_row_norms(forces.node_scale, node_force)
+        edge_scale = _kernels.plus_row_norms(forces.edge_scale, moment)
         n_pairs = len(contacts.pairs)
         gap = np.empty(contacts.start[-1])
         contact_force = np.empty(contacts.start[-1])
@@ -631,8 +632,8 @@ class QuasiStaticSolver:
         n3 = 3 * m.n_nodes
         net_node = unbalanced[:n3].reshape(-1, 3)
         net_edge = unbalanced[n3:].reshape(-1, 3)
-        net_force = float(np.linalg.norm(net_node[self._node_free], axis=1).max(initial=0.0))
-        net_torque = float(np.linalg.norm(net_edge[~m.edge_pinned], axis=1).max(initial=0.0))
+        net_force = float(_kernels.largest_row_norm(net_node, self._node_free))
+        net_torque = float(_kernels.largest_row_norm(net_edge, self._edge_free))
         roundoff = ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(position).max(initial=0.0))
         penetration, separation = contacts.measures(gap, contact_force)
 
@@ -693,19 +694,21 @@ class QuasiStaticSolver:
             return None, None, 0.0
         hessian, on_diagonal = self._hessian(work)
         g = ev.gradient[self._free]
-        diag = hessian.data[on_diagonal]
+        diag = hessian.data[on_diagonal].copy()
         floor = 1e-12 * max(float(np.abs(diag).max(initial=0.0)), 1e-300)
         scale = np.maximum(np.abs(diag), floor)
         a = self._step_constraints(work.quaternion)
         for _ in range(20):
-            damped = hessian.copy()
-            damped.data[on_diagonal] += damping.value * scale
+            # Damped in place (the solve keeps its own arrays) and undamped again for the curvature.
+            hessian.data[on_diagonal] = diag + damping.value * scale
             try:
-                solve = SymmetricSolve(damped, a, work.factors)
+                solve = SymmetricSolve(hessian, a, work.factors)
                 d = solve(-g)
             except SingularSystemError:  # exactly singular: damp harder
                 damping.harden()
                 continue
+            finally:
+                hessian.data[on_diagonal] = diag
             if np.all(np.isfinite(d)) and float(g @ d) < 0.0:
                 with np.errstate(over="ignore", invalid="ignore"):  # a step beyond every cap
                     curvature = float(d @ (hessian @ d))
