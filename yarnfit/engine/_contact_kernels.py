@@ -461,6 +461,41 @@ def keep_pairs_in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, images, pa
 
 
 @njit(cache=True)
+def pairs_in_reach_near(pos, pos_end, reference, reference_distance, edge_nodes, edge_radius, pairs, pair_rotation,
+                        pair_translation, margin):
+    """Indices, in order, of the pairs in reach (:func:`_in_reach`), the pairs' centreline distances
+    at node positions ``reference`` being ``reference_distance (P,)``: a segment's points move no
+    further than its nodes, and rigid maps keep a move's length, so the distance now lies within
+    the pair's two largest node moves of it, and only the pairs that bound leaves undecided are
+    measured."""
+    n = pos.shape[0]
+    moved = np.empty(n)
+    travel_of = np.empty(n)
+    for i in range(n):
+        moved[i] = math.sqrt((pos[i, 0] - reference[i, 0]) ** 2 + (pos[i, 1] - reference[i, 1]) ** 2
+                             + (pos[i, 2] - reference[i, 2]) ** 2)
+        travel_of[i] = math.sqrt((pos_end[i, 0] - pos[i, 0]) ** 2 + (pos_end[i, 1] - pos[i, 1]) ** 2
+                                 + (pos_end[i, 2] - pos[i, 2]) ** 2)
+    kept = np.empty(pairs.shape[0], dtype=np.int64)
+    count = 0
+    for p in range(pairs.shape[0]):
+        shift = 0.0
+        travel = 0.0
+        for e in (pairs[p, 0], pairs[p, 1]):
+            i, j = edge_nodes[e, 0], edge_nodes[e, 1]
+            shift += max(moved[i], moved[j])
+            travel += max(travel_of[i], travel_of[j])
+        reach = edge_radius[pairs[p, 0]] + edge_radius[pairs[p, 1]] + margin + travel
+        if reference_distance[p] - shift > reach:
+            continue
+        if reference_distance[p] + shift < reach or _in_reach(pos, pos_end, edge_nodes, edge_radius, pairs,
+                                                              pair_rotation, pair_translation, margin, p):
+            kept[count] = p
+            count += 1
+    return kept[:count]
+
+
+@njit(cache=True)
 def largest_squared_move(reference, position):
     """Largest squared distance (m²) of a node of ``position (N, 3)`` from its ``reference``."""
     largest = 0.0
@@ -469,18 +504,6 @@ def largest_squared_move(reference, position):
              + (position[i, 2] - reference[i, 2]) ** 2)
         largest = max(largest, d)
     return largest
-
-
-@njit(cache=True)
-def pairs_in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, pair_rotation, pair_translation, margin):
-    """Indices, in order, of the pairs in reach (:func:`_in_reach`); the pairs are left as they are."""
-    kept = np.empty(pairs.shape[0], dtype=np.int64)
-    count = 0
-    for p in range(pairs.shape[0]):
-        if _in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, pair_rotation, pair_translation, margin, p):
-            kept[count] = p
-            count += 1
-    return kept[:count]
 
 
 @njit(cache=True)

@@ -241,12 +241,15 @@ class NeighbourList:
         self.maps = maps if maps is not None or model.tiling is None else ImageMaps(model)
         self._reference: np.ndarray | None = None
         self._candidates = ContactPairs.empty()
+        self._distance = np.empty(0)
         self.searches = 0
         self.queries = 0
 
     def query(self, position: np.ndarray, position_end: np.ndarray | None, within: float) -> ContactPairs:
         """The pairs within ``ra + rb + within`` (m) of each other at ``position`` or on the way to
-        ``position_end`` (``None``: at ``position`` only)."""
+        ``position_end`` (``None``: at ``position`` only); ``within`` at most the list's margin."""
+        if not within <= self.margin:
+            raise ValueError(f"within ({within!r} m) must not exceed the neighbour list's margin ({self.margin!r} m)")
         self.queries += 1
         end = position if position_end is None else position_end
         if not self._covers(position, end):
@@ -257,8 +260,9 @@ class NeighbourList:
         c = self._candidates
         if len(c) == 0:
             return c
-        kept = _contact_kernels.pairs_in_reach(position, end, self.model.edge_nodes, self.model.edge_radius, c.pairs,
-                                               c.rotation, c.translation, float(within))
+        kept = _contact_kernels.pairs_in_reach_near(position, end, self._reference, self._distance,
+                                                    self.model.edge_nodes, self.model.edge_radius, c.pairs, c.rotation,
+                                                    c.translation, float(within))
         return c.subset(kept)
 
     def _covers(self, position: np.ndarray, end: np.ndarray) -> bool:
@@ -271,11 +275,18 @@ class NeighbourList:
     def _search(self, position: np.ndarray) -> None:
         self.searches += 1
         try:
-            self._candidates = find_pairs(self.model, position, self.margin + self.skin, None, self.maps)
-            self._reference = np.array(position)
+            candidates = find_pairs(self.model, position, self.margin + self.skin, None, self.maps)
         except TilingReachError:
             # The widened search reaches further than the maps; plain searches may not.
             self._reference = None
+            return
+        # A pair further apart than ra + rb + margin + 3 skins now cannot be in reach of a covered
+        # query: its nodes move by half a skin each, and a sweep's nodes by a skin more.
+        distance = pair_distances(self.model, position, candidates)
+        near = distance <= self.model.edge_radius[candidates.pairs].sum(axis=1) + self.margin + 3.0 * self.skin
+        self._candidates = candidates.subset(near)
+        self._distance = distance[near]
+        self._reference = np.array(position)
 
 
 def pair_distances(model: RodModel, position: np.ndarray, pairs: ContactPairs) -> np.ndarray:
