@@ -5,7 +5,8 @@ system ``K = [M Aᵀ; A 0]``, ``K [d; ν] = [b; 0]``).
 ``K`` is equilibrated (``W K W``, ``W`` diagonal: ``|M_ii|^(-1/2)`` on the free DOFs, whose
 stiffnesses differ by up to 1e10 between a slender yarn's positions and rotations, and each
 constraint row scaled to a largest entry of 1) and factorised as ``L D Lᵀ`` without pivoting
-(QDLDL, Stellato, Banjac et al., the factorisation inside OSQP, through its ``qdldl`` binding),
+(QDLDL, the factorisation inside the OSQP solver of Stellato, Banjac, Goulart et al., through its
+``qdldl`` binding),
 after QDLDL's approximate-minimum-degree ordering. The ordering and the elimination tree (the
 symbolic analysis) depend only on the sparsity pattern, and a solve's Hessians keep one as long as
 their contact pairs do: :class:`FactorCache` keeps the last analysis over the union of the
@@ -16,8 +17,7 @@ new analysis 1.2 ms, a numeric refactorisation of the same pattern 0.36 ms, 1.2 
 with the cache over a solve's changing patterns.
 
 ``L D Lᵀ`` without pivoting exists for every quasi-definite ``K`` (``M`` positive definite, as the
-Levenberg–Marquardt damping makes it wherever the solver needs a descent direction) and is then
-stable in practice (Vanderbei 1995; Gill, Saunders & Shinnerl 1996): backward errors of 1e-18 to
+damped Hessian is near a stable equilibrium) and is then stable in practice (Vanderbei 1995; Gill, Saunders & Shinnerl 1996): backward errors of 1e-18 to
 1e-13 on the stockinette's systems. Where it is not:
 
 - a constraint row the ordering eliminates before the DOFs it holds has an exactly zero pivot
