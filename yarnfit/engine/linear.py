@@ -266,7 +266,11 @@ class SymmetricSolve:
     ``method`` says which factorisation solved it: ``"ldl"`` (QDLDL), ``"threshold"`` (SuperLU in
     symmetric mode with threshold pivoting, where LDLᵀ met a zero pivot) or ``"partial"`` (SuperLU
     with partial pivoting on the unequilibrated system, where either gave a backward error above
-    :data:`BACKWARD_ERROR`); ``pivoted`` whether it came to the last."""
+    :data:`BACKWARD_ERROR`); ``pivoted`` whether it came to the last.
+
+    LDLᵀ factors live in the cache and are overwritten by its next factorisation: a solve is valid
+    until its cache factorises another matrix (the Newton step's direction and chord steps use it
+    before the next step's Hessian is factorised)."""
 
     def __init__(self, matrix: sp.spmatrix, constraints: sp.spmatrix | None = None,
                  cache: FactorCache | None = None):
