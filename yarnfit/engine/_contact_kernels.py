@@ -417,23 +417,32 @@ def _moved_distance(a0, a1, b0, b1, move, alpha):
 
 
 @njit(cache=True)
+def _node_move(pos, pos_end, i):
+    """How far node ``i`` moves from ``pos`` to ``pos_end`` (m)."""
+    return math.sqrt((pos_end[i, 0] - pos[i, 0]) ** 2 + (pos_end[i, 1] - pos[i, 1]) ** 2
+                     + (pos_end[i, 2] - pos[i, 2]) ** 2)
+
+
+@njit(cache=True)
+def _segments_within(pos, edge_nodes, pairs, pair_rotation, pair_translation, p, reach):
+    """Pair ``p``'s segments at ``pos`` are no further than ``reach`` (m) apart: settled by their
+    midpoints' bound where it can, by their closest points otherwise."""
+    a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
+    if _midpoint_distance_bound(a0, a1, b0, b1) > reach:
+        return False
+    return segment_closest_points(a0, a1, b0, b1)[2] <= reach
+
+
+@njit(cache=True)
 def _in_reach(pos, pos_end, edge_nodes, edge_radius, pairs, pair_rotation, pair_translation, margin, p):
     """Pair ``p``'s segments come within ``ra + rb + margin`` (m) of each other at ``pos`` or
     anywhere on the straight way to ``pos_end``: their distance at ``pos`` less the largest move of
     a node of each edge (rigid maps keep a move's length)."""
-    a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
     travel = 0.0
     for e in (pairs[p, 0], pairs[p, 1]):
-        move = 0.0
-        for m in range(2):
-            i = edge_nodes[e, m]
-            move = max(move, math.sqrt((pos_end[i, 0] - pos[i, 0]) ** 2 + (pos_end[i, 1] - pos[i, 1]) ** 2
-                                       + (pos_end[i, 2] - pos[i, 2]) ** 2))
-        travel += move
+        travel += max(_node_move(pos, pos_end, edge_nodes[e, 0]), _node_move(pos, pos_end, edge_nodes[e, 1]))
     reach = edge_radius[pairs[p, 0]] + edge_radius[pairs[p, 1]] + margin + travel
-    if _midpoint_distance_bound(a0, a1, b0, b1) > reach:
-        return False
-    return segment_closest_points(a0, a1, b0, b1)[2] <= reach
+    return _segments_within(pos, edge_nodes, pairs, pair_rotation, pair_translation, p, reach)
 
 
 @njit(cache=True)
@@ -466,10 +475,8 @@ def pairs_in_reach_near(pos, pos_end, reference, reference_distance, edge_nodes,
     moved = np.empty(n)
     travel_of = np.empty(n)
     for i in range(n):
-        moved[i] = math.sqrt((pos[i, 0] - reference[i, 0]) ** 2 + (pos[i, 1] - reference[i, 1]) ** 2
-                             + (pos[i, 2] - reference[i, 2]) ** 2)
-        travel_of[i] = math.sqrt((pos_end[i, 0] - pos[i, 0]) ** 2 + (pos_end[i, 1] - pos[i, 1]) ** 2
-                                 + (pos_end[i, 2] - pos[i, 2]) ** 2)
+        moved[i] = _node_move(reference, pos, i)
+        travel_of[i] = _node_move(pos, pos_end, i)
     kept = np.empty(pairs.shape[0], dtype=np.int64)
     count = 0
     for p in range(pairs.shape[0]):
@@ -482,8 +489,8 @@ def pairs_in_reach_near(pos, pos_end, reference, reference_distance, edge_nodes,
         reach = edge_radius[pairs[p, 0]] + edge_radius[pairs[p, 1]] + margin + travel
         if reference_distance[p] - shift > reach:
             continue
-        if reference_distance[p] + shift < reach or _in_reach(pos, pos_end, edge_nodes, edge_radius, pairs,
-                                                              pair_rotation, pair_translation, margin, p):
+        if reference_distance[p] + shift < reach or _segments_within(pos, edge_nodes, pairs, pair_rotation,
+                                                                      pair_translation, p, reach):
             kept[count] = p
             count += 1
     return kept[:count]
@@ -612,6 +619,17 @@ def _out_of_reach(multiplier, first, n_samples, stiffness, lowest_gap, delta):
 
 
 @njit(cache=True)
+def _lowest_gap(a0, a1, b0, b1, radius_sum, multiplier, first, n_samples, stiffness, delta):
+    """``(out of reach, lowest gap)`` of a pair (see :func:`_pair_sample_terms`): the gap's lower
+    bound from the midpoints when that already puts every constraint off its ramp, the segments'
+    distance less ``ra + rb`` otherwise."""
+    lowest_gap = _midpoint_distance_bound(a0, a1, b0, b1) - radius_sum
+    if not _out_of_reach(multiplier, first, n_samples, stiffness, lowest_gap, delta):
+        lowest_gap = segment_closest_points(a0, a1, b0, b1)[2] - radius_sum
+    return _out_of_reach(multiplier, first, n_samples, stiffness, lowest_gap, delta), lowest_gap
+
+
+@njit(cache=True)
 def _pair_sample_terms(a0, a1, b0, b1, samples_a, samples_b, radius_sum, multiplier, first, stiffness, smoothing,
                        out_grad, out_gap, out_force):
     """Augmented-Lagrangian terms of the sampled constraints of one edge pair.
@@ -637,11 +655,9 @@ def _pair_sample_terms(a0, a1, b0, b1, samples_a, samples_b, radius_sum, multipl
     delta = smoothing * stiffness * radius_sum
     energy = 0.0
     n_samples = samples_a + samples_b
-    # A lower bound of every sample's gap: the cheap one first, then the segments' distance.
-    lowest_gap = _midpoint_distance_bound(a0, a1, b0, b1) - radius_sum
-    if not _out_of_reach(multiplier, first, n_samples, stiffness, lowest_gap, delta):
-        lowest_gap = segment_closest_points(a0, a1, b0, b1)[2] - radius_sum
-    if _out_of_reach(multiplier, first, n_samples, stiffness, lowest_gap, delta):
+    out_of_reach, lowest_gap = _lowest_gap(a0, a1, b0, b1, radius_sum, multiplier, first, n_samples, stiffness,
+                                           delta)
+    if out_of_reach:
         for c in range(n_samples):
             out_gap[first + c] = lowest_gap
             out_force[first + c] = 0.0
@@ -818,9 +834,7 @@ def contact_hessian_coo(pos, edge_nodes, edge_radius, edge_samples, pairs, pair_
         rsum = edge_radius[ea] + edge_radius[eb]
         k = stiffness[p]
         delta = smoothing * k * rsum
-        if (_out_of_reach(multiplier, first, sa + sb, k, _midpoint_distance_bound(a0, a1, b0, b1) - rsum, delta)
-                or _out_of_reach(multiplier, first, sa + sb, k, segment_closest_points(a0, a1, b0, b1)[2] - rsum,
-                                 delta)):
+        if _lowest_gap(a0, a1, b0, b1, rsum, multiplier, first, sa + sb, k, delta)[0]:
             continue  # every constraint off its ramp: no curvature
         for i in range(3):
             points[0, i] = a0[i]

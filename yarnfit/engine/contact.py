@@ -270,7 +270,7 @@ class NeighbourList:
             return False
         limit = (0.5 * self.skin) ** 2
         return bool(_contact_kernels.largest_squared_move(self._reference, position) <= limit
-                    and _contact_kernels.largest_squared_move(self._reference, end) <= limit)
+                    and (end is position or _contact_kernels.largest_squared_move(self._reference, end) <= limit))
 
     def _search(self, position: np.ndarray) -> None:
         self.searches += 1
