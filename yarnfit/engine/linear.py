@@ -205,10 +205,9 @@ class FactorCache:
     ``factorisations`` count the symbolic analyses and the numeric factorisations done."""
 
     def __init__(self) -> None:
-        self._indptr: np.ndarray | None = None
-        self._indices: np.ndarray | None = None
+        # The pattern analysed, holding the values of the matrix factorised last.
+        self._matrix: sp.csc_matrix | None = None
         self._solver = None
-        self._data = np.empty(0)
         self._zero_pivot = False
         self.analyses = 0
         self.factorisations = 0
@@ -222,20 +221,19 @@ class FactorCache:
         or one frame's spin, as the relaxation's do, has the least)."""
         n = indptr.shape[0] - 1
         self.factorisations += 1
-        same_shape = self._indptr is not None and self._indptr.shape[0] == n + 1
-        if not (same_shape and self._indices.shape[0] <= UNION_FILL_LIMIT * indices.shape[0]
-                and _scatter(self._indptr, self._indices, indptr, indices, data, self._data)):
+        cached = self._matrix
+        same_shape = cached is not None and cached.shape[0] == n
+        if not (same_shape and cached.indices.shape[0] <= UNION_FILL_LIMIT * indices.shape[0]
+                and _scatter(cached.indptr, cached.indices, indptr, indices, data, cached.data)):
             pattern = (indptr, indices)
             if same_shape:
-                union = _union(self._indptr, self._indices, indptr, indices)
+                union = _union(cached.indptr, cached.indices, indptr, indices)
                 if union[1].shape[0] <= UNION_FILL_LIMIT * indices.shape[0]:
                     pattern = union
-            self._indptr, self._indices = pattern
-            self._data = np.empty(pattern[1].shape[0])
-            _scatter(self._indptr, self._indices, indptr, indices, data, self._data)
-            self._csc = sp.csc_matrix((self._data, self._indices, self._indptr), shape=(n, n))
-            # Later matrices of the pattern are scattered into the same values array.
-            self._data = self._csc.data
+            values = np.empty(pattern[1].shape[0])
+            _scatter(pattern[0], pattern[1], indptr, indices, data, values)
+            # Later matrices of the pattern are scattered into this matrix's values.
+            self._matrix = sp.csc_matrix((values, pattern[1], pattern[0]), shape=(n, n))
             self._solver = None
             self._zero_pivot = False
         if self._zero_pivot:
@@ -243,9 +241,9 @@ class FactorCache:
         try:
             if self._solver is None:
                 self.analyses += 1
-                self._solver = qdldl.Solver(self._csc, upper=True)
+                self._solver = qdldl.Solver(self._matrix, upper=True)
             else:
-                self._solver.update(self._csc, upper=True)
+                self._solver.update(self._matrix, upper=True)
         except RuntimeError as error:
             self._zero_pivot = True
             raise ZeroPivotError(str(error)) from None
@@ -301,7 +299,7 @@ class SymmetricSolve:
         except ZeroPivotError:
             self.method = "threshold"
             try:
-                self._factors = spla.splu(self._equilibrated(), **_SYMMETRIC)
+                self._factors = spla.splu(self._full(equilibrated=True), **_SYMMETRIC)
             except RuntimeError:  # a zero pivot even with threshold pivoting
                 self._use_pivoted()
 
@@ -338,20 +336,18 @@ class SymmetricSolve:
         error = float(np.abs(residual).sum())
         return error / denominator if denominator > 0.0 else error
 
-    def _equilibrated(self) -> sp.csc_matrix:
-        """``W K W`` in full (CSC)."""
+    def _full(self, equilibrated: bool) -> sp.csc_matrix:
+        """``W K W`` (``equilibrated``) or ``K`` itself, ``W⁻¹ (W K W) W⁻¹``, in full (CSC)."""
         indptr, indices, data = self._upper
+        if not equilibrated:
+            column = np.repeat(np.arange(self.size), np.diff(indptr))
+            data = data / (self._weight[indices] * self._weight[column])
         upper = sp.csc_matrix((data, indices, indptr), shape=(self.size, self.size))
         return sp.csc_matrix(upper + upper.T - sp.diags(upper.diagonal()))
 
     def _use_pivoted(self) -> None:
         self.method = "partial"
-        # K itself, W⁻¹ (W K W) W⁻¹, in full.
-        indptr, indices, data = self._upper
-        column = np.repeat(np.arange(self.size), np.diff(indptr))
-        upper = sp.csc_matrix((data / (self._weight[indices] * self._weight[column]), indices, indptr),
-                              shape=(self.size, self.size))
         try:
-            self._factors = spla.splu(sp.csc_matrix(upper + upper.T - sp.diags(upper.diagonal())))
+            self._factors = spla.splu(self._full(equilibrated=False))
         except RuntimeError as error:
             raise SingularSystemError(str(error)) from None
