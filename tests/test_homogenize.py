@@ -14,14 +14,18 @@ import math
 import numpy as np
 import pytest
 
-from yarnfit.engine import ConvergenceWarning, QuasiStaticOptions
+from yarnfit.engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticSolver
+from yarnfit.engine.energy import internal_forces
+from yarnfit.engine.model import aligned_frames
 from yarnfit import homogenize as homogenize_module
-from yarnfit.engine.tiling import yarn_strips
+from yarnfit.engine.tiling import scale_images, yarn_strips
 from yarnfit.fabric import Fabric
 from yarnfit.fit import fit_shell
 from yarnfit.homogenize import (
     CONTINUATION_HALVINGS,
     SurfaceMap,
+    _FreeStrainPoint,
+    _next_free_strain,
     _solve_with_continuation,
     default_ranges,
     solve_sample,
@@ -225,6 +229,98 @@ def test_uniaxial_tension_finds_the_free_width_minimum():
     pure = solve_sample(relaxed, SampleSpec("weft_stretch", *family_deformation("weft_stretch", 0.05), 0.05))
     assert all(s.energy_density > result.energy_density for s in scan)
     assert result.energy_density < pure.energy_density
+
+
+def _free_strain_search(energy, slope, low, strain, solves=homogenize_module.FREE_STRAIN_SOLVES):
+    """Drive :func:`_next_free_strain` over an analytic Ū(E⊥): ``(points solved, verdict)``."""
+    points = [_FreeStrainPoint(0.0, energy(0.0), slope(0.0))]
+    for _ in range(solves):
+        trial, verdict = _next_free_strain(points, low, strain)
+        if trial is None:
+            return points, verdict
+        assert low <= trial <= 0.0 and all(trial != p.free for p in points)
+        points.append(_FreeStrainPoint(trial, energy(trial), slope(trial)))
+    return points, "out of solves"
+
+
+# Quadratic, auxetic, jammed-then-slack (a jersey: slope 1000× steeper on one side of a kink),
+# plateau and still falling at the interval's end: (Ū, dŪ/dE⊥, the E⊥ of the least Ū in [low, 0],
+# verdict). Strain 0.05, low −0.15; Ū ~ 1–10 J/m² as the presets' uniaxial samples.
+FREE_STRAIN_CASES = {
+    "quadratic": (lambda e: 2.0 + 5e4 * (e + 0.02) ** 2, lambda e: 1e5 * (e + 0.02), -0.02, "minimum"),
+    "auxetic": (lambda e: 2.0 - 30.0 * e + 5e4 * e**2, lambda e: -30.0 + 1e5 * e, 0.0, "upper end"),
+    "jammed": (lambda e: 1.0 + 1e6 * max(e + 0.03, 0.0) ** 2 + 1e3 * (e + 0.04) ** 2,
+               lambda e: 2e6 * max(e + 0.03, 0.0) + 2e3 * (e + 0.04), -0.04, "minimum"),
+    "plateau": (lambda e: 1.0 + 1e4 * max(e + 0.1, 0.0) ** 2 + 1e-3 * (e + 0.3),
+                lambda e: 2e4 * max(e + 0.1, 0.0) + 1e-3, -0.15, "plateau"),
+    "falling": (lambda e: 1.0 + 10.0 * (e + 0.3), lambda e: 10.0, -0.15, "lower end"),
+}
+
+
+@pytest.mark.parametrize("case", FREE_STRAIN_CASES)
+def test_the_free_strain_search_finds_the_least_energy_from_slopes(case):
+    energy, slope, where, verdict = FREE_STRAIN_CASES[case]
+    points, found = _free_strain_search(energy, slope, low=-0.15, strain=0.05)
+    assert found == verdict
+    best = min(points, key=lambda p: p.energy)
+    # Within what the search promises: Ū at most SEARCH_ENERGY_RTOL above the least in the interval.
+    assert best.energy <= energy(where) * (1.0 + homogenize_module.SEARCH_ENERGY_RTOL)
+    # Secants on exact slopes: a quadratic's root in one step after the guess; the kink in a few.
+    assert len(points) <= {"quadratic": 3, "auxetic": 1}.get(case, 12)
+
+
+def test_a_flat_energy_ends_the_search_at_once():
+    points, found = _free_strain_search(lambda e: 3.0, lambda e: 0.0, low=-0.15, strain=0.05)
+    assert found == "minimum" and len(points) == 1
+
+
+# The slope from the equilibrium against central differences of warm-started solves 2Δ = 8e-3
+# apart in E⊥: their Ū carry the solver's noise (~1e-3 of Ū between warm starts, 0.3 % of the
+# slope over 2Δ) and Δ² Ū‴ / 6 of truncation; measured 0.15 % at E⊥ = 0 and 0.28 % at −0.01.
+# The contacts carry a large share: the rods' potential alone gives 3066 J/m² against 2388 at 0.
+SLOPE_RTOL = 0.01
+SLOPE_SPAN = 4e-3
+
+
+@pytest.mark.parametrize("free", [0.0, -0.01])
+def test_the_transverse_slope_is_the_derivative_of_the_equilibrium_energy(free):
+    relaxed = fitted().relaxed
+    options = QuasiStaticOptions(max_iterations=homogenize_module.MAX_ITERATIONS)
+
+    def solve(e, warm=None):
+        tiled = tile_repeat(relaxed, np.diag([1.05**2, 1.0 + 2.0 * e]), np.zeros((2, 2)))
+        if warm is not None:
+            tiled.state.node_position[:] = warm.state.node_position
+            tiled.state.node_position[:, 1] *= math.sqrt((1.0 + 2.0 * e) / (1.0 + 2.0 * free))
+            tiled.state.edge_quaternion[:] = aligned_frames(tiled.model, tiled.state.node_position,
+                                                            warm.state.edge_quaternion)
+        result = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
+        assert result.converged
+        return tiled, result
+
+    tiled, result = solve(free)
+    slope = homogenize_module._transverse_slope(tiled.model, result, 0, free, tiled.area)
+    above, below = (solve(free + d, result)[1].energy.internal for d in (SLOPE_SPAN, -SLOPE_SPAN))
+    assert slope == pytest.approx((above - below) / (2.0 * SLOPE_SPAN * tiled.area), rel=SLOPE_RTOL)
+
+
+def test_scaled_images_are_those_of_the_scaled_sample():
+    # A flat sample's tiling scaled across is the tiling of the sample with that width: the rods'
+    # energy of a scaled configuration is the same on either.
+    relaxed = fitted().relaxed
+    tiled = tile_repeat(relaxed, np.diag([1.05**2, 0.98]), np.zeros((2, 2)))
+    scale = np.array([1.0, math.sqrt(0.95 / 0.98), 1.0])
+    wider = tile_repeat(relaxed, np.diag([1.05**2, 0.95]), np.zeros((2, 2)))
+    scaled = scale_images(tiled.model, scale)
+    position = tiled.state.node_position * scale
+    quaternion = tiled.state.edge_quaternion
+    got = internal_forces(scaled, position, quaternion)
+    want = internal_forces(wider.model, position, quaternion)
+    assert sum(got.terms) == pytest.approx(sum(want.terms), rel=1e-12)
+    assert np.allclose(scaled.tiling.translation, wider.model.tiling.translation, rtol=0.0, atol=1e-15)
+    bent = tile_repeat(relaxed, np.eye(2), np.diag([50.0, 0.0]))
+    with pytest.raises(ValueError, match="translations"):
+        scale_images(bent.model, scale)
 
 
 def test_the_undeformed_sample_has_no_energy():

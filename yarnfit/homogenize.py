@@ -38,9 +38,11 @@ import numpy as np
 from .engine import (ConvergenceWarning, LinearConstraints, QuasiStaticOptions, QuasiStaticSolver, Residual, RodModel,
                      RodState)
 from .engine.contact import TilingReachError, image_range
+from .engine.contact_lagrangian import contact_potential
+from .engine.energy import internal_forces
 from .engine.model import aligned_frames
 from .engine.rotations import rotate_frames
-from .engine.tiling import CurvedTiling, retile
+from .engine.tiling import CurvedTiling, retile, scale_images
 from .relax import RelaxedRepeat, yarn_centroid_constraints
 from .samples import SampleRanges, SampleResult, SampleSpec, stretch_share
 from .shell import as_first_fundamental_form, as_second_fundamental_form
@@ -380,40 +382,155 @@ FREE_STRAIN_TOLERANCE = 1e-4
 # their stretch at small strain (measured on cotton jersey); 3 leaves room; μ stays ≥ 0.5.
 FREE_STRAIN_RANGE = 3.0
 SMALLEST_FREE_STRETCH = 0.5
-# First trial of E⊥ / E: a woven's Poisson ratio (0.2–0.3); the parabolas take it from there.
+# First trial of E⊥ / E when the pure stretch's slope gives no curvature yet: a woven's Poisson
+# ratio (0.2–0.3); the secants take it from there.
 FREE_STRAIN_GUESS = -0.3
-# Solves per uniaxial sample at most; successive parabolas typically need 4–10. With fibre-assembly
-# yarns a jersey's minimum can sit at a kink (its wales jam) and warm starts land on a neighbouring
-# branch of equilibria, which the parabolas approach at bisection's pace: wool jersey, course-wise
-# at 15 %, took 27 solves (E⊥ to 1e-4, Ū 3 % below where 15 stopped).
+# Solves per uniaxial sample at most; the secants on the slope typically need 2–6. With
+# fibre-assembly yarns a jersey's minimum can sit at a kink (its wales jam) and warm starts land on
+# a neighbouring branch of equilibria, which a search approaches at bisection's pace: wool jersey,
+# course-wise at 15 %, took 27 solves of the parabolas this search replaced.
 FREE_STRAIN_SOLVES = 40
 # A trial E⊥ whose solve fails from the nearest equilibrium is approached by solving halfway first,
 # at most this many times nested (each halving is one more point the search can use).
 FREE_STRAIN_HALVINGS = 3
-# The search also stops when the parabola around the best point promises less than this relative
-# decrease of Ū: warm-started solves of a knit land in nearby equilibria whose Ū differ by ~1e-4,
-# below which the parabolas only chase that noise, and the fit's residuals are percent-level.
+# The search stops when the decrease of Ū its slope still promises, s² / (2 k) with k the secant
+# curvature, is below this relative to Ū: warm-started solves of a knit land in nearby equilibria
+# whose Ū differ by ~1e-4 and more, below which further solves only chase that noise, and the
+# fit's residuals are percent-level.
 SEARCH_ENERGY_RTOL = 1e-3
-# Ū that varies by less than this (relative) over the E⊥ tried does not depend on E⊥: round-off of
-# the energy sum (1e-16 × the number of terms) with a wide margin.
-FLAT_ENERGY_RTOL = 1e-10
-# A minimum at the interval's lower end counts as a plateau if Ū there is within this (relative)
-# of its neighbour's: the energy has stopped changing with E⊥ to the accuracy the fit can use.
+# A slope this small against Ū over the whole search interval means Ū does not depend on E⊥
+# (nothing resists the transverse direction, as between straight parallel yarns): round-off of
+# the energy sum (1e-16 × the number of terms) over the slope's step, with a wide margin.
+FLAT_ENERGY_RTOL = 1e-6
+# Shortest step of an unbracketed search: ten tolerances, past a minimum its secant step has
+# all but reached, so that the slope changes sign there.
+FREE_STRAIN_PROBE = 10.0 * FREE_STRAIN_TOLERANCE
+# A minimum at the interval's lower end counts as a plateau if Ū would fall by less than this
+# (relative) towards its neighbour: the energy has stopped changing with E⊥ to the accuracy the
+# fit can use.
 PLATEAU_RTOL = 1e-3
+# Step of E⊥ for the slope dŪ/dE⊥ (central difference along the affine path, see
+# :func:`_transverse_slope`): nodes move ~1e-7 of the repeat (~1e-10 m), inside the contact
+# smoothing band (1.6e-8 m for an 80 µm yarn) so the difference stays on one smooth branch, and
+# the energy's round-off (~1e-13 relative) costs ~1e-6 of the slope. Measured on HYLC's
+# stockinette at 5.6 % weft: steps from 5.6e-10 to 5.6e-8 agree to 3e-7 relative, 5.6e-6 is 1e-3 off.
+TRANSVERSE_SLOPE_STEP = 1e-7
+
+
+@dataclass(frozen=True)
+class _FreeStrainPoint:
+    """One converged solve of a uniaxial search: E⊥, Ū (J/m²) and dŪ/dE⊥ (J/m²)."""
+
+    free: float
+    energy: float
+    slope: float
+
+
+def _transverse_slope(model: RodModel, result, axis: int, free: float, area: float) -> float:
+    """dŪ/dE⊥ (J/m²) at ``result``, the equilibrium on ``model`` (a flat sample's tiling) of a
+    sample pulled along ``axis`` at the free Green strain E⊥ = ``free``. By the envelope theorem
+    it is the derivative of the potential the solve balanced (rods, plus the contacts' augmented
+    Lagrangian with the multipliers and penalties it ended with) along any path of configurations
+    that keeps C_RVE; here the affine one, every node and image scaled across by
+    μ(E⊥ ± h) / μ(E⊥) (:func:`~yarnfit.engine.tiling.scale_images`). Frames stay as they are:
+    they are balanced, so turning them changes the potential only to second order."""
+    values = []
+    for step in (TRANSVERSE_SLOPE_STEP, -TRANSVERSE_SLOPE_STEP):
+        scale = np.ones(3)
+        scale[1 - axis] = math.sqrt((1.0 + 2.0 * (free + step)) / (1.0 + 2.0 * free))
+        scaled = scale_images(model, scale)
+        position = result.state.node_position * scale
+        contacts = result.contacts
+        pairs = replace(contacts.pairs, translation=contacts.pairs.translation * scale)
+        rods = sum(internal_forces(scaled, position, result.state.edge_quaternion).terms)
+        values.append(rods + contact_potential(scaled, position, replace(contacts, pairs=pairs)))
+    return (values[0] - values[1]) / (2.0 * TRANSVERSE_SLOPE_STEP * area)
+
+
+def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: float) -> tuple[float | None, str]:
+    """The next E⊥ a uniaxial search should solve, from its converged ``points`` (E⊥ in
+    ``[low, 0]``, prescribed Green strain ``strain``), or ``None`` with the search's verdict:
+
+    - ``"minimum"``: within a bracket, the decrease of Ū the least slope still promises
+      (``s² / 2k``, ``k`` the smaller positive secant curvature with its neighbours) is below
+      :data:`SEARCH_ENERGY_RTOL` or the bracket is narrower than the tolerance; or Ū does not
+      depend on E⊥;
+    - ``"upper end"``: the slope at E⊥ = 0 is not positive (the fabric would widen; the interval
+      stops at 0);
+    - ``"plateau"`` / ``"lower end"``: every slope is positive down to ``low``, and Ū there has
+      (has not) stopped changing.
+
+    ``points`` come in the order they were solved. A bracket (a negative slope left of a positive
+    one) is narrowed by the secant through its ends, kept inside it, as the Illinois variant of
+    regula falsi does it: an end kept while k ≥ 2 later points were solved enters with its slope
+    halved k − 1 times (a jersey's slope, steep where its wales jam and flat beyond, otherwise moved
+    one end by 5e-4 at a time). Without one the search steps towards where the slope points by the
+    secant curvature of its two outermost points (by :data:`FREE_STRAIN_GUESS` from the pure
+    stretch alone), at least :data:`FREE_STRAIN_PROBE` and, once a secant step has fallen short,
+    at least as far as its last: a jersey's slope falls steeply while its wales jam and then tails
+    off slowly, and secant steps on that tail crept (cotton jersey at 2 %: six steps of 5e-4 to
+    3e-3 towards a minimum 5e-3 away). It stops only with a bracket: a secant across a kink
+    gives the jammed side's curvature, which would promise nothing where much is left."""
+    order = {id(p): i for i, p in enumerate(points)}
+    points = sorted(points, key=lambda p: p.free)
+    closest = min(points, key=lambda p: abs(p.slope))
+    span = max(-low, FREE_STRAIN_TOLERANCE)
+    if abs(closest.slope) * span <= FLAT_ENERGY_RTOL * max(abs(closest.energy), np.finfo(float).tiny):
+        return None, "minimum"
+    top = points[-1]
+    if top.free == 0.0 and top.slope <= 0.0:
+        return None, "upper end"
+
+    # Curvature at the point of least slope: the smaller secant with its neighbours (a secant
+    # across a jersey's kink is the jammed side's, far stiffer than the slack side it stops on).
+    i = points.index(closest)
+    neighbours = [(points[j], points[j + 1]) for j in (i - 1, i) if 0 <= j < len(points) - 1]
+    secants = [k for k in ((b.slope - a.slope) / (b.free - a.free) for a, b in neighbours) if k > 0.0]
+    promised = bool(secants) and closest.slope**2 / (2.0 * min(secants)) <= SEARCH_ENERGY_RTOL * abs(closest.energy)
+
+    rising = [p for p in points if p.slope > 0.0]
+    right = rising[0] if rising else None
+    left = next((p for p in reversed(points) if p.slope < 0.0 and (right is None or p.free < right.free)), None)
+    if left is not None and right is not None:
+        width = right.free - left.free
+        if width <= FREE_STRAIN_TOLERANCE or promised:
+            return None, "minimum"
+        older = min(left, right, key=lambda p: order[id(p)])
+        kept = len(order) - 1 - order[id(older)]
+        slopes = [p.slope * (0.5 ** (kept - 1) if p is older and kept >= 2 else 1.0) for p in (left, right)]
+        trial = left.free - slopes[0] * width / (slopes[1] - slopes[0])
+        margin = min(0.1 * width, 0.5 * FREE_STRAIN_TOLERANCE)
+        return min(max(trial, left.free + margin), right.free - margin), "search"
+    # Unbracketed: every slope points the same way.
+    outer, inner = (points[0], points[1:2]) if left is None else (points[-1], points[-2:-1])
+    if left is None and outer.free <= low:
+        falls = outer.slope * (inner[0].free - outer.free) if inner else math.inf
+        return None, "plateau" if falls <= PLATEAU_RTOL * abs(outer.energy) else "lower end"
+    if not inner:
+        return min(max(FREE_STRAIN_GUESS * strain, low), 0.0), "search"
+    inner = inner[0]
+    last = outer.free - inner.free
+    curvature = (inner.slope - outer.slope) / (inner.free - outer.free)
+    step = -outer.slope / curvature if curvature > 0.0 else 2.0 * last
+    # Not a minimum until the slope has changed sign: the curvature an unbracketed secant gives
+    # can be the other side of a kink's, and promise nothing where much is left.
+    shortest = abs(last) if len(points) >= 3 else FREE_STRAIN_PROBE
+    step = math.copysign(max(abs(step), shortest), last)
+    return min(max(outer.free + step, low), 0.0), "search"
 
 
 def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:
-    """Minimise Ū over the free transverse Green strain E⊥ by successive parabolic interpolation
-    (Ū is close to quadratic in E⊥ near its minimum), each evaluation a full solve started from the
-    nearest solved E⊥'s equilibrium stretched across (exact for its affine part, and it keeps C_RVE's
-    values, which are linear in the positions). Not converged if the solve at the optimum did not
-    converge, the search ran out of solves, or E⊥ ends at the interval's lower end (the fabric
-    would contract further)."""
+    """Find the free transverse Green strain E⊥ where Ū is least, each trial a full solve started
+    from the nearest solved E⊥'s equilibrium stretched across (exact for its affine part, and it
+    keeps C_RVE's values, which are linear in the positions), each solve giving Ū's slope
+    dŪ/dE⊥ too (:func:`_transverse_slope`), and the trials chosen by :func:`_next_free_strain`.
+    Not converged if the solve at the result did not converge, the search ran out of solves, or
+    E⊥ ends at the interval's lower end still falling (the fabric would contract further)."""
     axis = spec.family.uniaxial_axis
     stretch = math.sqrt(float(spec.I[axis, axis]))
     strain = 0.5 * (stretch**2 - 1.0)
     low = max(0.5 * (SMALLEST_FREE_STRETCH**2 - 1.0), -FREE_STRAIN_RANGE * strain)
-    solved: dict[float, tuple] = {}  # E⊥ -> (quasi-static result, area)
+    solved: dict[float, tuple] = {}  # E⊥ -> (quasi-static result, area, point or None if unusable)
     iterations = 0
 
     def form(free: float) -> np.ndarray:
@@ -422,7 +539,7 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
         return np.diag(diagonal)
 
     def usable(e: float) -> bool:
-        return solved[e][0] is not None and solved[e][0].converged
+        return solved[e][2] is not None
 
     def nearest_usable(free: float) -> float | None:
         warm = [e for e in solved if usable(e)]
@@ -452,82 +569,66 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
             if not solved:
                 raise
             result = None
-        return result, tiled.area
+        point = None
+        if result is not None and result.converged:
+            point = _FreeStrainPoint(free, result.energy.internal / tiled.area,
+                                     _transverse_slope(tiled.model, result, axis, free, tiled.area))
+        return result, tiled.area, point
 
-    def energy(free: float, depth: int = 0) -> float:
-        free = float(min(0.0, max(low, free)))
-        if free not in solved:
-            result, area = solve_at(free)
-            nearest = nearest_usable(free)
-            if (result is None or not result.converged) and nearest is not None and depth < FREE_STRAIN_HALVINGS:
-                # Too far from the nearest equilibrium for one solve (soft yarns: a jersey's width
-                # contracting by a third): solve halfway first, then again from there.
-                halfway = 0.5 * (nearest + free)
-                if abs(halfway - nearest) > FREE_STRAIN_TOLERANCE and halfway not in solved:
-                    energy(halfway, depth + 1)
-                    if usable(halfway):
-                        result, area = solve_at(free)
-            solved[free] = (result, area)
-        return solved[free][0].energy.internal / solved[free][1] if usable(free) else math.inf
+    def solve(free: float, depth: int = 0) -> None:
+        outcome = solve_at(free)
+        nearest = nearest_usable(free)
+        if outcome[2] is None and nearest is not None and depth < FREE_STRAIN_HALVINGS:
+            # Too far from the nearest equilibrium for one solve (soft yarns: a jersey's width
+            # contracting by a third): solve halfway first, then again from there.
+            halfway = 0.5 * (nearest + free)
+            if abs(halfway - nearest) > FREE_STRAIN_TOLERANCE and halfway not in solved:
+                solve(halfway, depth + 1)
+                if usable(halfway):
+                    outcome = solve_at(free)
+        solved[free] = outcome
 
-    energy(0.0)  # the pure stretch first: every later start is near it
-    energy(FREE_STRAIN_GUESS * strain)
-    found = plateau = False
+    solve(0.0)  # the pure stretch first: every later start is near it
+    verdict = "search"
     for _ in range(FREE_STRAIN_SOLVES):
-        xs = sorted(solved)
-        ys = np.array([energy(e) for e in xs])
-        i = int(np.argmin(ys))
-        if np.isfinite(ys).all() and np.ptp(ys) <= FLAT_ENERGY_RTOL * np.abs(ys).max():
-            found = True  # Ū does not depend on E⊥ (nothing resists the transverse direction)
-            break
-        if i == 0:
-            if xs[0] <= low:
-                # At the interval's end: a plateau (the transverse direction has gone slack, as a
-                # jersey's wales do) is a minimum; still falling, the fabric would contract further.
-                found = plateau = bool(np.isfinite(ys[:2]).all() and ys[1] - ys[0] <= PLATEAU_RTOL * abs(ys[0]))
-                break
-            trial = max(low, xs[0] - 2.0 * (xs[1] - xs[0]))  # not yet bracketed: step on down
+        points = [solved[e][2] for e in solved if usable(e)]
+        if points:
+            trial, verdict = _next_free_strain(points, low, strain)
         else:
-            # Bracketed by its neighbours (or by E⊥ = 0 from above): the vertex of the parabola
-            # through the three points around the best, kept inside the bracket.
-            j = min(max(i, 1), len(xs) - 2) if len(xs) >= 3 else 1
-            x, y = np.array(xs[j - 1:j + 2]), ys[j - 1:j + 2]
-            a, b, c = np.polyfit(x, y, 2) if len(x) == 3 and np.isfinite(y).all() else (0.0, 0.0, 0.0)
-            lower, upper = xs[i - 1], xs[i + 1] if i + 1 < len(xs) else 0.0
-            # The parabola's lowest point inside the bracket: with the best at E⊥ = 0 (the
-            # interval's upper end: an auxetic knit, such as HYLC's stockinette, would widen), a
-            # vertex beyond 0 promises nothing the search may reach, and bisecting towards 0 only
-            # repeated the pure stretch's equilibrium (2–6 solves more per sample).
-            lowest = min(max(-b / (2.0 * a), lower), upper) if a > 0.0 else 0.0
-            if a > 0.0 and ys[i] - (a * lowest * lowest + b * lowest + c) <= SEARCH_ENERGY_RTOL * ys[i]:
-                found = True  # the parabola promises no useful decrease below the best
+            trial, verdict = (FREE_STRAIN_GUESS * strain, "search") if len(solved) == 1 else (None, "failed")
+        if trial is None:
+            break
+        if trial in solved:
+            # A trial that failed before: approach it from the nearest equilibrium instead.
+            nearest = nearest_usable(trial)
+            if nearest is None or abs(trial - nearest) <= FREE_STRAIN_TOLERANCE:
+                verdict = "failed"
                 break
-            trial = -b / (2.0 * a) if a > 0.0 else 0.5 * (lower + xs[i])
-            if not lower < trial < upper or min(abs(trial - e) for e in xs) < 0.1 * FREE_STRAIN_TOLERANCE:
-                # Outside the bracket or already solved: bisect the wider side instead.
-                trial = 0.5 * (xs[i] + (lower if xs[i] - lower > upper - xs[i] else upper))
-            if abs(trial - xs[i]) < FREE_STRAIN_TOLERANCE:
-                found = True
-                break
-        energy(trial)
-    free = min(solved, key=lambda e: energy(e))
-    result, area = solved[free]
-    converged = bool(found and usable(free) and (free - low > FREE_STRAIN_TOLERANCE or plateau))
+            trial = 0.5 * (trial + nearest)
+        solve(trial)
+    else:
+        verdict = "out of solves"
+    # The least Ū found: warm starts land on neighbouring branches of a knit's equilibria, and a
+    # point of small slope on a higher branch is not the fabric's uniaxial state.
+    free = min(solved, key=lambda e: solved[e][2].energy if usable(e) else math.inf)
+    result, area, _ = solved[free]
+    converged = verdict in ("minimum", "upper end", "plateau")
     if not converged:
-        why = ("the solve at the best free strain did not converge" if not usable(free) else
-               "the free strain reached the search interval's end" if found else "the search ran out of solves")
+        why = {"lower end": "the free strain reached the search interval's end with Ū still falling",
+               "out of solves": "the search ran out of solves",
+               "failed": "the solves near the best free strain did not converge"}[verdict]
         warnings.warn(f"uniaxial sample {spec.family} {spec.parameter:+.3g} did not converge: {why} "
                       f"(E⊥ = {free:.4g}, {iterations} iterations)"
                       + ("" if result is None else f": {result.residual}"), ConvergenceWarning, stacklevel=3)
     return SampleResult(
         spec=SampleSpec(spec.family, form(free), spec.II, spec.parameter),
-        energy_density=result.energy.internal / area,
+        energy_density=result.energy.internal / area if result is not None else math.nan,
         converged=converged,
-        residual=result.residual,
+        residual=result.residual if result is not None else Residual(math.nan, math.nan, math.nan, math.nan),
         iterations=iterations,
         seconds=time.perf_counter() - start,
-        position=result.state.node_position,
-        stretch_share=stretch_share(result.energy),
+        position=result.state.node_position if result is not None else None,
+        stretch_share=stretch_share(result.energy) if result is not None else math.nan,
     )
 
 

@@ -20,11 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _contact_kernels
 from ._contact_kernels import constraint_measures
 from .contact import ContactPairs, ImageMaps, NeighbourList
 from .model import RodModel
 
-__all__ = ["CONTACT_SAMPLE_SPACING", "CONTACT_SMOOTHING", "ContactLagrangian", "ContactSet"]
+__all__ = ["CONTACT_SAMPLE_SPACING", "CONTACT_SMOOTHING", "ContactLagrangian", "ContactSet", "contact_potential"]
 
 # Contact penalty: each pair starts at EA / (ra + rb) (a yarn under strain ε presses a contact in by
 # ~ε of the diameter before the multipliers take the force over). The multiplier iteration removes
@@ -138,6 +139,20 @@ class ContactSet:
         if len(self.pairs) == 0:
             return 0.0, 0.0
         return constraint_measures(gap, force, self.start, self.radius_sum, self.stiffness, CONTACT_SMOOTHING)
+
+
+def contact_potential(model: RodModel, position: np.ndarray, contacts: ContactSet) -> float:
+    """The augmented-Lagrangian contact potential (J) of ``contacts`` (their multipliers and
+    penalties held fixed) at node positions ``position`` ``(N, 3)`` (m): the function whose
+    gradient the quasi-static solver balances against the rods' forces. The pairs' image maps are
+    taken as ``contacts`` holds them."""
+    if len(contacts.pairs) == 0:
+        return 0.0
+    n_constraints = contacts.start[-1]
+    return float(_contact_kernels.contact_energy_gradient(
+        np.ascontiguousarray(position, dtype=np.float64), model.edge_nodes, model.edge_radius,
+        *contacts.kernel_args(), np.zeros((model.n_nodes, 3)), np.zeros(model.n_nodes),
+        np.empty(n_constraints), np.empty(n_constraints)))
 
 
 class _Memory:

@@ -273,6 +273,9 @@ class QuasiStaticResult:
         reaction_moment: ``(E, 3)`` the moment (N·m, world frame) each pinned frame's support
             exerts on it, ``∂Π/∂θ``; zero on free frames.
         history: the residual of every iteration.
+        contacts: the contact constraints of the last evaluation with their multipliers and
+            penalties: the contact potential the returned state balances (see
+            :func:`~yarnfit.engine.contact_lagrangian.contact_potential`).
     """
 
     state: RodState
@@ -285,6 +288,7 @@ class QuasiStaticResult:
     reaction_force: np.ndarray
     reaction_moment: np.ndarray
     history: list = field(default_factory=list)
+    contacts: ContactSet = field(default_factory=ContactSet.none)
 
 
 @dataclass
@@ -539,6 +543,7 @@ class QuasiStaticSolver:
             reaction_force=reaction_force,
             reaction_moment=reaction_moment,
             history=history,
+            contacts=work.contacts,
         )
 
     # -- one load step ------------------------------------------------------------------------

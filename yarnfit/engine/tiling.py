@@ -22,6 +22,9 @@ from .rotations import rotate_frames
 
 # A map's rotation must be orthonormal to this (they come from polar decompositions).
 ORTHONORMAL_TOLERANCE = 1e-9
+# A flat sample's maps turn nothing but for round-off of the polar decompositions (~1e-16): a turn
+# this small moves an image by 1e-12 of its distance, far below any tolerance of the solver.
+FLAT_TURN_TOLERANCE = 1e-12
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,6 +121,20 @@ def retile(model: RodModel, tiling: CurvedTiling, lattice: np.ndarray) -> RodMod
     frame_rotation = np.ascontiguousarray(np.column_stack([xyzw[:, 3], xyzw[:, :3]]))
     return replace(curved, edge_end_rotation=np.ascontiguousarray(end_rotation),
                    edge_offset=np.ascontiguousarray(end_offset), joint_frame_rotation=frame_rotation)
+
+
+def scale_images(model: RodModel, scale: np.ndarray) -> RodModel:
+    """``model`` with its periodic images where they are when the whole tiled configuration is
+    scaled by ``diag(scale)`` (``(3,)``): an image's translation, every ghost edge's end offset
+    and the lattice scale with it. Only for tilings of translations (flat samples, whose maps turn
+    nothing): a turning map does not commute with the scaling."""
+    scale = np.asarray(scale, dtype=np.float64)
+    if model.tiling is not None:
+        if np.abs(model.tiling.rotation - np.eye(3)).max(initial=0.0) > FLAT_TURN_TOLERANCE:
+            raise ValueError("scale_images needs a tiling of translations (its maps turn the images)")
+        model = replace(model, tiling=CurvedTiling(model.tiling.images, model.tiling.rotation,
+                                                   model.tiling.translation * scale))
+    return replace(model, lattice=model.lattice * scale, edge_offset=np.ascontiguousarray(model.edge_offset * scale))
 
 
 def yarn_strips(model: RodModel, position: np.ndarray, tile=(0, 0)) -> list[np.ndarray]:
