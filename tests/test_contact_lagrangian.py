@@ -17,7 +17,9 @@ from yarnfit.engine.contact_lagrangian import (
     STALL_PROGRESS,
     ContactLagrangian,
     ContactSet,
+    contact_potential,
 )
+from yarnfit.engine import _contact_kernels
 
 RADIUS = 1e-3  # m
 MATERIAL = RodMaterial(young_modulus=1e9, poisson_ratio=0.3, density=1000.0)
@@ -156,3 +158,28 @@ def test_penalties_stiffen_only_where_updates_stall():
     assert new.any() and (~new).any()
     assert np.all(later.stiffening[new] == MAX_STIFFENING)
     assert np.all(later.stiffening[~new] <= MAX_STIFFENING) and later.stiffening[~new].min() == 1.0
+
+
+def test_the_potential_of_some_pairs_adds_up_to_the_whole():
+    # A swept query finds pairs a query at the start does not: the solver corrects the start's
+    # potential by the pairs one set lacks (pairs_energy over those alone) instead of assessing it
+    # again. The parts must add up to the kernel's whole, and missing_from must name exactly the
+    # pairs the other set lacks.
+    model, position, options, lagrangian, at_rest = queried()
+    moved = position + np.array([0.0, 0.0, 3.0 * RADIUS]) * (np.arange(model.n_nodes) >= model.n_nodes // 2)[:, None]
+    swept = lagrangian.query(position, moved)
+    swept.multiplier = np.linspace(0.0, 2.0, swept.start[-1])  # loaded constraints, not only zeros
+    assert len(swept) > len(at_rest) > 0
+    n = model.n_edges
+    missing = swept.missing_from(at_rest, n)
+    have = set(at_rest.pairs.keys(n).tolist())
+    assert [int(k) for k in swept.pairs.keys(n)[missing]] == [k for k in swept.pairs.keys(n).tolist() if k not in have]
+    assert at_rest.missing_from(swept, n).size == 0 and at_rest.missing_from(ContactSet.none(), n).size == len(at_rest)
+    rest = np.setdiff1d(np.arange(len(swept)), missing)
+    gap, force = np.empty(swept.start[-1]), np.empty(swept.start[-1])
+    whole = _contact_kernels.contact_energy_gradient(position, model.edge_nodes, model.edge_radius,
+                                                     *swept.kernel_args(), np.zeros((model.n_nodes, 3)),
+                                                     np.zeros(model.n_nodes), gap, force)
+    parts = contact_potential(model, position, swept, missing) + contact_potential(model, position, swept, rest)
+    assert parts == pytest.approx(whole, rel=1e-14) and whole != 0.0
+    assert contact_potential(model, position, swept) == pytest.approx(whole, rel=1e-14)

@@ -727,6 +727,28 @@ def contact_energy_gradient(pos, edge_nodes, edge_radius, edge_samples, pairs, p
 
 
 @njit(cache=True)
+def pairs_energy(pos, edge_nodes, edge_radius, edge_samples, pairs, pair_rotation, pair_translation, constraint_start,
+                 multiplier, stiffness, smoothing, which):
+    """The augmented-Lagrangian contact energy (J) of the pairs ``which`` (indices) alone, as
+    :func:`contact_energy_gradient` sums it."""
+    local = np.empty(12)
+    # One pair's gaps and forces, thrown away: its constraints are indexed from 0 in a view of
+    # its multipliers.
+    scratch_gap = np.empty(2 * edge_samples.max())
+    scratch_force = np.empty(2 * edge_samples.max())
+    energy = 0.0
+    for p in which:
+        ea = pairs[p, 0]
+        eb = pairs[p, 1]
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
+        energy += _pair_sample_terms(a0, a1, b0, b1, edge_samples[ea], edge_samples[eb],
+                                     edge_radius[ea] + edge_radius[eb],
+                                     multiplier[constraint_start[p]:constraint_start[p + 1]], 0, stiffness[p],
+                                     smoothing, local, scratch_gap, scratch_force)
+    return energy
+
+
+@njit(cache=True)
 def constraint_measures(gap, force, constraint_start, radius_sum, stiffness, smoothing):
     """``(penetration, separation)`` of sampled constraints with gaps ``gap`` (m) and normal forces
     ``force`` (N), pair ``p`` owning ``constraint_start[p]:[p + 1]``: the deepest overlap, and the

@@ -122,6 +122,15 @@ class ContactSet:
         return (self.edge_samples, *self.pairs.kernel_args(), self.start, self.multiplier, self.stiffness,
                 CONTACT_SMOOTHING)
 
+    def missing_from(self, other: "ContactSet", n_edges: int) -> np.ndarray:
+        """Indices of this set's pairs (edges and image) that ``other`` does not have."""
+        theirs = np.sort(other.pairs.keys(n_edges))
+        mine = self.pairs.keys(n_edges)
+        at = np.minimum(np.searchsorted(theirs, mine), max(theirs.size - 1, 0))
+        if theirs.size == 0:
+            return np.arange(mine.size)
+        return np.flatnonzero(theirs[at] != mine)
+
     def same_constraints(self, other: "ContactSet") -> bool:
         """The same pairs (with images), multipliers and penalties as ``other``: the contact
         potential is then the same function of the positions."""
@@ -141,18 +150,17 @@ class ContactSet:
         return constraint_measures(gap, force, self.start, self.radius_sum, self.stiffness, CONTACT_SMOOTHING)
 
 
-def contact_potential(model: RodModel, position: np.ndarray, contacts: ContactSet) -> float:
+def contact_potential(model: RodModel, position: np.ndarray, contacts: ContactSet,
+                      pairs: np.ndarray | None = None) -> float:
     """The augmented-Lagrangian contact potential (J) of ``contacts`` (their multipliers and
-    penalties held fixed) at node positions ``position`` ``(N, 3)`` (m): the function whose
-    gradient the quasi-static solver balances against the rods' forces. The pairs' image maps are
-    taken as ``contacts`` holds them."""
-    if len(contacts.pairs) == 0:
+    penalties held fixed), or of its pairs ``pairs`` (indices) alone, at node positions
+    ``position`` ``(N, 3)`` (m): the function whose gradient the quasi-static solver balances
+    against the rods' forces. The pairs' image maps are taken as ``contacts`` holds them."""
+    which = np.arange(len(contacts.pairs)) if pairs is None else np.asarray(pairs, dtype=np.int64)
+    if which.size == 0:
         return 0.0
-    n_constraints = contacts.start[-1]
-    return float(_contact_kernels.contact_energy_gradient(
-        np.ascontiguousarray(position, dtype=np.float64), model.edge_nodes, model.edge_radius,
-        *contacts.kernel_args(), np.zeros((model.n_nodes, 3)), np.zeros(model.n_nodes),
-        np.empty(n_constraints), np.empty(n_constraints)))
+    return float(_contact_kernels.pairs_energy(np.ascontiguousarray(position, dtype=np.float64), model.edge_nodes,
+                                               model.edge_radius, *contacts.kernel_args(), which))
 
 
 class _Memory:

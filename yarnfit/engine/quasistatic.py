@@ -57,7 +57,7 @@ import scipy.sparse as sp
 
 from . import _contact_kernels, _kernels
 from .contact import ContactPairs
-from .contact_lagrangian import ContactLagrangian, ContactSet
+from .contact_lagrangian import ContactLagrangian, ContactSet, contact_potential
 from .energy import EnergyTerms, internal_forces
 from .linear import FactorCache, SingularSystemError, SymmetricSolve
 from .model import RodModel, quaternion_d3
@@ -760,8 +760,15 @@ class QuasiStaticSolver:
             return self._assess(point, contacts, node_force, moment)
 
         # The current iterate's potential with the swept contacts: the evaluation's own when the
-        # sweep found the same constraints (same pairs, multipliers and penalties).
-        start = ev.potential if contacts.same_constraints(work.contacts) else assess(work.point).potential
+        # sweep found the same constraints (same pairs, multipliers and penalties), else corrected
+        # by the pairs only one of the two sets has (both come from the same memory, so the pairs
+        # they share carry the same multipliers and penalties). Most sweeps add pairs, and
+        # assessing the iterate again was a fifth of a stockinette sample's evaluations.
+        start = ev.potential
+        if not contacts.same_constraints(work.contacts):
+            n_edges = m.n_edges
+            start += (contact_potential(m, work.position, contacts, contacts.missing_from(work.contacts, n_edges))
+                      - contact_potential(m, work.position, work.contacts, work.contacts.missing_from(contacts, n_edges)))
         g_dot_d = float(ev.gradient[self._free] @ direction)
         scale = max(abs(start), abs(ev.internal), 1e-300)
 
