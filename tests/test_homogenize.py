@@ -265,6 +265,8 @@ def test_the_free_strain_search_finds_the_least_energy_from_slopes(case):
     best = min(points, key=lambda p: p.energy)
     # Within what the search promises: Ū at most SEARCH_ENERGY_RTOL above the least in the interval.
     assert best.energy <= energy(where) * (1.0 + homogenize_module.SEARCH_ENERGY_RTOL)
+    if found == "minimum":  # the slope's root to the search's tolerance on E⊥
+        assert min(abs(p.free - where) for p in points) <= homogenize_module.FREE_STRAIN_TOLERANCE
     # Secants on exact slopes: a quadratic's root in one step after the guess; the kink in a few.
     assert len(points) <= {"quadratic": 3, "auxetic": 1}.get(case, 12)
 

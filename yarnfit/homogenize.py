@@ -393,11 +393,20 @@ FREE_STRAIN_SOLVES = 40
 # A trial E⊥ whose solve fails from the nearest equilibrium is approached by solving halfway first,
 # at most this many times nested (each halving is one more point the search can use).
 FREE_STRAIN_HALVINGS = 3
-# The search stops when the decrease of Ū its slope still promises, s² / (2 k) with k the secant
-# curvature, is below this relative to Ū: warm-started solves of a knit land in nearby equilibria
-# whose Ū differ by ~1e-4 and more, below which further solves only chase that noise, and the
-# fit's residuals are percent-level.
+# Inside a bracket the search stops when the decrease of Ū the least slope still promises,
+# s² / (2 k), is below this relative to Ū *and* that slope is below FREE_SLOPE_RTOL of the pure
+# stretch's (or the root is within FREE_STRAIN_TOLERANCE). Ū alone is too flat about its minimum
+# to place E⊥ (satin at 5 %: ½ k δ² ≈ 1e-3 Ū for δ = 0.009, ±10 % on the Poisson ratio), and the
+# slope alone is fooled by a jersey's slack side (slope 0.2 % of the pure stretch's, Ū 8 % above
+# the least). Points whose Ū lies within this of the least found count as one equilibrium, and
+# the result is the one of least slope among them: warm-started solves of a knit land in nearby
+# equilibria whose Ū differ by ~1e-4, while a point further above is on another branch
+# (polyester jersey, wale-wise at 5 %: slope 0.03 J/m² at a Ū 2.2e-3 above the least found).
 SEARCH_ENERGY_RTOL = 1e-3
+# The transverse stress left at the result, as a fraction of the pure stretch's (the slope at
+# E⊥ = 0): where the slope is near linear this puts E⊥ within 1 % of its root, the Poisson ratio
+# to ~1 %.
+FREE_SLOPE_RTOL = 0.01
 # A slope this small against Ū over the whole search interval means Ū does not depend on E⊥
 # (nothing resists the transverse direction, as between straight parallel yarns): round-off of
 # the energy sum (1e-16 × the number of terms) over the slope's step, with a wide margin.
@@ -451,10 +460,11 @@ def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: fl
     """The next E⊥ a uniaxial search should solve, from its converged ``points`` (E⊥ in
     ``[low, 0]``, prescribed Green strain ``strain``), or ``None`` with the search's verdict:
 
-    - ``"minimum"``: within a bracket, the decrease of Ū the least slope still promises
-      (``s² / 2k``, ``k`` the smaller positive secant curvature with its neighbours) is below
-      :data:`SEARCH_ENERGY_RTOL` or the bracket is narrower than the tolerance; or Ū does not
-      depend on E⊥;
+    - ``"minimum"``: within a bracket, the point of least slope ``s`` promises a decrease of Ū
+      (``s² / 2k``, ``k`` the smaller positive secant curvature with its neighbours) below
+      :data:`SEARCH_ENERGY_RTOL` and ``|s|`` is below :data:`FREE_SLOPE_RTOL` of the pure
+      stretch's, or the slope's root lies within :data:`FREE_STRAIN_TOLERANCE` of it (``|s| / k``),
+      or the bracket is narrower than that; or Ū does not depend on E⊥;
     - ``"upper end"``: the slope at E⊥ = 0 is not positive (the fabric would widen; the interval
       stops at 0);
     - ``"plateau"`` / ``"lower end"``: every slope is positive down to ``low``, and Ū there has
@@ -486,20 +496,31 @@ def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: fl
     i = points.index(closest)
     neighbours = [(points[j], points[j + 1]) for j in (i - 1, i) if 0 <= j < len(points) - 1]
     secants = [k for k in ((b.slope - a.slope) / (b.free - a.free) for a, b in neighbours) if k > 0.0]
-    promised = bool(secants) and closest.slope**2 / (2.0 * min(secants)) <= SEARCH_ENERGY_RTOL * abs(closest.energy)
+    near_root = bool(secants) and abs(closest.slope) / min(secants) <= FREE_STRAIN_TOLERANCE
+    pure = max((abs(p.slope) for p in points if p.free == 0.0), default=max(abs(p.slope) for p in points))
+    settled = (bool(secants) and closest.slope**2 / (2.0 * min(secants)) <= SEARCH_ENERGY_RTOL * abs(closest.energy)
+               and abs(closest.slope) <= FREE_SLOPE_RTOL * pure)
 
     rising = [p for p in points if p.slope > 0.0]
     right = rising[0] if rising else None
     left = next((p for p in reversed(points) if p.slope < 0.0 and (right is None or p.free < right.free)), None)
     if left is not None and right is not None:
         width = right.free - left.free
-        if width <= FREE_STRAIN_TOLERANCE or promised:
+        if width <= FREE_STRAIN_TOLERANCE or near_root or settled:
             return None, "minimum"
+        margin = min(0.1 * width, 0.5 * FREE_STRAIN_TOLERANCE)
+        # The secant through the point of least slope and its nearer neighbour first (converges
+        # fast once near the root, whatever the bracket's far end looks like: polyester jersey's
+        # bracket end beyond a kink, slope −65 against ±0.05 near the root, made regula falsi
+        # creep by 5e-5 a solve), if it lands inside the bracket.
+        if secants:
+            trial = closest.free - closest.slope / min(secants)
+            if left.free + margin <= trial <= right.free - margin:
+                return trial, "search"
         older = min(left, right, key=lambda p: order[id(p)])
         kept = len(order) - 1 - order[id(older)]
         slopes = [p.slope * (0.5 ** (kept - 1) if p is older and kept >= 2 else 1.0) for p in (left, right)]
         trial = left.free - slopes[0] * width / (slopes[1] - slopes[0])
-        margin = min(0.1 * width, 0.5 * FREE_STRAIN_TOLERANCE)
         return min(max(trial, left.free + margin), right.free - margin), "search"
     # Unbracketed: every slope points the same way.
     outer, inner = (points[0], points[1:2]) if left is None else (points[-1], points[-2:-1])
@@ -608,9 +629,15 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
         solve(trial)
     else:
         verdict = "out of solves"
-    # The least Ū found: warm starts land on neighbouring branches of a knit's equilibria, and a
-    # point of small slope on a higher branch is not the fabric's uniaxial state.
-    free = min(solved, key=lambda e: solved[e][2].energy if usable(e) else math.inf)
+    points = [solved[e][2] for e in solved if usable(e)]
+    if not points:
+        free = next(iter(solved))
+    elif verdict in ("upper end", "plateau", "lower end"):
+        free = max(p.free for p in points) if verdict == "upper end" else min(p.free for p in points)
+    else:
+        least = min(p.energy for p in points)
+        free = min((p for p in points if p.energy <= least + SEARCH_ENERGY_RTOL * abs(least)),
+                   key=lambda p: abs(p.slope)).free
     result, area, _ = solved[free]
     converged = verdict in ("minimum", "upper end", "plateau")
     if not converged:
