@@ -11,7 +11,8 @@ import pytest
 import rerun as rr
 
 import yarnfit.validate.swatch as swatch_module
-from yarnfit.engine import Rod, RodMaterial, RodModel
+from yarnfit.engine import Rod, RodMaterial, RodModel, RodState, energy
+from yarnfit.engine.model import quaternion_d3
 from yarnfit.engine.tiling import cut_rectangle
 from yarnfit.validate.swatch import (STRAIN_TIMELINE, cut_swatch, edge_draw_in, free_side_ends, stretch_repeat,
                                      stretch_swatch)
@@ -24,6 +25,9 @@ NODES = 8  # per yarn per repeat (even: the jaw lines at multiples of PX / 2 fal
 # so the reaction is known to ~1e-6 relative; the closed form is exact for the discrete rod
 # (the axial strain |e|/l0 − 1 of a straight edge is the yarn strain), so only that is left.
 FORCE_RTOL = 1e-5
+# A cut swatch's rest state is its cut shape: its energy is round-off of curvatures and twists
+# recomputed from the frames it was built from (~1e-16 rad over 1e-4 m edges, EI ~ 1e-8 N·m²).
+REST_ENERGY_ATOL = 1e-20
 
 
 def straight_weft_repeat(hardening: float = 0.0):
@@ -142,6 +146,34 @@ def test_edge_draw_in_is_what_the_narrowing_does_not_explain():
     weft = cut_swatch(model, model.node_rest_position, material, direction="weft", gauge=4 * PX, width=2 * PY,
                       clamp=PX)
     assert len(free_side_ends(weft)) == 0 and math.isnan(edge_draw_in(weft, weft.position, 1.0))
+
+
+def test_selvedges_join_the_courses_into_one_force_free_yarn():
+    # A warp strip of straight wefts: the wefts run across it. With selvedges, the eight between
+    # the jaws become one serpentine yarn turning outside the long sides (even courses at +y, odd
+    # at −y, in order along the pull), the jaws' wefts stay as they were, and the joined yarn's
+    # rest state is its cut shape with half circles added: no energy, every frame along its edge.
+    model, material = straight_weft_repeat()
+    dims = dict(direction="warp", gauge=4 * PY, width=3 * PX, clamp=PY / 2)
+    cut = cut_swatch(model, model.node_rest_position, material, **dims)
+    joined = cut_swatch(model, model.node_rest_position, material, selvedge=True, **dims)
+    assert cut.model.n_rods == 10 and joined.model.n_rods == 3
+    serpentine = int(np.argmax(np.diff(joined.model.rod_node_start)))
+    nodes = np.arange(joined.model.rod_node_start[serpentine], joined.model.rod_node_start[serpentine + 1])
+    points = joined.position[nodes]
+    outside = np.abs(points[:, 1]) > 1.5 * PX + 1e-12
+    turns = np.flatnonzero(np.diff(outside.astype(int)) == 1)
+    assert len(turns) == 7  # between eight courses
+    assert [math.copysign(1.0, points[t + 1, 1]) for t in turns] == [1.0, -1.0] * 3 + [1.0]
+    assert np.all(np.diff(points[~outside][::NODES * 3, 0]) >= 0.0)  # courses in order along the pull
+    # Half circles of the course spacing (PY / 2) as diameter: no node beyond PY / 4 outside.
+    assert np.abs(points[:, 1]).max() <= 1.5 * PX + PY / 4 + 1e-12
+    state = RodState.from_model(joined.model)
+    assert energy(joined.model, state).internal == pytest.approx(0.0, abs=REST_ENERGY_ATOL)
+    tangents = np.diff(points, axis=0)
+    tangents /= np.linalg.norm(tangents, axis=1)[:, None]
+    edges = np.arange(joined.model.rod_edge_start[serpentine], joined.model.rod_edge_start[serpentine + 1])
+    np.testing.assert_allclose(quaternion_d3(joined.model.edge_rest_quaternion[edges]), tangents, atol=1e-12)
 
 
 def test_small_weave_balances_with_contacts():

@@ -9,7 +9,7 @@ node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what say
 has to be.
 
     python validation/swatch_convergence.py MATERIAL.json [--sizes 2x1.5,4x3,8x6] \\
-        [--directions weft,warp,bias] [--json OUT.json] [--from-json A.json,B.json]
+        [--directions weft,warp,bias] [--selvedge] [--json OUT.json] [--from-json A.json,B.json]
 
 The force and width measured at mid-length converge as the cut loops at the long sides and the
 jaws' constraint become a smaller part of the strip; the table shows how fast. Its edge draw-in
@@ -68,9 +68,11 @@ def parse_sizes(text: str) -> list[tuple[float, float]]:
     return sizes
 
 
-def solve_curves(file: MaterialFile, sizes, directions) -> tuple[object, dict]:
-    """``(relaxed repeat, {label: curve})``: each direction's strips at each size, pulled to
-    STRAINS on one core; prints each strip's row as it finishes."""
+def solve_curves(file: MaterialFile, sizes, directions, selvedge: bool = False) -> tuple[object, dict]:
+    """``(relaxed repeat, {label: curve})``: each direction's strips at each size (with
+    ``selvedge``, the yarns running across a strip joined at its long sides:
+    :func:`yarnfit.validate.swatch.join_selvedges`), pulled to STRAINS on one core; prints each
+    strip's row as it finishes."""
     relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
     repeat = float(max(relaxed.repeat_size))
     section = relaxed.yarn.section()
@@ -78,7 +80,8 @@ def solve_curves(file: MaterialFile, sizes, directions) -> tuple[object, dict]:
     for direction in directions:
         for gauge, width in sizes:
             swatch = cut_swatch(relaxed.model, relaxed.state.node_position, section, direction=direction,
-                                gauge=gauge * repeat, width=width * repeat, clamp=CLAMP_REPEATS * repeat)
+                                gauge=gauge * repeat, width=width * repeat, clamp=CLAMP_REPEATS * repeat,
+                                selvedge=selvedge)
             start = time.perf_counter()
             curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, progress=lambda text: print("   ", text, flush=True))
             curve["repeats"] = [gauge, width]
@@ -139,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("material", help="a material file written by `yarnfit fit`")
     parser.add_argument("--sizes", default="2x1.5,4x3,8x6", help="gauge x width between the jaws, in repeats")
     parser.add_argument("--directions", default="weft,warp", help="comma-separated: weft, warp, bias")
+    parser.add_argument("--selvedge", action="store_true",
+                        help="join the yarns running across each strip at its long sides (a flat knit's selvedges)")
     parser.add_argument("--json", help="also write the curves to this file")
     parser.add_argument("--from-json", help="comma-separated curve files of earlier runs: compare, do not solve")
     args = parser.parse_args(argv)
@@ -154,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
                     curves[label] = curve
         name = file.fabric().name
     else:
-        relaxed, curves = solve_curves(file, parse_sizes(args.sizes), args.directions.split(","))
+        relaxed, curves = solve_curves(file, parse_sizes(args.sizes), args.directions.split(","), args.selvedge)
         name = relaxed.name
         print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
     strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)

@@ -66,6 +66,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 import rerun as rr
+from scipy.spatial.transform import Rotation
 import rerun.blueprint as rrb
 
 from ..engine import (
@@ -79,7 +80,8 @@ from ..engine import (
     RodState,
     energy_gradient,
 )
-from ..engine.tiling import cut_rectangle
+from ..engine.rotations import quaternion_between, xyzw
+from ..engine.tiling import YarnPiece, cut_rectangle
 from ..jsonfile import finite_or_none
 from ..material_file import MaterialFile
 from ..record import Recording, folded_panels, markdown_table
@@ -97,6 +99,11 @@ QUICK_SIZE = {"gauge": 2.0, "width": 1.5, "clamp": 0.5}
 # a dense woven's swatch fits the suite's 10 minutes (full size: a twill 4149 nodes, 795 s for
 # three directions; a satin 10305 nodes). Knits stay at FULL_SIZE (~500 nodes).
 MAX_NODES = {True: 600, False: 1500}
+# Selvedges (join_selvedges): a piece end within this fraction of the repeat's smaller side of a
+# long side is cut there (a course leaves the strip within its loops' reach of the cut line: wool
+# jersey's warp strip, 0.10 of the repeat); a turn has at least this many edges.
+SELVEDGE_REACH = 0.25
+SELVEDGE_MIN_EDGES = 4
 # Pieces shorter than this fraction of the repeat's smaller side are dropped (clipped fragments).
 MIN_PIECE_FRACTION = 0.5
 # A node within this fraction of an edge length outside the jaw line still counts as clamped
@@ -146,10 +153,11 @@ class Swatch:
 
 
 def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | RodMaterial, *, direction: str = "weft",
-               gauge: float, width: float, clamp: float) -> Swatch:
+               gauge: float, width: float, clamp: float, selvedge: bool = False) -> Swatch:
     """Cut a strip from the flat periodic ``model`` at ``position`` (its relaxed rest state, frames
     its rest frames): ``gauge`` × ``width`` between the jaws plus a ``clamp`` band at each end (m),
-    pulled along ``direction`` (a key of :data:`DIRECTIONS`). See the module docstring."""
+    pulled along ``direction`` (a key of :data:`DIRECTIONS`); with ``selvedge``, the yarns running
+    across it are joined at its long sides (:func:`join_selvedges`). See the module docstring."""
     if direction not in DIRECTIONS:
         raise ValueError(f"direction must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
     for value, what in ((gauge, "gauge"), (width, "width"), (clamp, "clamp")):
@@ -163,7 +171,11 @@ def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | Rod
     lattice = model.lattice
     min_piece = MIN_PIECE_FRACTION * min(np.linalg.norm(lattice[0]), np.linalg.norm(lattice[1]))
     rods = []
-    for piece in cut_rectangle(model, position, rotation, length, width, min_piece):
+    pieces = cut_rectangle(model, position, rotation, length, width, min_piece)
+    if selvedge:
+        smaller = min(np.linalg.norm(lattice[0]), np.linalg.norm(lattice[1]))
+        pieces = join_selvedges(pieces, width, gauge, SELVEDGE_REACH * smaller)
+    for piece in pieces:
         x = piece.points[:, 0]
         slack = CLAMP_SLACK * length
         pinned = np.flatnonzero((x <= -gauge / 2 + slack) | (x >= gauge / 2 - slack))
@@ -183,6 +195,105 @@ def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | Rod
     return Swatch(model=built, position=np.array(built.node_rest_position), moving=moving, fixed=fixed,
                   length=length, width=width, gauge=gauge, clamp=clamp,
                   radius=float(built.edge_radius.max()), direction=direction, angle_deg=DIRECTIONS[direction])
+
+
+def join_selvedges(pieces: Sequence[YarnPiece], width: float, gauge: float, reach: float) -> list[YarnPiece]:
+    """Flat-knit selvedges for a strip pulled across its yarns (a knit's warp strip): the pieces
+    that run from one long side to the other (ends within ``reach`` of each side, m) and lie
+    between the jaws, in order along the pull, joined end to end, course k to course k + 1 at the
+    +y side for even k and at the −y side for odd k, by a half circle outside the strip
+    (:func:`_turn`); loop fragments lying wholly within ``reach`` of a side between the jaws (legs
+    of the outermost loops, cut off their courses) are dropped, the turns taking their place. The
+    strip's courses become one serpentine yarn, as a flat knitting machine makes it, so that a
+    course can draw yarn only from its neighbours, not from a free end (a frictionless cut edge
+    feeds its loops from there, which is not the fabric: session 28, wool jersey). Other pieces
+    are returned as they are."""
+    side = 0.5 * width - reach
+
+    def between_jaws(piece: YarnPiece) -> bool:
+        return bool(np.all(np.abs(piece.points[[0, -1], 0]) < 0.5 * gauge))
+
+    def across(piece: YarnPiece) -> bool:
+        ends = piece.points[[0, -1], 1]
+        return between_jaws(piece) and bool(np.all(np.abs(ends) >= side) and ends[0] * ends[1] < 0.0)
+
+    def fragment(piece: YarnPiece) -> bool:
+        return between_jaws(piece) and bool(np.all(np.abs(piece.points[:, 1]) >= side))
+
+    courses = sorted((p for p in pieces if across(p)), key=lambda p: float(p.points[:, 0].mean()))
+    if len(courses) < 2:
+        return list(pieces)
+    edge = float(np.median(np.concatenate([p.rest_lengths for p in courses])))
+    joined = None
+    for k, course in enumerate(courses):
+        # Course k runs towards the side it is joined to course k + 1 at: +y for even k.
+        towards = 1.0 if k % 2 == 0 else -1.0
+        if (course.points[-1, 1] - course.points[0, 1]) * towards < 0.0:
+            course = _reversed(course)
+        if joined is None:
+            joined = course
+            continue
+        turn = _turn(joined, course, -towards, edge)
+        joined = YarnPiece(np.concatenate([joined.points, turn.points[1:-1], course.points]),
+                           np.concatenate([joined.rest_lengths, turn.rest_lengths, course.rest_lengths]),
+                           np.concatenate([joined.frames, turn.frames, course.frames]), joined.radius)
+    return [p for p in pieces if not (across(p) or fragment(p))] + [joined]
+
+
+def _reversed(piece: YarnPiece) -> YarnPiece:
+    """The piece run the other way: each frame turned by π about its own d1, so that d3 follows
+    the new direction (d2 flips with it)."""
+    flipped = _rotations(piece.frames[::-1]) * Rotation.from_rotvec([math.pi, 0.0, 0.0])
+    return YarnPiece(piece.points[::-1].copy(), piece.rest_lengths[::-1].copy(), _quaternions(flipped), piece.radius)
+
+
+def _turn(before: YarnPiece, after: YarnPiece, outward: float, edge: float) -> YarnPiece:
+    """The half circle from ``before``'s last node to ``after``'s first, bulging ``outward`` (±y)
+    beyond the strip, its nodes about ``edge`` apart: its rest shape is its shape (a turn at rest
+    carries no force). Its frames are transported without twist from ``before``'s last edge, and
+    the twist that leaves against ``after``'s first frame is spread evenly over its edges."""
+    start, end = before.points[-1], after.points[0]
+    chord = end - start
+    radius = 0.5 * float(np.linalg.norm(chord))
+    if not radius > before.radius:
+        raise ValueError(f"selvedge: consecutive courses end {2 * radius:.3g} m apart, closer than a yarn diameter")
+    along = chord / (2.0 * radius)
+    out = np.array([0.0, outward, 0.0]) - outward * along[1] * along
+    out /= np.linalg.norm(out)
+    n = max(SELVEDGE_MIN_EDGES, int(math.ceil(math.pi * radius / edge)))
+    phi = np.linspace(0.0, math.pi, n + 1)
+    points = 0.5 * (start + end) + radius * (-np.cos(phi)[:, None] * along + np.sin(phi)[:, None] * out)
+    points[0], points[-1] = start, end
+    segments = np.diff(points, axis=0)
+    lengths = np.linalg.norm(segments, axis=1)
+    tangents = segments / lengths[:, None]
+    frame = _rotations(before.frames[-1:])[0]
+    frames = []
+    for t in tangents:
+        frame = _rotations(quaternion_between(frame.apply(E3), t)[None])[0] * frame
+        frames.append(frame)
+    first_after = _rotations(after.frames[:1])[0]
+    tangent_after = first_after.apply(E3)
+    arrived = _rotations(quaternion_between(frame.apply(E3), tangent_after)[None])[0] * frame
+    # The turn left between them is about after's first tangent: its signed angle.
+    left = (first_after * arrived.inv()).as_rotvec()
+    twist = float(left @ tangent_after)
+    spread = [Rotation.from_rotvec(twist * (i + 1) / (n + 1) * t) * f for i, (t, f) in enumerate(zip(tangents, frames))]
+    return YarnPiece(points, lengths, _quaternions(Rotation.concatenate(spread)), before.radius)
+
+
+E3 = np.array([0.0, 0.0, 1.0])
+
+
+def _rotations(quaternion: np.ndarray) -> Rotation:
+    """Frames ``(n, 4)`` (w, x, y, z) as SciPy rotations."""
+    return Rotation.from_quat(xyzw(quaternion))
+
+
+def _quaternions(rotation: Rotation) -> np.ndarray:
+    """SciPy rotations as frames ``(n, 4)`` (w, x, y, z)."""
+    q = rotation.as_quat()
+    return np.ascontiguousarray(np.column_stack([q[:, 3], q[:, :3]]))
 
 
 def mid_width(swatch: Swatch, position: np.ndarray) -> float:
