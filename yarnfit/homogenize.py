@@ -471,10 +471,11 @@ def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: fl
       (has not) stopped changing.
 
     ``points`` come in the order they were solved. A bracket (a negative slope left of a positive
-    one) is narrowed by the secant through its ends, kept inside it, as the Illinois variant of
-    regula falsi does it: an end kept while k ≥ 2 later points were solved enters with its slope
-    halved k − 1 times (a jersey's slope, steep where its wales jam and flat beyond, otherwise moved
-    one end by 5e-4 at a time). Without one the search steps towards where the slope points by the
+    one) is narrowed by the secant step from the point of least slope (its curvature the smaller
+    neighbour secant) when that lands inside the bracket, else by the secant through the bracket's
+    ends as the Illinois variant of regula falsi takes it: an end kept while k ≥ 2 later points
+    were solved enters with its slope halved k − 1 times (a jersey's slope, steep where its wales
+    jam and flat beyond, otherwise moved one end by 5e-4 at a time). Without one the search steps towards where the slope points by the
     secant curvature of its two outermost points (by :data:`FREE_STRAIN_GUESS` from the pure
     stretch alone), at least :data:`FREE_STRAIN_PROBE` and, once a secant step has fallen short,
     at least as far as its last: a jersey's slope falls steeply while its wales jam and then tails
@@ -509,10 +510,10 @@ def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: fl
         if width <= FREE_STRAIN_TOLERANCE or near_root or settled:
             return None, "minimum"
         margin = min(0.1 * width, 0.5 * FREE_STRAIN_TOLERANCE)
-        # The secant through the point of least slope and its nearer neighbour first (converges
-        # fast once near the root, whatever the bracket's far end looks like: polyester jersey's
-        # bracket end beyond a kink, slope −65 against ±0.05 near the root, made regula falsi
-        # creep by 5e-5 a solve), if it lands inside the bracket.
+        # The secant step from the point of least slope first (converges fast once near the
+        # root, whatever the bracket's far end looks like: polyester jersey's bracket end beyond
+        # a kink, slope −65 against ±0.05 near the root, made regula falsi creep by 5e-5 a
+        # solve), if it lands inside the bracket.
         if secants:
             trial = closest.free - closest.slope / min(secants)
             if left.free + margin <= trial <= right.free - margin:
