@@ -774,6 +774,27 @@ def plus_row_norms(scale, rows):
 
 
 @njit(cache=True)
+def residual_scales(node_scale, edge_scale, edge_nodes, rest_length):
+    """``(force scale, torque scale)``: the largest of the nodes' force scales and the edges'
+    torque scales over their rest lengths, and the largest of the edges' torque scales and their
+    end nodes' larger force scale times their rest lengths (0 for none; NaN if any scale is)."""
+    force = 0.0
+    torque = 0.0
+    finite = True
+    for i in range(node_scale.shape[0]):
+        finite &= node_scale[i] == node_scale[i]
+        force = max(force, node_scale[i])
+    for e in range(edge_scale.shape[0]):
+        finite &= edge_scale[e] == edge_scale[e]
+        force = max(force, edge_scale[e] / rest_length[e])
+        ends = max(node_scale[edge_nodes[e, 0]], node_scale[edge_nodes[e, 1]])
+        torque = max(torque, edge_scale[e], ends * rest_length[e])
+    if not finite:
+        return math.nan, math.nan
+    return force, torque
+
+
+@njit(cache=True)
 def largest_row_norm(rows, mask):
     """Largest ``|rows[i]|`` over the rows with ``mask[i]`` (0 if none)."""
     largest = 0.0

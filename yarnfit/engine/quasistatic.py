@@ -385,9 +385,10 @@ class QuasiStaticSolver:
         self._constraint_dense = None
         self._least_squares_multiplier = None
         self._spin_edges = np.empty(0, dtype=np.int64)
-        self._node_stiffness = np.zeros(n)
-        np.add.at(self._node_stiffness, model.edge_nodes.ravel(), np.repeat(edge_stiffness / model.edge_rest_length, 2))
-        self._edge_stiffness = edge_stiffness
+        node_stiffness = np.zeros(n)
+        np.add.at(node_stiffness, model.edge_nodes.ravel(), np.repeat(edge_stiffness / model.edge_rest_length, 2))
+        self._largest_node_stiffness = float(node_stiffness.max(initial=0.0))
+        self._largest_edge_stiffness = float(edge_stiffness.max(initial=0.0))
 
     def _set_constraints(self, constraints: LinearConstraints | None) -> None:
         """Restrict ``constraints`` to the free DOFs (rotations have zero columns), drop empty and
@@ -625,10 +626,7 @@ class QuasiStaticSolver:
         # A torque τ on an edge is carried by forces τ / l0 on its nodes, and a force F on a node
         # makes torques F l0 on its edges: each scale includes the other's equivalent, so that
         # pure-moment and pure-force problems have meaningful scales for both residuals.
-        l0 = m.edge_rest_length
-        node_ends = np.maximum(node_scale[m.edge_nodes[:, 0]], node_scale[m.edge_nodes[:, 1]])
-        force_scale = max(float(node_scale.max(initial=0.0)), float((edge_scale / l0).max(initial=0.0)))
-        torque_scale = max(float(edge_scale.max(initial=0.0)), float((node_ends * l0).max(initial=0.0)))
+        force_scale, torque_scale = _kernels.residual_scales(node_scale, edge_scale, m.edge_nodes, m.edge_rest_length)
         gradient = np.concatenate([node_gradient.ravel(), edge_gradient.ravel()])
         unbalanced = gradient
         if self._constraint is not None:
@@ -651,8 +649,8 @@ class QuasiStaticSolver:
             energy_change=energy_change,
             penetration=penetration,
             separation=separation,
-            force_floor=relative(roundoff * float(self._node_stiffness.max(initial=0.0)), force_scale),
-            torque_floor=relative(roundoff * float(self._edge_stiffness.max(initial=0.0)), torque_scale),
+            force_floor=relative(roundoff * self._largest_node_stiffness, force_scale),
+            torque_floor=relative(roundoff * self._largest_edge_stiffness, torque_scale),
         )
         internal = sum(forces.terms)
         potential = (
