@@ -124,11 +124,11 @@ class ContactSet:
 
     def missing_from(self, other: "ContactSet", n_edges: int) -> np.ndarray:
         """Indices of this set's pairs (edges and image) that ``other`` does not have."""
-        theirs = np.sort(other.pairs.keys(n_edges))
         mine = self.pairs.keys(n_edges)
-        at = np.minimum(np.searchsorted(theirs, mine), max(theirs.size - 1, 0))
-        if theirs.size == 0:
+        if len(other.pairs) == 0:
             return np.arange(mine.size)
+        theirs = np.sort(other.pairs.keys(n_edges))
+        at = np.minimum(np.searchsorted(theirs, mine), theirs.size - 1)
         return np.flatnonzero(theirs[at] != mine)
 
     def same_constraints(self, other: "ContactSet") -> bool:
