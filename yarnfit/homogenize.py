@@ -441,7 +441,8 @@ def _transverse_slope(model: RodModel, result, axis: int, free: float, area: flo
     it is the derivative of the potential the solve balanced (rods, plus the contacts' augmented
     Lagrangian with the multipliers and penalties it ended with) along any path of configurations
     that keeps C_RVE; here the affine one, every node and image scaled across by
-    μ(E⊥ ± h) / μ(E⊥) (:func:`~yarnfit.engine.tiling.scale_images`). Frames stay as they are:
+    μ(E⊥ ± h) / μ(E⊥) (:func:`~yarnfit.engine.tiling.scale_images`,
+    :meth:`~yarnfit.engine.contact.ContactPairs.scaled`). Frames stay as they are:
     they are balanced, so turning them changes the potential only to second order."""
     values = []
     for step in (TRANSVERSE_SLOPE_STEP, -TRANSVERSE_SLOPE_STEP):
@@ -449,10 +450,9 @@ def _transverse_slope(model: RodModel, result, axis: int, free: float, area: flo
         scale[1 - axis] = math.sqrt((1.0 + 2.0 * (free + step)) / (1.0 + 2.0 * free))
         scaled = scale_images(model, scale)
         position = result.state.node_position * scale
-        contacts = result.contacts
-        pairs = replace(contacts.pairs, translation=contacts.pairs.translation * scale)
+        contacts = replace(result.contacts, pairs=result.contacts.pairs.scaled(scale))
         rods = sum(internal_forces(scaled, position, result.state.edge_quaternion).terms)
-        values.append(rods + contact_potential(scaled, position, replace(contacts, pairs=pairs)))
+        values.append(rods + contact_potential(scaled, position, contacts))
     return (values[0] - values[1]) / (2.0 * TRANSVERSE_SLOPE_STEP * area)
 
 
@@ -475,13 +475,14 @@ def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: fl
     neighbour secant) when that lands inside the bracket, else by the secant through the bracket's
     ends as the Illinois variant of regula falsi takes it: an end kept while k ≥ 2 later points
     were solved enters with its slope halved k − 1 times (a jersey's slope, steep where its wales
-    jam and flat beyond, otherwise moved one end by 5e-4 at a time). Without one the search steps towards where the slope points by the
-    secant curvature of its two outermost points (by :data:`FREE_STRAIN_GUESS` from the pure
-    stretch alone), at least :data:`FREE_STRAIN_PROBE` and, once a secant step has fallen short,
-    at least as far as its last: a jersey's slope falls steeply while its wales jam and then tails
-    off slowly, and secant steps on that tail crept (cotton jersey at 2 %: six steps of 5e-4 to
-    3e-3 towards a minimum 5e-3 away). It stops only with a bracket: a secant across a kink
-    gives the jammed side's curvature, which would promise nothing where much is left."""
+    jam and flat beyond, otherwise moved one end by 5e-4 at a time). Without one the search
+    steps towards where the slope points by the secant curvature of its two outermost points (by
+    :data:`FREE_STRAIN_GUESS` from the pure stretch alone), at least :data:`FREE_STRAIN_PROBE`
+    and, once a secant step has fallen short, at least as far as its last: a jersey's slope falls
+    steeply while its wales jam and then tails off slowly, and secant steps on that tail crept
+    (cotton jersey at 2 %: six steps of 5e-4 to 3e-3 towards a minimum 5e-3 away). It stops only
+    with a bracket: a secant across a kink gives the jammed side's curvature, which would promise
+    nothing where much is left."""
     order = {id(p): i for i, p in enumerate(points)}
     points = sorted(points, key=lambda p: p.free)
     closest = min(points, key=lambda p: abs(p.slope))

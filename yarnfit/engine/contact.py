@@ -53,6 +53,12 @@ class ContactPairs:
     def subset(self, mask: np.ndarray) -> "ContactPairs":
         return ContactPairs(self.pairs[mask], self.images[mask], self.rotation[mask], self.translation[mask])
 
+    def scaled(self, scale: np.ndarray) -> "ContactPairs":
+        """The pairs with their maps where they are when the whole tiled configuration is scaled by
+        ``diag(scale)`` (``(3,)``): the translations scale, the rotations stay. Only for maps
+        that turn nothing (a flat tiling's), as :func:`~yarnfit.engine.tiling.scale_images`."""
+        return ContactPairs(self.pairs, self.images, self.rotation, self.translation * np.asarray(scale))
+
     def kernel_args(self) -> tuple:
         """``(pairs, rotation, translation)`` as the contact kernels take them."""
         return self.pairs, self.rotation, self.translation

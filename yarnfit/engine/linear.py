@@ -17,8 +17,9 @@ new analysis 1.2 ms, a numeric refactorisation of the same pattern 0.36 ms, 1.2 
 with the cache over a solve's changing patterns.
 
 ``L D Lᵀ`` without pivoting exists for every quasi-definite ``K`` (``M`` positive definite, as the
-damped Hessian is near a stable equilibrium) and is then stable in practice (Vanderbei 1995; Gill, Saunders & Shinnerl 1996): backward errors of 1e-18 to
-1e-13 on the stockinette's systems. Where it is not:
+damped Hessian is near a stable equilibrium) and is then stable in practice (Vanderbei 1995;
+Gill, Saunders & Shinnerl 1996): backward errors of 1e-18 to 1e-13 on the stockinette's systems.
+Where it is not:
 
 - a constraint row the ordering eliminates before the DOFs it holds has an exactly zero pivot
   whatever the values (the relaxation's rows that pin one coordinate or one frame's spin: 622 of

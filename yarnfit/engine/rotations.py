@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-__all__ = ["quaternion_between", "rotate_frames", "xyzw"]
+__all__ = ["as_frames", "as_rotations", "quaternion_between", "rotate_frames", "xyzw"]
 
 
 def xyzw(quaternion: np.ndarray) -> np.ndarray:
@@ -18,11 +18,21 @@ def xyzw(quaternion: np.ndarray) -> np.ndarray:
     return np.asarray(quaternion)[..., [1, 2, 3, 0]]
 
 
+def as_rotations(quaternion: np.ndarray) -> Rotation:
+    """Frames ``(n, 4)`` (w, x, y, z) as SciPy rotations."""
+    return Rotation.from_quat(xyzw(quaternion))
+
+
+def as_frames(rotation: Rotation) -> np.ndarray:
+    """SciPy rotations (several) as unit quaternions ``(n, 4)`` (w, x, y, z), C-contiguous."""
+    q = rotation.as_quat()
+    return np.ascontiguousarray(np.column_stack([q[:, 3], q[:, :3]]))
+
+
 def rotate_frames(rotation: np.ndarray, quaternion: np.ndarray) -> np.ndarray:
     """Frames ``quaternion (n, 4)`` turned by world rotations ``rotation`` (``(n, 3, 3)`` or one
     ``(3, 3)``): ``R ⊗ q``, unit quaternions ``(n, 4)``, C-contiguous."""
-    turned = (Rotation.from_matrix(rotation) * Rotation.from_quat(xyzw(quaternion))).as_quat()
-    return np.ascontiguousarray(np.column_stack([turned[:, 3], turned[:, :3]]))
+    return as_frames(Rotation.from_matrix(rotation) * as_rotations(quaternion))
 
 
 def quaternion_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .model import RodModel
-from .rotations import rotate_frames
+from .rotations import as_frames, rotate_frames
 
 # A map's rotation must be orthonormal to this (they come from polar decompositions).
 ORTHONORMAL_TOLERANCE = 1e-9
@@ -117,10 +117,9 @@ def retile(model: RodModel, tiling: CurvedTiling, lattice: np.ndarray) -> RodMod
     # shared node into that tile.
     a = model.joint_edges[:, 0]
     joint_rotation, _ = node_maps(curved, model.edge_nodes[a, 1], model.edge_tile[a])
-    xyzw = Rotation.from_matrix(joint_rotation).as_quat()
-    frame_rotation = np.ascontiguousarray(np.column_stack([xyzw[:, 3], xyzw[:, :3]]))
     return replace(curved, edge_end_rotation=np.ascontiguousarray(end_rotation),
-                   edge_offset=np.ascontiguousarray(end_offset), joint_frame_rotation=frame_rotation)
+                   edge_offset=np.ascontiguousarray(end_offset),
+                   joint_frame_rotation=as_frames(Rotation.from_matrix(joint_rotation)))
 
 
 def scale_images(model: RodModel, scale: np.ndarray) -> RodModel:

@@ -66,8 +66,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 import rerun as rr
-from scipy.spatial.transform import Rotation
 import rerun.blueprint as rrb
+from scipy.spatial.transform import Rotation
 
 from ..engine import (
     ConvergenceWarning,
@@ -80,7 +80,7 @@ from ..engine import (
     RodState,
     energy_gradient,
 )
-from ..engine.rotations import quaternion_between, xyzw
+from ..engine.rotations import as_frames, as_rotations, quaternion_between
 from ..engine.tiling import YarnPiece, cut_rectangle
 from ..jsonfile import finite_or_none
 from ..material_file import MaterialFile
@@ -104,6 +104,8 @@ MAX_NODES = {True: 600, False: 1500}
 # jersey's warp strip, 0.10 of the repeat); a turn has at least this many edges.
 SELVEDGE_REACH = 0.25
 SELVEDGE_MIN_EDGES = 4
+# A frame's third axis in its own coordinates (d3 = R e3: the yarn's tangent).
+E3 = np.array([0.0, 0.0, 1.0])
 # Pieces shorter than this fraction of the repeat's smaller side are dropped (clipped fragments).
 MIN_PIECE_FRACTION = 0.5
 # A node within this fraction of an edge length outside the jaw line still counts as clamped
@@ -168,12 +170,10 @@ def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | Rod
     # World (x along the pull u, y across v) from material coordinates, about the repeat's centre.
     rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
     length = gauge + 2.0 * clamp
-    lattice = model.lattice
-    min_piece = MIN_PIECE_FRACTION * min(np.linalg.norm(lattice[0]), np.linalg.norm(lattice[1]))
+    smaller = min(np.linalg.norm(model.lattice[0]), np.linalg.norm(model.lattice[1]))  # repeat side
     rods = []
-    pieces = cut_rectangle(model, position, rotation, length, width, min_piece)
+    pieces = cut_rectangle(model, position, rotation, length, width, MIN_PIECE_FRACTION * smaller)
     if selvedge:
-        smaller = min(np.linalg.norm(lattice[0]), np.linalg.norm(lattice[1]))
         pieces = join_selvedges(pieces, width, gauge, SELVEDGE_REACH * smaller)
     for piece in pieces:
         x = piece.points[:, 0]
@@ -243,8 +243,8 @@ def join_selvedges(pieces: Sequence[YarnPiece], width: float, gauge: float, reac
 def _reversed(piece: YarnPiece) -> YarnPiece:
     """The piece run the other way: each frame turned by π about its own d1, so that d3 follows
     the new direction (d2 flips with it)."""
-    flipped = _rotations(piece.frames[::-1]) * Rotation.from_rotvec([math.pi, 0.0, 0.0])
-    return YarnPiece(piece.points[::-1].copy(), piece.rest_lengths[::-1].copy(), _quaternions(flipped), piece.radius)
+    flipped = as_rotations(piece.frames[::-1]) * Rotation.from_rotvec([math.pi, 0.0, 0.0])
+    return YarnPiece(piece.points[::-1].copy(), piece.rest_lengths[::-1].copy(), as_frames(flipped), piece.radius)
 
 
 def _turn(before: YarnPiece, after: YarnPiece, outward: float, edge: float) -> YarnPiece:
@@ -267,33 +267,19 @@ def _turn(before: YarnPiece, after: YarnPiece, outward: float, edge: float) -> Y
     segments = np.diff(points, axis=0)
     lengths = np.linalg.norm(segments, axis=1)
     tangents = segments / lengths[:, None]
-    frame = _rotations(before.frames[-1:])[0]
+    frame = as_rotations(before.frames[-1:])[0]
     frames = []
     for t in tangents:
-        frame = _rotations(quaternion_between(frame.apply(E3), t)[None])[0] * frame
+        frame = as_rotations(quaternion_between(frame.apply(E3), t)[None])[0] * frame
         frames.append(frame)
-    first_after = _rotations(after.frames[:1])[0]
+    first_after = as_rotations(after.frames[:1])[0]
     tangent_after = first_after.apply(E3)
-    arrived = _rotations(quaternion_between(frame.apply(E3), tangent_after)[None])[0] * frame
+    arrived = as_rotations(quaternion_between(frame.apply(E3), tangent_after)[None])[0] * frame
     # The turn left between them is about after's first tangent: its signed angle.
     left = (first_after * arrived.inv()).as_rotvec()
     twist = float(left @ tangent_after)
     spread = [Rotation.from_rotvec(twist * (i + 1) / (n + 1) * t) * f for i, (t, f) in enumerate(zip(tangents, frames))]
-    return YarnPiece(points, lengths, _quaternions(Rotation.concatenate(spread)), before.radius)
-
-
-E3 = np.array([0.0, 0.0, 1.0])
-
-
-def _rotations(quaternion: np.ndarray) -> Rotation:
-    """Frames ``(n, 4)`` (w, x, y, z) as SciPy rotations."""
-    return Rotation.from_quat(xyzw(quaternion))
-
-
-def _quaternions(rotation: Rotation) -> np.ndarray:
-    """SciPy rotations as frames ``(n, 4)`` (w, x, y, z)."""
-    q = rotation.as_quat()
-    return np.ascontiguousarray(np.column_stack([q[:, 3], q[:, :3]]))
+    return YarnPiece(points, lengths, as_frames(Rotation.concatenate(spread)), before.radius)
 
 
 def mid_width(swatch: Swatch, position: np.ndarray) -> float:
