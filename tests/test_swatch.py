@@ -28,6 +28,8 @@ FORCE_RTOL = 1e-5
 # A cut swatch's rest state is its cut shape: its energy is round-off of curvatures and twists
 # recomputed from the frames it was built from (~1e-16 rad over 1e-4 m edges, EI ~ 1e-8 N·m²).
 REST_ENERGY_ATOL = 1e-20
+# Rest frames along their edges: d3 against the unit tangent, round-off of the frames' transport.
+TANGENT_ATOL = 1e-12
 
 
 def straight_weft_repeat(hardening: float = 0.0):
@@ -173,7 +175,7 @@ def test_selvedges_join_the_courses_into_one_force_free_yarn():
     tangents = np.diff(points, axis=0)
     tangents /= np.linalg.norm(tangents, axis=1)[:, None]
     edges = np.arange(joined.model.rod_edge_start[serpentine], joined.model.rod_edge_start[serpentine + 1])
-    np.testing.assert_allclose(quaternion_d3(joined.model.edge_rest_quaternion[edges]), tangents, atol=1e-12)
+    np.testing.assert_allclose(quaternion_d3(joined.model.edge_rest_quaternion[edges]), tangents, atol=TANGENT_ATOL)
 
 
 def test_small_weave_balances_with_contacts():
