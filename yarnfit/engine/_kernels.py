@@ -689,78 +689,81 @@ def rotate_frames(quat, theta, out):
 
 
 @njit(cache=True)
-def _counting_sort(keys, order, n_keys):
-    """``order`` (indices into ``keys``, values in ``[0, n_keys)``) stably sorted by key."""
-    start = np.zeros(n_keys + 1, dtype=np.int64)
-    for k in order:
-        start[keys[k] + 1] += 1
-    for i in range(n_keys):
-        start[i + 1] += start[i]
-    out = np.empty(order.shape[0], dtype=np.int64)
-    for k in order:
-        out[start[keys[k]]] = k
-        start[keys[k]] += 1
-    return out
-
-
-@njit(cache=True)
 def assemble_csc(rows, cols, vals, count, dof_map, n_free):
     """Sum the first ``count`` COO triplets over full DOFs into a CSC matrix over the free DOFs
     (``dof_map``: full DOF → free index, −1 for a pinned one), in canonical form: row indices
     sorted within each column, duplicates summed in the order they were written, every diagonal
     entry stored (zero if none was written) and no explicit zero off the diagonal.
 
-    Two stable counting sorts (by row, then by column) put the triplets in (column, row) order in
-    O(count + n_free). Returns ``(indptr (n_free + 1,), indices, data, diagonal (n_free,))``,
-    ``diagonal[j]`` the position of entry (j, j)."""
-    n_kept = 0
-    for k in range(count):
-        if dof_map[rows[k]] >= 0 and dof_map[cols[k]] >= 0:
-            n_kept += 1
-    total = n_kept + n_free
-    r = np.empty(total, dtype=np.int64)
-    c = np.empty(total, dtype=np.int64)
-    v = np.empty(total)
-    u = 0
+    One stable counting sort by row, then a sweep over the rows in order that appends each
+    triplet to its column (so every column's rows come out sorted, and a duplicate lands next to
+    the entry it adds to): O(count + n_free). Returns ``(indptr (n_free + 1,), indices, data,
+    diagonal (n_free,))``, ``diagonal[j]`` the position of entry (j, j)."""
+    # Triplets kept (their free indices, row −1 for a dropped one), counted per row and per column
+    # (each column also holds its diagonal).
+    mapped_row = np.empty(count, dtype=np.int64)
+    mapped_column = np.empty(count, dtype=np.int64)
+    row_start = np.zeros(n_free + 1, dtype=np.int64)
+    column_room = np.ones(n_free + 1, dtype=np.int64)
+    column_room[0] = 0
     for k in range(count):
         i = dof_map[rows[k]]
         j = dof_map[cols[k]]
-        if i >= 0 and j >= 0:
-            r[u] = i
-            c[u] = j
-            v[u] = vals[k]
-            u += 1
-    for j in range(n_free):  # the diagonal, written last so that it adds nothing to a sum
-        r[u] = j
-        c[u] = j
-        v[u] = 0.0
-        u += 1
-    # Stable counting sort by row, then by column: (column, row) order, ties in written order.
-    order = _counting_sort(c, _counting_sort(r, np.arange(total), n_free), n_free)
+        if j < 0:
+            i = -1
+        mapped_row[k] = i
+        mapped_column[k] = j
+        if i >= 0:
+            row_start[i + 1] += 1
+            column_room[j + 1] += 1
+    for i in range(n_free):
+        row_start[i + 1] += row_start[i]
+        column_room[i + 1] += column_room[i]
+    # Stable counting sort by row: each row's (column, value) in written order.
+    by_row_column = np.empty(row_start[n_free], dtype=np.int64)
+    by_row_value = np.empty(row_start[n_free])
+    fill = row_start[:n_free].copy()
+    for k in range(count):
+        i = mapped_row[k]
+        if i >= 0:
+            by_row_column[fill[i]] = mapped_column[k]
+            by_row_value[fill[i]] = vals[k]
+            fill[i] += 1
+    # Sweep the rows in order, appending to the columns (room for every triplet of a column).
+    room_indices = np.empty(column_room[n_free], dtype=np.int64)
+    room_data = np.empty(column_room[n_free])
+    end = column_room[:n_free].copy()
+    for i in range(n_free):
+        # The diagonal entry first: a zero that the written (i, i) triplets then add to.
+        room_indices[end[i]] = i
+        room_data[end[i]] = 0.0
+        end[i] += 1
+        for t in range(row_start[i], row_start[i + 1]):
+            j = by_row_column[t]
+            last = end[j] - 1
+            if last >= column_room[j] and room_indices[last] == i:
+                room_data[last] += by_row_value[t]
+            else:
+                room_indices[last + 1] = i
+                room_data[last + 1] = by_row_value[t]
+                end[j] = last + 2
+    # Compact the columns, dropping sums that cancelled off the diagonal.
     indptr = np.zeros(n_free + 1, dtype=np.int64)
-    indices = np.empty(total, dtype=np.int64)
-    data = np.empty(total)
+    indices = np.empty(column_room[n_free], dtype=np.int64)
+    data = np.empty(column_room[n_free])
     diagonal = np.empty(n_free, dtype=np.int64)
     n = 0
-    t = 0
-    while t < total:
-        k = order[t]
-        row = r[k]
-        column = c[k]
-        value = v[k]
-        t += 1
-        while t < total and r[order[t]] == row and c[order[t]] == column:
-            value += v[order[t]]
-            t += 1
-        if value != 0.0 or row == column:
-            if row == column:
-                diagonal[column] = n
+    for j in range(n_free):
+        for t in range(column_room[j], end[j]):
+            row = room_indices[t]
+            if row == j:
+                diagonal[j] = n
+            elif room_data[t] == 0.0:
+                continue
             indices[n] = row
-            data[n] = value
+            data[n] = room_data[t]
             n += 1
-        indptr[column + 1] = n
-    for j in range(n_free):  # columns are never empty (each holds its diagonal), but keep indptr monotone
-        indptr[j + 1] = max(indptr[j + 1], indptr[j])
+        indptr[j + 1] = n
     return indptr, indices[:n], data[:n], diagonal
 
 
