@@ -18,7 +18,7 @@ from yarnfit.engine import (
     straight_points,
 )
 from yarnfit.engine._contact_kernels import segment_closest_points, tunneling_step_limit
-from yarnfit.engine.contact import find_pairs, pair_distances
+from yarnfit.engine.contact import ContactPairs, find_pairs, pair_distances
 from yarnfit.engine.model import CONTACT_EXCLUSION_FACTOR
 
 # Issue acceptance: pressed rods stop at centreline distance ra + rb within 1 %.
@@ -279,3 +279,17 @@ def test_pairs_within_reach_are_the_candidates_whose_segments_come_that_close(sw
     np.testing.assert_array_equal(kept.pairs, candidates.pairs[expected])
     np.testing.assert_array_equal(kept.images, candidates.images[expected])
     np.testing.assert_array_equal(kept.translation, candidates.translation[expected])
+
+
+def test_a_subset_of_pairs_keeps_their_images_and_maps():
+    """``ContactPairs.subset`` by a mask or by indices (in the order given) holds the same pairs,
+    images, rotations and translations as numpy's indexing of each array (the reference)."""
+    rng = np.random.default_rng(11)
+    n = 40
+    candidates = ContactPairs(rng.integers(0, 100, (n, 2)), rng.integers(-3, 4, (n, 2)),
+                              rng.normal(size=(n, 4, 3, 3)), rng.normal(size=(n, 4, 3)))
+    mask = rng.random(n) < 0.5
+    for which in (mask, rng.permutation(n)[:25], np.zeros(0, dtype=np.int64)):
+        kept = candidates.subset(which)
+        for name in ("pairs", "images", "rotation", "translation"):
+            np.testing.assert_array_equal(getattr(kept, name), getattr(candidates, name)[which])

@@ -50,8 +50,12 @@ class ContactPairs:
         # Images are bounded by the search range (a few tiles); 64 values per axis leave room.
         return ((self.pairs[:, 0] * n_edges + self.pairs[:, 1]) * 64 + self.images[:, 0] + 32) * 64 + self.images[:, 1] + 32
 
-    def subset(self, mask: np.ndarray) -> "ContactPairs":
-        return ContactPairs(self.pairs[mask], self.images[mask], self.rotation[mask], self.translation[mask])
+    def subset(self, which: np.ndarray) -> "ContactPairs":
+        """The pairs ``which`` selects (a boolean mask, or indices in the order wanted)."""
+        which = np.asarray(which)
+        index = np.flatnonzero(which) if which.dtype == np.bool_ else which.astype(np.int64, copy=False)
+        return ContactPairs(*_contact_kernels.gather_pairs(index, self.pairs, self.images, self.rotation,
+                                                           self.translation))
 
     def scaled(self, scale: np.ndarray) -> "ContactPairs":
         """The pairs with their maps where they are when the whole tiled configuration is scaled by
