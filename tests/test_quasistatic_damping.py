@@ -10,6 +10,8 @@ from yarnfit.engine.quasistatic import (
     DAMPING_RAISE,
     INITIAL_DAMPING,
     MIN_DAMPING,
+    NEAR_DAMPING,
+    NOISE_DAMPING,
     LinearConstraints,
     _Damping,
 )
@@ -39,6 +41,26 @@ def test_cut_steps_raise_the_damping_faster_and_faster_until_one_is_taken_whole(
     raised = damping.value
     damping.failed()
     assert damping.value == pytest.approx(raised * DAMPING_RAISE)
+
+
+def test_the_damping_restarts_near_once_the_iterate_reaches_round_off():
+    """The first step in the round-off regime brings a damping still up from the cold start
+    down to NEAR_DAMPING (a damped step there could not resolve a soft residual, and the noise
+    rule's raises ratcheted); later ones leave the noise rule alone, and a lower damping is kept."""
+    damping = _Damping()
+    assert INITIAL_DAMPING > NEAR_DAMPING
+    damping.reached_roundoff()
+    assert damping.value == NEAR_DAMPING
+    damping.raise_by(NOISE_DAMPING)
+    damping.reached_roundoff()
+    assert damping.value == pytest.approx(NEAR_DAMPING * NOISE_DAMPING)
+    low = _Damping()
+    for _ in range(30):
+        low.succeeded(1.0)
+    floor = low.value
+    assert floor < NEAR_DAMPING
+    low.reached_roundoff()
+    assert low.value == floor
 
 
 def test_damping_never_falls_below_its_floor():

@@ -102,15 +102,22 @@ POTENTIAL_ROUNDOFF = 1e-13
 # imbalances of 3e-8 and 2e-7 N (6.6e-5 relative) for 29,000 iterations at damping 1e-12.
 NOISE_DAMPING = 10.0
 # Levenberg–Marquardt damping bounds, relative to diag(H). The floor is far below the Hessian's
-# own error (~1e-10 relative); it only regularises exactly singular directions. The start stays
-# low although a sample's first steps then get cut 4–6 times while the damping climbs: starting at
-# 1e-4 (Madsen, Nielsen & Tingleff's τ for a start not close to the solution) saved 8–10 % of the
-# samples' iterations but could enter the round-off regime (NOISE_DAMPING) still damped to 1e-5,
-# where a bending residual of 1.7e-8 (tolerance 1e-8) needs far less: no step lowered the
-# imbalance, and the damping ratcheted to its ceiling (solid cotton jersey, weft bend 1 /m: 27620
-# iterations and no convergence, against 9). The twill weft strip's 10 % took 1494 iterations
-# against 531 as well (design notes §5, session 31).
-INITIAL_DAMPING = 1e-8
+# own error (~1e-10 relative); it only regularises exactly singular directions. The start follows
+# Madsen, Nielsen & Tingleff (2004, §3.2: μ0 = τ max a_ii with τ = 1e-6 when the start is believed
+# close to the solution, 1e-3 or more otherwise): a sample starts from the affine map of its
+# relaxed repeat, which its soft modes (loops turning, yarns sliding) are not close to, and from
+# 1e-8 its first 4–6 steps were cut while the damping climbed (HYLC's stockinette at 0.1 % shear:
+# 1/8 … 1/64 of a step each). Once the iterate is within round-off of a stationary point it is
+# close, and the damping restarts from NEAR_DAMPING if it was higher: a step still damped to 1e-5
+# there could not resolve a bending residual of 1.7e-8 (tolerance 1e-8), no step lowered the
+# imbalance, and the noise rule's raises ratcheted it to the ceiling (solid cotton jersey, weft
+# bend 1 /m: 27620 iterations, not converged; 12 with the restart, 9 from 1e-8). Newton iterations
+# from the same relaxed repeats, 1e-8 → 1e-4 with the restart: the presets' 5 × 55 samples
+# 6788 → 6102, HYLC's stockinette 4101 → 3764, the bench's 2000-segment crossing 41 → 34, the
+# presets' relaxations 247 → 232, the twill warp strip 5 → 10 % 1638 → 1552; but the twill weft
+# strip's 10 % 531 → 1494 (design notes §5, session 31).
+INITIAL_DAMPING = 1e-4
+NEAR_DAMPING = 1e-8
 MIN_DAMPING = 1e-12
 # Ceiling of the damping (and of its raise factor): a step damped this much moves 1e-12 of a
 # diagonally scaled gradient step, nothing any more. Without it a run of cut steps (factors 2, 4,
@@ -342,6 +349,14 @@ class _Damping:
     def __init__(self) -> None:
         self.value = INITIAL_DAMPING
         self._raise = DAMPING_RAISE
+        self._near = False
+
+    def reached_roundoff(self) -> None:
+        """The iterate is within round-off of a stationary point: from the first such step on, the
+        damping starts again from NEAR_DAMPING if it was higher."""
+        if not self._near:
+            self._near = True
+            self.value = min(self.value, NEAR_DAMPING)
 
     def succeeded(self, gain: float) -> None:
         """A full Newton step was taken; ``gain`` is its actual over its predicted decrease."""
@@ -796,6 +811,7 @@ class QuasiStaticSolver:
         trial = assess(point)
         if below_roundoff(alpha_max):
             # The step is taken whole, and the imbalance judges the model instead (see NOISE_DAMPING).
+            damping.reached_roundoff()
             if _imbalance(trial) >= _imbalance(ev):
                 damping.raise_by(NOISE_DAMPING)
             else:
