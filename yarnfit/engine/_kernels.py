@@ -740,13 +740,13 @@ def assemble_csc(rows, cols, vals, count, dof_map, n_free):
         end[i] += 1
         for t in range(row_start[i], row_start[i + 1]):
             j = by_row_column[t]
-            last = end[j] - 1
-            if last >= column_room[j] and room_indices[last] == i:
-                room_data[last] += by_row_value[t]
+            e = end[j]
+            if e > column_room[j] and room_indices[e - 1] == i:  # a duplicate of the last entry
+                room_data[e - 1] += by_row_value[t]
             else:
-                room_indices[last + 1] = i
-                room_data[last + 1] = by_row_value[t]
-                end[j] = last + 2
+                room_indices[e] = i
+                room_data[e] = by_row_value[t]
+                end[j] = e + 1
     # Compact the columns, dropping sums that cancelled off the diagonal.
     indptr = np.zeros(n_free + 1, dtype=np.int64)
     indices = np.empty(column_room[n_free], dtype=np.int64)
