@@ -9,13 +9,15 @@ node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what say
 has to be.
 
     python validation/swatch_convergence.py MATERIAL.json [--sizes 2x1.5,4x3,8x6] \\
-        [--directions weft,warp,bias] [--selvedge] [--json OUT.json] [--from-json A.json,B.json]
+        [--directions weft,warp,bias] [--selvedge] [--friction] [--json OUT.json] [--from-json A.json,B.json]
 
 The force and width measured at mid-length converge as the cut loops at the long sides and the
 jaws' constraint become a smaller part of the strip; the table shows how fast. Its edge draw-in
 (:func:`yarnfit.validate.swatch.edge_draw_in`) is how far the yarn ends cut at the long sides have
 slid in beyond the strip's narrowing: yarn a frictionless cut strip feeds to its loops from its
-free ends, which a periodic repeat cannot.
+free ends, which a periodic repeat cannot. ``--friction`` pulls the strips with Coulomb friction at
+the yarn crossings (the fibre's coefficient, lagged per strain: :mod:`yarnfit.engine.friction`),
+which holds those ends as a real strip's are held.
 
 Then the material's shell (nonlinear) and its linear fit from the same samples (``fit.linear``)
 against the largest strip of each direction
@@ -68,14 +70,16 @@ def parse_sizes(text: str) -> list[tuple[float, float]]:
     return sizes
 
 
-def solve_curves(file: MaterialFile, sizes, directions, selvedge: bool = False) -> tuple[object, dict]:
+def solve_curves(file: MaterialFile, sizes, directions, selvedge: bool = False,
+                 friction: bool = False) -> tuple[object, dict]:
     """``(relaxed repeat, {label: curve})``: each direction's strips at each size (with
     ``selvedge``, the yarns running across a strip joined at its long sides:
-    :func:`yarnfit.validate.swatch.join_selvedges`), pulled to STRAINS on one core; prints each
-    strip's row as it finishes."""
+    :func:`yarnfit.validate.swatch.join_selvedges`; with ``friction``, the fibre's friction at the
+    contacts), pulled to STRAINS on one core; prints each strip's row as it finishes."""
     relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
     repeat = float(max(relaxed.repeat_size))
     section = relaxed.yarn.section()
+    coefficient = file.fabric().fiber.friction if friction else 0.0
     curves = {}
     for direction in directions:
         for gauge, width in sizes:
@@ -83,7 +87,8 @@ def solve_curves(file: MaterialFile, sizes, directions, selvedge: bool = False) 
                                 gauge=gauge * repeat, width=width * repeat, clamp=CLAMP_REPEATS * repeat,
                                 selvedge=selvedge)
             start = time.perf_counter()
-            curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, progress=lambda text: print("   ", text, flush=True))
+            curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, friction=coefficient,
+                                   progress=lambda text: print("   ", text, flush=True))
             curve["repeats"] = [gauge, width]
             curves[f"{direction} {gauge:g}x{width:g}"] = curve
             print(convergence_row(curve), f"({time.perf_counter() - start:.0f} s)", flush=True)
@@ -144,6 +149,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--directions", default="weft,warp", help="comma-separated: weft, warp, bias")
     parser.add_argument("--selvedge", action="store_true",
                         help="join the yarns running across each strip at its long sides (a flat knit's selvedges)")
+    parser.add_argument("--friction", action="store_true",
+                        help="Coulomb friction at the yarn contacts, the fibre's coefficient (default: frictionless)")
     parser.add_argument("--json", help="also write the curves to this file")
     parser.add_argument("--from-json", help="comma-separated curve files of earlier runs: compare, do not solve")
     args = parser.parse_args(argv)
@@ -159,7 +166,8 @@ def main(argv: list[str] | None = None) -> int:
                     curves[label] = curve
         name = file.fabric().name
     else:
-        relaxed, curves = solve_curves(file, parse_sizes(args.sizes), args.directions.split(","), args.selvedge)
+        relaxed, curves = solve_curves(file, parse_sizes(args.sizes), args.directions.split(","), args.selvedge,
+                                       args.friction)
         name = relaxed.name
         print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
     strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)

@@ -32,8 +32,9 @@ solver here is a damped Newton method on the exact energy of :mod:`yarnfit.engin
   contacts to ``g = 0`` exactly (a constraint carrying less than ``δ`` rests up to ``δ / k``
   apart). Friction does no work in a minimisation; the frictionless minimiser is an equilibrium
   of the frictional problem too (zero tangential force is inside every Coulomb cone), and it is
-  the reproducible one. Frictional paths are for the dynamic
-  :class:`~yarnfit.engine.xpbd.XPBDSolver`;
+  the reproducible one, which the periodic samples use. A load step that must follow a frictional
+  path (a cut strip whose loose yarn ends friction holds) passes lagged friction anchors
+  (:mod:`yarnfit.engine.friction`): a convex potential of the slip since the step's start;
 - slender rods converge more slowly (Newton's quadratic model misses the quartic stretch energy
   of a rotating edge: L/r = 100 takes ~20 iterations for a large-deflection cantilever, L/r = 1000
   ~100); ``load_steps`` splits strongly nonlinear loads.
@@ -55,10 +56,11 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 
-from . import _contact_kernels, _kernels
+from . import _contact_kernels, _friction_kernels, _kernels
 from .contact import ContactPairs
 from .contact_lagrangian import ContactLagrangian, ContactSet, contact_potential
 from .energy import EnergyTerms, internal_forces
+from .friction import FrictionAnchors
 from .linear import FactorCache, SingularSystemError, SymmetricSolve
 from .model import RodModel, quaternion_d3
 from .state import Loads, RodState
@@ -408,6 +410,7 @@ class QuasiStaticSolver:
         self._constraint_dense = None
         self._least_squares_multiplier = None
         self._spin_edges = np.empty(0, dtype=np.int64)
+        self._friction: FrictionAnchors | None = None
         node_stiffness = np.zeros(n)
         np.add.at(node_stiffness, model.edge_nodes.ravel(), np.repeat(edge_stiffness / model.edge_rest_length, 2))
         self._largest_node_stiffness = float(node_stiffness.max(initial=0.0))
@@ -510,15 +513,20 @@ class QuasiStaticSolver:
         loads: Loads | None = None,
         callback: Callable[[Progress], None] | None = None,
         constraints: LinearConstraints | None = None,
+        friction: FrictionAnchors | None = None,
     ) -> QuasiStaticResult:
         """Equilibrium of ``state`` under ``loads`` (and ``constraints``, which ``state`` must
-        satisfy). Warns :class:`ConvergenceWarning` when the tolerances are not met within the
-        iteration limit; ``callback(progress)`` is called after every iteration with a
-        :class:`Progress`."""
+        satisfy), with the lagged ``friction`` anchors' potential added when given
+        (:mod:`yarnfit.engine.friction`). Warns :class:`ConvergenceWarning` when the tolerances are
+        not met within the iteration limit; ``callback(progress)`` is called after every iteration
+        with a :class:`Progress`."""
         model, opt = self.model, self.options
         state.check(model)
         loads = loads if loads is not None else Loads.zeros(model)
         loads.check(model)
+        if friction is not None and len(friction) and int(friction.nodes.max()) >= model.n_nodes:
+            raise ValueError(f"friction anchors name node {int(friction.nodes.max())}; the model has {model.n_nodes}")
+        self._friction = friction if friction is not None and len(friction) else None
         self._set_constraints(constraints)
         self._spin_edges = np.union1d(self._spin_edges, self._spin_gauge(self._spin_edges, loads.edge_moment))
         work = _Work(
@@ -646,6 +654,10 @@ class QuasiStaticSolver:
                 position, m.edge_nodes, m.edge_radius, *contacts.kernel_args(), node_gradient,
                 node_scale, gap, contact_force,
             )
+        friction_energy = 0.0
+        if self._friction is not None:
+            friction_energy = _friction_kernels.friction_energy_gradient(
+                position, *self._friction.kernel_args(), node_gradient, node_scale, np.empty(len(self._friction)))
         # A torque τ on an edge is carried by forces τ / l0 on its nodes, and a force F on a node
         # makes torques F l0 on its edges: each scale includes the other's equivalent, so that
         # pure-moment and pure-force problems have meaningful scales for both residuals.
@@ -677,7 +689,8 @@ class QuasiStaticSolver:
         )
         internal = sum(forces.terms)
         potential = (
-            internal + contact_energy - float(np.sum(node_force * (position - m.node_rest_position))) - moment_work
+            internal + contact_energy + friction_energy
+            - float(np.sum(node_force * (position - m.node_rest_position))) - moment_work
         )
         return _Evaluation(
             gradient=gradient,
@@ -695,7 +708,9 @@ class QuasiStaticSolver:
         diagonal entry stored: the damping goes there) and the positions of its diagonal entries."""
         m, opt = self.model, self.options
         c = work.contacts
-        n_entries = 81 * m.n_edges + 36 * m.n_joints + 144 * len(c.pairs)
+        friction = self._friction
+        n_anchors = 0 if friction is None else len(friction)
+        n_entries = 81 * m.n_edges + 36 * m.n_joints + 144 * (len(c.pairs) + n_anchors)
         rows = np.empty(n_entries, dtype=np.int64)
         cols = np.empty(n_entries, dtype=np.int64)
         vals = np.empty(n_entries)
@@ -706,6 +721,9 @@ class QuasiStaticSolver:
                 work.position, m.edge_nodes, m.edge_radius, *c.kernel_args(),
                 rows, cols, vals, count,
             )
+        if friction is not None:
+            count = _friction_kernels.friction_hessian_coo(work.position, *friction.kernel_args(), rows, cols, vals,
+                                                           count)
         n_free = self._free.size
         indptr, indices, data, diagonal = _kernels.assemble_csc(rows, cols, vals, count, self._dof_map, n_free)
         hessian = sp.csc_matrix((data, indices.astype(np.int32), indptr.astype(np.int32)), shape=(n_free, n_free))

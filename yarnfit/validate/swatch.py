@@ -35,7 +35,9 @@ Outputs per direction and strain:
   (:func:`extent_width`: cut ends splaying out count); ``edge_draw_in_m`` how far the yarn ends cut
   at the long sides lie inside where the strip's narrowing puts them (:func:`edge_draw_in`: yarn
   slid in from the sides; null where none is cut in the middle half of the gauge).
-- the solver's residuals, iterations and wall time.
+- the solver's residuals, iterations and wall time; with friction (``stretch_swatch(...,
+  friction=μ)``, off by default), ``friction_passes`` and ``friction_change``, the lagged passes
+  and the last change of the anchored normal force (:func:`yarnfit.engine.friction.lagged_solve`).
 
 Recording (:class:`SwatchRecording`, one ``rr.RecordingStream`` per file as in
 :mod:`yarnfit.record`, application id ``yarnfit``), default ``logs/<material>/yarn.rrd``.
@@ -80,6 +82,7 @@ from ..engine import (
     RodState,
     energy_gradient,
 )
+from ..engine.friction import lagged_solve
 from ..engine.rotations import as_frames, as_rotations, quaternion_between
 from ..engine.tiling import YarnPiece, cut_rectangle
 from ..jsonfile import finite_or_none
@@ -338,15 +341,21 @@ def edge_draw_in(swatch: Swatch, position: np.ndarray, compression_ratio: float)
 def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                    options: QuasiStaticOptions | None = None, width_band: float | None = None,
                    on_step: Callable[[int, float, np.ndarray, dict], None] | None = None,
-                   progress: Callable[[str], None] | None = None) -> dict:
+                   progress: Callable[[str], None] | None = None, friction: float = 0.0) -> dict:
     """Pull ``swatch`` to each of ``strains`` (ascending, > 0) in turn, each a converged solve
     warm-started from the previous one. ``on_step(k, strain, position, point)`` is called after
     each solve (k = 0 for the unstrained state, then 1, 2, ...). ``width_band`` (m, default a
     quarter of the strip width) is the half-length of the mid-length slab the width is measured
-    in (:func:`extent_width`). Returns a JSON-able dict (see the module docstring)."""
+    in (:func:`extent_width`). ``friction`` μ > 0: Coulomb friction at the yarn contacts, each
+    strain a lagged frictional step from the last (:func:`yarnfit.engine.friction.lagged_solve`;
+    a point's ``iterations`` then count every pass, ``friction_passes`` how many, and it is
+    converged only if the normal forces settled). Returns a JSON-able dict (see the module
+    docstring)."""
     strains = [float(e) for e in strains]
     if not strains or any(not (math.isfinite(e) and e > 0) for e in strains) or strains != sorted(strains):
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
+    if not (math.isfinite(friction) and friction >= 0.0):
+        raise ValueError(f"friction must be a finite coefficient >= 0, got {friction!r}")
     model = swatch.model
     options = options or QuasiStaticOptions(**SWATCH_OPTIONS)
     solver = QuasiStaticSolver(model, options)
@@ -363,6 +372,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     if on_step is not None:
         on_step(0, 0.0, rest, points[0])
     previous = 0.0
+    contacts = None
     for k, strain in enumerate(strains, start=1):
         start = time.perf_counter()
         # Warm start: the last equilibrium stretched affinely between the jaws; the moving jaw's
@@ -375,8 +385,13 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         guess = replace(state, node_position=x)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
-            result = solver.solve(guess)
-        state = result.state
+            if friction > 0.0:
+                lagged = lagged_solve(solver, guess, state.node_position, friction,
+                                      anchors_from=None if contacts is None else (state.node_position, contacts))
+                result = lagged.result
+            else:
+                lagged, result = None, solver.solve(guess)
+        state, contacts = result.state, result.contacts
         _, rod_gradient, _ = energy_gradient(model, state)
         pull = float(result.reaction_force[swatch.moving, 0].sum())
         back = float(result.reaction_force[swatch.fixed, 0].sum())
@@ -393,8 +408,10 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
             "width_m": width,
             "edge_draw_in_m": finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
-            "converged": bool(result.converged),
-            "iterations": int(result.iterations),
+            "converged": bool(result.converged) and (lagged is None or lagged.settled),
+            "iterations": int(result.iterations if lagged is None else lagged.iterations),
+            "friction_passes": None if lagged is None else lagged.passes,
+            "friction_change": None if lagged is None else lagged.force_change,
             "seconds": time.perf_counter() - start,
             "residual": {"force": float(r.force), "torque": float(r.torque), "energy_change": float(r.energy_change),
                          "penetration": float(r.penetration), "force_floor": float(r.force_floor),
@@ -406,8 +423,10 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         previous = strain
         if progress is not None:
             progress(f"{swatch.direction} {100 * strain:g} %: {point['force_n_per_m']:.5g} N/m, compression "
-                     f"{point['compression_ratio']:.4f}, {'converged' if result.converged else 'NOT converged'} "
-                     f"in {result.iterations} iterations ({point['seconds']:.1f} s; {r})")
+                     f"{point['compression_ratio']:.4f}, {'converged' if point['converged'] else 'NOT converged'} "
+                     f"in {point['iterations']} iterations"
+                     f"{'' if lagged is None else f' over {lagged.passes} friction passes'} "
+                     f"({point['seconds']:.1f} s; {r})")
         if on_step is not None:
             on_step(k, strain, state.node_position, point)
     return {
@@ -431,12 +450,14 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
 def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection | RodMaterial, *, name: str = "swatch",
                    directions: Sequence[str] = ("weft", "warp"), strains: Sequence[float] = STRAINS,
                    size: dict | None = None, quick: bool = False, recording_path=None,
-                   progress: Callable[[str], None] | None = None, options: QuasiStaticOptions | None = None) -> dict:
+                   progress: Callable[[str], None] | None = None, options: QuasiStaticOptions | None = None,
+                   friction: float = 0.0) -> dict:
     """The stretch test on strips cut from a relaxed flat periodic repeat (``model`` its rest model,
     ``position`` its rest positions, ``material`` the yarns'). ``size``: gauge, width and clamp in
     repeats of the larger repeat side (default :data:`FULL_SIZE`, or :data:`QUICK_SIZE` with
-    ``quick``), or in metres with keys ``gauge_m``, ``width_m``, ``clamp_m``. Returns a JSON-able
-    dict: per direction the curves of :func:`stretch_swatch`."""
+    ``quick``), or in metres with keys ``gauge_m``, ``width_m``, ``clamp_m``; ``friction`` μ at the
+    yarn contacts (:func:`stretch_swatch`). Returns a JSON-able dict: per direction the curves of
+    :func:`stretch_swatch`."""
     start = time.perf_counter()
     repeat = max(np.linalg.norm(model.lattice[0]), np.linalg.norm(model.lattice[1]))
     size = dict(size or (QUICK_SIZE if quick else FULL_SIZE))
@@ -466,7 +487,7 @@ def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection |
                     recording.step(base + k, swatch, pos, strain, point)
 
             out["directions"][direction] = stretch_swatch(swatch, strains, options=options, on_step=on_step,
-                                                          progress=progress)
+                                                          progress=progress, friction=friction)
             step = base + len(strains) + 1
         out["seconds"] = time.perf_counter() - start
         if recording is not None:

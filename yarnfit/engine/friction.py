@@ -1,0 +1,183 @@
+"""Coulomb friction for the quasi-static solver, lagged as in Incremental Potential Contact.
+
+A minimiser has no friction path of its own: friction does no work it could minimise. Li et al.
+2020 (IPC, §5) make it one for a time step by freezing, at the step's start, each contact's normal
+force ``N``, its tangent plane and its contact points, and adding the dissipation potential
+``μ N f(|u|)`` of the tangential slip ``u`` since the start (:mod:`yarnfit.engine._friction_kernels`
+gives ``f``): a convex term whose minimiser sticks a contact while its tangential force is below
+``μ N`` and lets it slide at ``μ N`` beyond. A quasi-static load step is such a step with
+displacements for velocities. The frozen quantities are then refreshed from the solution and the
+step solved again (IPC's lagged iterations) until the normal forces settle: :func:`lagged_solve`.
+
+Each sampled contact constraint carrying force becomes one :class:`FrictionAnchors` entry, so a
+line contact's friction is spread over its samples as its normal force is.
+
+What it cannot represent: static friction above kinetic (one μ), and friction on contacts that
+appear during a step (they are anchored only at the next lag); a contact that opens keeps its
+frozen force for the rest of the pass.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _contact_kernels, _friction_kernels
+from .contact_lagrangian import ContactSet
+from .model import RodModel
+
+__all__ = ["FRICTION_SLIP", "FrictionAnchors", "anchor_contacts"]
+
+# Slip ε (in sums of radii ra + rb) at which a contact's friction reaches the Coulomb bound μ N;
+# below it the contact sticks elastically with stiffness 2 μ N / ε. The model has no tangential
+# contact compliance of its own, so ε is numerical: small against the slips a strain step makes
+# (a 1 % step moves crossings a repeat apart by ~1 µm; ε is 0.2 µm for a 100 µm-thick yarn pair),
+# large enough that the stick stiffness stays within a few orders of the yarns' own. Measured
+# (session 32): the cotton twill's cut warp strip (1819 nodes) at 2 % pulls at 814.80 N/m with
+# this ε and 815.11 N/m with half of it (0.04 %).
+FRICTION_SLIP = 1e-3
+
+
+@dataclass(frozen=True)
+class FrictionAnchors:
+    """Contact constraints frozen for friction (``K`` anchors).
+
+    Attributes:
+        nodes: ``(K, 4)`` the pair's nodes ``(a0, a1, b0, b1)``.
+        weight: ``(K, 4)`` weights of the relative vector ``r = Σ_m w_m (R_m x_m + t_m)`` from the
+            point on b to the point on a.
+        rotation, translation: ``(K, 4, 3, 3)``, ``(K, 4, 3)`` m: the nodes' tile maps.
+        tangent: ``(K, 2, 3)`` orthonormal basis of the contact's tangent plane.
+        origin: ``(K, 2)`` m: ``T r`` where the slip is measured from.
+        bound: ``(K,)`` N: ``μ N``, the largest friction force of each anchor.
+        slip_length: ε (m), the slip at which an anchor's friction reaches its bound.
+    """
+
+    nodes: np.ndarray
+    weight: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    tangent: np.ndarray
+    origin: np.ndarray
+    bound: np.ndarray
+    slip_length: float
+
+    def __len__(self) -> int:
+        return len(self.bound)
+
+    def kernel_args(self) -> tuple:
+        """``(nodes, weight, rotation, translation, tangent, origin, bound, slip_length)`` as the
+        friction kernels take them."""
+        return (self.nodes, self.weight, self.rotation, self.translation, self.tangent, self.origin, self.bound,
+                self.slip_length)
+
+    def energy_gradient(self, position: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """Friction energy (J) at node positions ``position (N, 3)``, its gradient ``(N, 3)``
+        (N) and each anchor's friction force magnitude ``(K,)`` (N)."""
+        gradient = np.zeros_like(position)
+        force = np.empty(len(self))
+        energy = _friction_kernels.friction_energy_gradient(position, *self.kernel_args(), gradient,
+                                                            np.zeros(len(position)), force)
+        return float(energy), gradient, force
+
+
+def constraint_forces(model: RodModel, position: np.ndarray, contacts: ContactSet) -> np.ndarray:
+    """Normal force (N) of each sampled constraint of ``contacts`` at ``position (N, 3)``."""
+    force = np.zeros(contacts.start[-1])
+    if len(contacts.pairs):
+        _contact_kernels.contact_energy_gradient(
+            position, model.edge_nodes, model.edge_radius, *contacts.kernel_args(), np.zeros_like(position),
+            np.zeros(len(position)), np.empty(contacts.start[-1]), force)
+    return force
+
+
+def anchor_contacts(model: RodModel, position: np.ndarray, contacts: ContactSet, reference: np.ndarray,
+                    coefficient: float, slip_length: float | None = None) -> FrictionAnchors:
+    """Anchor the loaded constraints of ``contacts`` at ``position (N, 3)`` (m): their contact
+    points, tangent planes and normal forces there, their slip measured from where those contact
+    points are at ``reference (N, 3)`` (the load step's start). ``coefficient`` μ; ``slip_length``
+    ε (m), by default :data:`FRICTION_SLIP` of the mean sum of radii."""
+    if not (math.isfinite(coefficient) and coefficient >= 0.0):
+        raise ValueError(f"friction coefficient must be finite and non-negative, got {coefficient!r}")
+    position = np.ascontiguousarray(position, dtype=np.float64)
+    reference = np.ascontiguousarray(reference, dtype=np.float64)
+    if reference.shape != position.shape:
+        raise ValueError(f"reference positions have shape {reference.shape}, positions {position.shape}")
+    if slip_length is None:
+        slip_length = FRICTION_SLIP * 2.0 * float(np.mean(model.edge_radius))
+    if not (math.isfinite(slip_length) and slip_length > 0.0):
+        raise ValueError(f"slip length must be finite and positive, got {slip_length!r}")
+    force = constraint_forces(model, position, contacts)
+    n = int(np.count_nonzero(force > 0.0)) if coefficient > 0.0 else 0
+    nodes = np.empty((n, 4), dtype=np.int64)
+    weight = np.empty((n, 4))
+    rotation = np.empty((n, 4, 3, 3))
+    translation = np.empty((n, 4, 3))
+    tangent = np.empty((n, 2, 3))
+    origin = np.empty((n, 2))
+    normal = np.empty(n)
+    if n:
+        written = _friction_kernels.anchor_constraints(
+            position, reference, model.edge_nodes, contacts.edge_samples, *contacts.pairs.kernel_args(),
+            contacts.start, force, nodes, weight, rotation, translation, tangent, origin, normal)
+        assert written == n
+    return FrictionAnchors(nodes, weight, rotation, translation, tangent, origin, coefficient * normal,
+                           float(slip_length))
+
+
+@dataclass(frozen=True)
+class LaggedSolve:
+    """Outcome of :func:`lagged_solve`: the last solve's result and the anchors it was solved
+    with, whether the normal forces settled, the number of lagged passes and Newton iterations
+    over all of them, and the relative change of the total anchored normal force between the
+    last two passes."""
+
+    result: object
+    anchors: FrictionAnchors
+    settled: bool
+    passes: int
+    iterations: int
+    force_change: float
+
+
+# Lagged passes stop when the anchored normal forces' total changes by less than this fraction
+# between passes (IPC iterates its lagging to a tolerance the same way): the friction bound μ N
+# is then that close to the step's own normal forces. Friction raises the normal forces it is
+# bounded by (it holds yarn tension that presses the crossings), so the passes climb: the
+# cotton twill's warp strip from rest to 2 % anchored 1.5, 3.2, 4.6, 5.5, 5.9, 6.07, 6.08 N over
+# its first seven passes, its pull 434 → 815 N/m. It settled in 7 / 4 / 8 passes at 2 / 5 / 10 %.
+LAG_TOLERANCE = 1e-2
+MAX_LAG_PASSES = 10
+
+
+def lagged_solve(solver, guess, reference, coefficient: float, *, anchors_from=None, slip_length: float | None = None,
+                 tolerance: float = LAG_TOLERANCE, max_passes: int = MAX_LAG_PASSES, **solve_args) -> LaggedSolve:
+    """A frictional load step: solve from ``guess`` (a :class:`~yarnfit.engine.RodState`) with
+    friction anchored at ``reference`` (the step's start, ``(N, 3)`` m), re-anchor at the solution
+    (normal forces, tangent planes and contact points there, slip still from ``reference``) and
+    solve again from it, until the anchored normal force changes by less than ``tolerance`` (or
+    ``max_passes``). ``anchors_from`` ``(position, contacts)``: where the first pass takes its
+    normal forces (the step's start, solved; default: a frictionless first pass). ``solver`` a
+    :class:`~yarnfit.engine.QuasiStaticSolver`; other keywords go to its ``solve``."""
+    model = solver.model
+    if anchors_from is None:
+        result = solver.solve(guess, **solve_args)
+        anchors_from = (result.state.node_position, result.contacts)
+        guess, iterations, passes = result.state, result.iterations, 1
+    else:
+        iterations, passes = 0, 0
+    anchors = anchor_contacts(model, anchors_from[0], anchors_from[1], reference, coefficient, slip_length)
+    change = math.inf
+    while True:
+        result = solver.solve(guess, friction=anchors, **solve_args)
+        iterations += result.iterations
+        passes += 1
+        updated = anchor_contacts(model, result.state.node_position, result.contacts, reference, coefficient,
+                                  slip_length)
+        before, after = float(anchors.bound.sum()), float(updated.bound.sum())
+        change = abs(after - before) / max(after, before) if max(after, before) > 0.0 else 0.0
+        if change < tolerance or passes >= max_passes or coefficient == 0.0:
+            return LaggedSolve(result, anchors, change < tolerance, passes, iterations, change)
+        anchors, guess = updated, result.state
