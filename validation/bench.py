@@ -1,7 +1,7 @@
 """Benchmarks of yarnfit, one section per stage.
 
     python validation/bench.py [engine] [relax] [fit] [mujoco] [plugin_nonlinear_stable_step] [swatch]
-                               [drape_stable_step] [body] [suite]
+                               [swatch_friction] [drape_stable_step] [body] [suite]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -591,11 +591,13 @@ def bench_drape_stable_step() -> None:
 # -- swatch ---------------------------------------------------------------------------------------
 
 
-def bench_swatch() -> None:
+def bench_swatch(friction: bool = False) -> None:
     """The explicit yarn-level stretch test's strips at the suite's full size (``yarnfit validate``,
     node budget included), 2 / 5 / 10 % on one core: nodes, and per strain the solve's wall time and
     Newton iterations. Cotton jersey along the weft, cotton twill along weft and warp (the warp strip,
-    1819 nodes, is the presets' largest; a satin is cut to the node budget).
+    1819 nodes, is the presets' largest; a satin is cut to the node budget). With ``friction``
+    (section ``swatch_friction``) the same strips with the fibre's friction at the yarn contacts
+    (:mod:`yarnfit.engine.friction`), also the pull (N/m) and the lagged passes per strain.
     ``validation/swatch_convergence.py`` gives the strips of other sizes."""
     import warnings
 
@@ -607,18 +609,22 @@ def bench_swatch() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for name, directions in (("cotton-jersey", ("weft",)), ("cotton-twill", ("weft", "warp"))):
-            relaxed = relax(Fabric.preset(name))
+            fabric = Fabric.preset(name)
+            relaxed = relax(fabric)
             out = stretch_repeat(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), name=name,
-                                 directions=directions)
+                                 directions=directions, friction=fabric.fiber.friction if friction else 0.0)
             for direction in directions:
                 curve = out["directions"][direction]
-                key = f"swatch_{name.replace('-', '_')}_{direction}"
+                key = f"swatch{'_friction' if friction else ''}_{name.replace('-', '_')}_{direction}"
                 report(f"{key}_nodes", curve["nodes"], "nodes")
                 for point in curve["points"][1:]:
                     percent = f"{100 * point['strain']:g}pct"
                     report(f"{key}_{percent}_seconds", point["seconds"], "s (one core)")
                     report(f"{key}_{percent}_iterations", point["iterations"], "iterations")
                     report(f"{key}_{percent}_converged", int(point["converged"]), "bool")
+                    if friction:
+                        report(f"{key}_{percent}_force", point["force_n_per_m"], "N/m")
+                        report(f"{key}_{percent}_friction_passes", point["friction_passes"], "passes")
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
@@ -687,6 +693,7 @@ def bench_suite() -> None:
 
 SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco,
             "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step, "swatch": bench_swatch,
+            "swatch_friction": lambda: bench_swatch(friction=True),
             "drape_stable_step": bench_drape_stable_step, "body": bench_body, "suite": bench_suite}
 
 
