@@ -19,6 +19,10 @@ converged Newton solve (:class:`yarnfit.engine.QuasiStaticSolver`, stopping on f
 residuals, energy change and contact penetration; never a fixed iteration count, see
 ``docs/design.md`` §5), warm-started from the previous strain's equilibrium stretched affinely
 between the jaws (an x-stretch never brings two segments closer, so the guess adds no overlap).
+The validation scene (:func:`run_yarn`) pulls with Coulomb friction at the yarn contacts, the
+fibre's coefficient, each strain a lagged frictional step (:mod:`yarnfit.engine.friction`): the
+yarn ends cut at a strip's long sides are held by friction, as a real strip's are; frictionless,
+they slide in freely and the strip stays soft at any width (``docs/design.md`` §3).
 
 Outputs per direction and strain:
 
@@ -466,7 +470,7 @@ def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection |
     else:
         dims = {k: float(size[k]) * repeat for k in ("gauge", "width", "clamp")}
     recording = None if recording_path is None else SwatchRecording(name, recording_path)
-    out = {"name": name, "strains": list(strains), "directions": {}}
+    out = {"name": name, "strains": list(strains), "directions": {}, "friction": float(friction)}
     step = 0
     try:
         for direction in directions:
@@ -503,7 +507,8 @@ class YarnResult(SceneResult):
     """The yarn-level stretch test of a material: the swatch's ``name`` and the ``strains`` pulled
     to, the curve per direction (:func:`stretch_swatch`'s dict), wall ``seconds`` of the pulls, the
     material's name, ``quick``, the relaxation it was cut from (converged, iterations, seconds,
-    radius_m, repeat_size_m) and the recording's path (or None)."""
+    radius_m, repeat_size_m), the recording's path (or None) and the friction coefficient at the
+    yarn contacts (0: frictionless)."""
 
     name: str
     strains: list[float]
@@ -513,14 +518,16 @@ class YarnResult(SceneResult):
     quick: bool
     relaxation: dict
     recording: str | None
+    friction: float = 0.0
 
 
 def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Callable[[str], None] | None = None,
-             directions: Sequence[str] | None = None, size: dict | None = None) -> YarnResult:
+             directions: Sequence[str] | None = None, size: dict | None = None, friction: bool = True) -> YarnResult:
     """The yarn-level stretch test of a material file (path or its decoded dict): take the relaxed
     repeat the file keeps (a file without one has the fabric of its ``inputs`` relaxed again, with a
     note through ``progress``), cut strips along weft and warp (and bias unless ``quick``) and pull
-    each to 2, 5 and 10 %. ``recording_path`` defaults to
+    each to 2, 5 and 10 %, with the fibre's friction at the yarn contacts (``friction=False``:
+    frictionless). ``recording_path`` defaults to
     ``logs/<material>/yarn.rrd`` (``False``: no recording). ``size`` overrides the strip size
     (see :func:`stretch_repeat`)."""
     file = MaterialFile.read(material)
@@ -535,14 +542,15 @@ def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Ca
     elif recording_path is False:
         recording_path = None
     directions = directions or (("weft", "warp") if quick else ("weft", "warp", "bias"))
+    coefficient = float(fabric.fiber.friction) if friction else 0.0
     out = stretch_repeat(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), name=fabric.name,
                          directions=directions, size=size, quick=quick, recording_path=recording_path,
-                         progress=progress)
+                         progress=progress, friction=coefficient)
     relaxation = {"converged": relaxed.converged, "iterations": relaxed.iterations, "seconds": relax_seconds,
                   "radius_m": relaxed.radius, "repeat_size_m": [float(v) for v in relaxed.repeat_size]}
     return YarnResult(name=out["name"], strains=out["strains"], directions=out["directions"], seconds=out["seconds"],
                       material=fabric.name, quick=bool(quick), relaxation=relaxation,
-                      recording=None if recording_path is None else str(recording_path))
+                      recording=None if recording_path is None else str(recording_path), friction=coefficient)
 
 
 # -- recording ---------------------------------------------------------------------------------
@@ -601,7 +609,10 @@ def summary_markdown(out: dict) -> str:
                          "yes" if p["converged"] else "**no**", p["iterations"], f"{res:.2e}", f"{p['seconds']:.1f}"))
     header = ("direction", "strain", "force (N/m)", "compression ratio", "edge draw-in (µm)", "converged", "iterations",
               "force residual", "seconds")
-    lines = [f"# yarn-level stretch: {out.get('name', '')}", "", markdown_table(rows, header)]
+    mu = out.get("friction", 0.0)
+    lines = [f"# yarn-level stretch: {out.get('name', '')}", "",
+             f"Friction at the yarn contacts: μ = {mu:g}." if mu else "Frictionless yarn contacts.", "",
+             markdown_table(rows, header)]
     for direction, curve in out["directions"].items():
         lines.append(f"\n{direction}: {curve['nodes']} nodes, {curve['pieces']} yarn pieces, gauge "
                      f"{1e3 * curve['gauge_m']:.3g} mm × width {1e3 * curve['width_m']:.3g} mm")
