@@ -1,7 +1,7 @@
 """Benchmarks of yarnfit, one section per stage.
 
     python validation/bench.py [engine] [relax] [fit] [mujoco] [plugin_nonlinear_stable_step] [swatch]
-                               [swatch_friction] [drape_stable_step] [body] [suite]
+                               [swatch_frictionless] [drape_stable_step] [body] [suite]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -591,14 +591,14 @@ def bench_drape_stable_step() -> None:
 # -- swatch ---------------------------------------------------------------------------------------
 
 
-def bench_swatch(friction: bool = False) -> None:
+def bench_swatch(friction: bool = True) -> None:
     """The explicit yarn-level stretch test's strips at the suite's full size (``yarnfit validate``,
-    node budget included), 2 / 5 / 10 % on one core: nodes, and per strain the solve's wall time and
-    Newton iterations. Cotton jersey along the weft, cotton twill along weft and warp (the warp strip,
-    1819 nodes, is the presets' largest; a satin is cut to the node budget). With ``friction``
-    (section ``swatch_friction``) the same strips with the fibre's friction at the yarn contacts
-    (:mod:`yarnfit.engine.friction`), also the pull (N/m) and the lagged passes per strain.
-    ``validation/swatch_convergence.py`` gives the strips of other sizes."""
+    node budget included), 2 / 5 / 10 % on one core, with the fibre's friction at the yarn contacts
+    as the suite pulls them (:mod:`yarnfit.engine.friction`; section ``swatch_frictionless``
+    without): nodes, and per strain the solve's wall time, Newton iterations (over every lagged
+    pass), the pull (N/m) and the lagged passes. Cotton jersey along the weft, cotton twill along
+    weft and warp (the warp strip, 1819 nodes, is the presets' largest; a satin is cut to the node
+    budget). ``validation/swatch_convergence.py`` gives the strips of other sizes."""
     import warnings
 
     from yarnfit.fabric import Fabric
@@ -615,15 +615,15 @@ def bench_swatch(friction: bool = False) -> None:
                                  directions=directions, friction=fabric.fiber.friction if friction else 0.0)
             for direction in directions:
                 curve = out["directions"][direction]
-                key = f"swatch{'_friction' if friction else ''}_{name.replace('-', '_')}_{direction}"
+                key = f"swatch{'' if friction else '_frictionless'}_{name.replace('-', '_')}_{direction}"
                 report(f"{key}_nodes", curve["nodes"], "nodes")
                 for point in curve["points"][1:]:
                     percent = f"{100 * point['strain']:g}pct"
                     report(f"{key}_{percent}_seconds", point["seconds"], "s (one core)")
                     report(f"{key}_{percent}_iterations", point["iterations"], "iterations")
                     report(f"{key}_{percent}_converged", int(point["converged"]), "bool")
+                    report(f"{key}_{percent}_force", point["force_n_per_m"], "N/m")
                     if friction:
-                        report(f"{key}_{percent}_force", point["force_n_per_m"], "N/m")
                         report(f"{key}_{percent}_friction_passes", point["friction_passes"], "passes")
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
@@ -693,7 +693,7 @@ def bench_suite() -> None:
 
 SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco,
             "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step, "swatch": bench_swatch,
-            "swatch_friction": lambda: bench_swatch(friction=True),
+            "swatch_frictionless": lambda: bench_swatch(friction=False),
             "drape_stable_step": bench_drape_stable_step, "body": bench_body, "suite": bench_suite}
 
 
