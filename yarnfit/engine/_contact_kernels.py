@@ -856,6 +856,26 @@ def _add_constraint_hessian(points, weight, slide, free, stiffness_term, force, 
 
 
 @njit(cache=True)
+def sample_closest_point(c, sa, sb, a0, a1, b0, b1, weight):
+    """Constraint ``c`` of a pair whose edges carry ``sa`` and ``sb`` samples: a's sample at
+    ``s = c / (sa − 1)`` and its closest point on b at ``u`` (``c < sa``), or b's sample at
+    ``t = (c − sa) / (sb − 1)`` and its closest point on a at ``u``. Writes into ``weight (4,)`` the
+    weights of the vector from the point on b to the point on a over ``(a0, a1, b0, b1)``; returns
+    ``(u, distance, normal)``, the normal from the point on b towards the point on a."""
+    if c < sa:
+        s = c / (sa - 1)
+        point = (a0[0] + s * (a1[0] - a0[0]), a0[1] + s * (a1[1] - a0[1]), a0[2] + s * (a1[2] - a0[2]))
+        u, dist, n = _point_segment(point, b0, b1)
+        weight[0], weight[1], weight[2], weight[3] = 1.0 - s, s, -(1.0 - u), -u
+        return u, dist, n
+    t = (c - sa) / (sb - 1)
+    point = (b0[0] + t * (b1[0] - b0[0]), b0[1] + t * (b1[1] - b0[1]), b0[2] + t * (b1[2] - b0[2]))
+    u, dist, n_ab = _point_segment(point, a0, a1)
+    weight[0], weight[1], weight[2], weight[3] = 1.0 - u, u, -(1.0 - t), -t
+    return u, dist, (-n_ab[0], -n_ab[1], -n_ab[2])
+
+
+@njit(cache=True)
 def contact_hessian_coo(pos, edge_nodes, edge_radius, edge_samples, pairs, pair_rotation, pair_translation,
                         constraint_start, multiplier, stiffness, smoothing, rows, cols, vals, start):
     """Hessian of the contact terms as COO triplets (144 per pair with a constraint on its ramp)
@@ -889,17 +909,10 @@ def contact_hessian_coo(pos, edge_nodes, edge_radius, edge_samples, pairs, pair_
             points[3, i] = b1[i]
         local[:, :] = 0.0
         for c in range(sa + sb):
+            u, dist, _ = sample_closest_point(c, sa, sb, a0, a1, b0, b1, weight)
             if c < sa:  # a's sample, its closest point on b: u = t slides along b
-                s = c / (sa - 1)
-                point = (a0[0] + s * (a1[0] - a0[0]), a0[1] + s * (a1[1] - a0[1]), a0[2] + s * (a1[2] - a0[2]))
-                u, dist, _ = _point_segment(point, b0, b1)
-                weight[0], weight[1], weight[2], weight[3] = 1.0 - s, s, -(1.0 - u), -u
                 slide[0], slide[1], slide[2], slide[3] = 0.0, 0.0, 1.0, -1.0
-            else:  # b's sample, its closest point on a: r from b's point to a's, u = s slides along a
-                t = (c - sa) / (sb - 1)
-                point = (b0[0] + t * (b1[0] - b0[0]), b0[1] + t * (b1[1] - b0[1]), b0[2] + t * (b1[2] - b0[2]))
-                u, dist, _ = _point_segment(point, a0, a1)
-                weight[0], weight[1], weight[2], weight[3] = 1.0 - u, u, -(1.0 - t), -t
+            else:  # b's sample, its closest point on a: u = s slides along a
                 slide[0], slide[1], slide[2], slide[3] = -1.0, 1.0, 0.0, 0.0
             argument = multiplier[first + c] - k * (dist - rsum)
             if argument <= -delta:

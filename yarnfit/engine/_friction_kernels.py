@@ -20,7 +20,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._contact_kernels import _pair_nodes, _pair_points, _point_segment
+from ._contact_kernels import _pair_nodes, _pair_points, sample_closest_point
 
 
 @njit(cache=True)
@@ -72,27 +72,14 @@ def anchor_constraints(pos, reference_pos, edge_nodes, edge_samples, pairs, pair
     returns their count."""
     k = 0
     for p in range(pairs.shape[0]):
-        ea = pairs[p, 0]
-        eb = pairs[p, 1]
-        sa = edge_samples[ea]
-        sb = edge_samples[eb]
-        first = constraint_start[p]
-        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
         nodes = _pair_nodes(edge_nodes, pairs, p)
-        for c in range(sa + sb):
-            if force[first + c] <= 0.0:
+        a0, a1, b0, b1 = _pair_points(pos, edge_nodes, pairs, pair_rotation, pair_translation, p)
+        samples_a = edge_samples[pairs[p, 0]]
+        samples_b = edge_samples[pairs[p, 1]]
+        for c in range(samples_a + samples_b):
+            if force[constraint_start[p] + c] <= 0.0:
                 continue
-            if c < sa:  # a's sample at s, its closest point on b at u
-                s = c / (sa - 1)
-                point = (a0[0] + s * (a1[0] - a0[0]), a0[1] + s * (a1[1] - a0[1]), a0[2] + s * (a1[2] - a0[2]))
-                u, _, n = _point_segment(point, b0, b1)
-                out_weight[k, 0], out_weight[k, 1], out_weight[k, 2], out_weight[k, 3] = 1.0 - s, s, -(1.0 - u), -u
-            else:  # b's sample at t, its closest point on a at u; n from b's point towards a's
-                t = (c - sa) / (sb - 1)
-                point = (b0[0] + t * (b1[0] - b0[0]), b0[1] + t * (b1[1] - b0[1]), b0[2] + t * (b1[2] - b0[2]))
-                u, _, n_ab = _point_segment(point, a0, a1)
-                n = (-n_ab[0], -n_ab[1], -n_ab[2])
-                out_weight[k, 0], out_weight[k, 1], out_weight[k, 2], out_weight[k, 3] = 1.0 - u, u, -(1.0 - t), -t
+            _, _, n = sample_closest_point(c, samples_a, samples_b, a0, a1, b0, b1, out_weight[k])
             for m in range(4):
                 out_nodes[k, m] = nodes[m]
                 out_rotation[k, m] = pair_rotation[p, m]
@@ -102,7 +89,7 @@ def anchor_constraints(pos, reference_pos, edge_nodes, edge_samples, pairs, pair
             for i in range(2):
                 out_origin[k, i] = (out_tangent[k, i, 0] * r[0] + out_tangent[k, i, 1] * r[1]
                                     + out_tangent[k, i, 2] * r[2])
-            out_normal_force[k] = force[first + c]
+            out_normal_force[k] = force[constraint_start[p] + c]
             k += 1
     return k
 
