@@ -9,15 +9,16 @@ node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what say
 has to be.
 
     python validation/swatch_convergence.py MATERIAL.json [--sizes 2x1.5,4x3,8x6] \\
-        [--directions weft,warp,bias] [--selvedge] [--friction] [--json OUT.json] [--from-json A.json,B.json]
+        [--directions weft,warp,bias] [--selvedge] [--frictionless] [--json OUT.json] [--from-json A.json,B.json]
 
 The force and width measured at mid-length converge as the cut loops at the long sides and the
 jaws' constraint become a smaller part of the strip; the table shows how fast. Its edge draw-in
 (:func:`yarnfit.validate.swatch.edge_draw_in`) is how far the yarn ends cut at the long sides have
 slid in beyond the strip's narrowing: yarn a frictionless cut strip feeds to its loops from its
-free ends, which a periodic repeat cannot. ``--friction`` pulls the strips with Coulomb friction at
-the yarn crossings (the fibre's coefficient, lagged per strain: :mod:`yarnfit.engine.friction`),
-which holds those ends as a real strip's are held.
+free ends, which a periodic repeat cannot. The strips are pulled with Coulomb friction at the yarn
+crossings, as the suite's yarn scene pulls them (the fibre's coefficient, lagged per strain:
+:mod:`yarnfit.engine.friction`), which holds those ends as a real strip's are held;
+``--frictionless`` pulls them without.
 
 Then the material's shell (nonlinear) and its linear fit from the same samples (``fit.linear``)
 against the largest strip of each direction
@@ -71,7 +72,7 @@ def parse_sizes(text: str) -> list[tuple[float, float]]:
 
 
 def solve_curves(file: MaterialFile, sizes, directions, selvedge: bool = False,
-                 friction: bool = False) -> tuple[object, dict]:
+                 friction: bool = True) -> tuple[object, dict]:
     """``(relaxed repeat, {label: curve})``: each direction's strips at each size (with
     ``selvedge``, the yarns running across a strip joined at its long sides:
     :func:`yarnfit.validate.swatch.join_selvedges`; with ``friction``, the fibre's friction at the
@@ -149,8 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--directions", default="weft,warp", help="comma-separated: weft, warp, bias")
     parser.add_argument("--selvedge", action="store_true",
                         help="join the yarns running across each strip at its long sides (a flat knit's selvedges)")
-    parser.add_argument("--friction", action="store_true",
-                        help="Coulomb friction at the yarn contacts, the fibre's coefficient (default: frictionless)")
+    parser.add_argument("--frictionless", action="store_true",
+                        help="no friction at the yarn contacts (default: the fibre's coefficient, as the suite)")
     parser.add_argument("--json", help="also write the curves to this file")
     parser.add_argument("--from-json", help="comma-separated curve files of earlier runs: compare, do not solve")
     args = parser.parse_args(argv)
@@ -167,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
         name = file.fabric().name
     else:
         relaxed, curves = solve_curves(file, parse_sizes(args.sizes), args.directions.split(","), args.selvedge,
-                                       args.friction)
+                                       not args.frictionless)
         name = relaxed.name
         print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
     strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
