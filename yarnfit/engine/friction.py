@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,7 +29,11 @@ from . import _contact_kernels, _friction_kernels
 from .contact_lagrangian import ContactSet
 from .model import RodModel
 
-__all__ = ["FRICTION_SLIP", "FrictionAnchors", "anchor_contacts"]
+if TYPE_CHECKING:  # the solver imports this module
+    from .quasistatic import QuasiStaticResult, QuasiStaticSolver
+    from .state import RodState
+
+__all__ = ["FRICTION_SLIP", "FrictionAnchors", "LaggedSolve", "anchor_contacts", "lagged_solve"]
 
 # Slip ε (in sums of radii ra + rb) at which a contact's friction reaches the Coulomb bound μ N;
 # below it the contact sticks elastically with stiffness 2 μ N / ε. The model has no tangential
@@ -134,7 +139,7 @@ class LaggedSolve:
     over all of them, and the relative change of the total anchored normal force between the
     last two passes."""
 
-    result: object
+    result: QuasiStaticResult
     anchors: FrictionAnchors
     settled: bool
     passes: int
@@ -158,7 +163,8 @@ LAG_TOLERANCE = 1e-2
 MAX_LAG_PASSES = 20
 
 
-def lagged_solve(solver, guess, reference, coefficient: float, *, anchors_from=None, slip_length: float | None = None,
+def lagged_solve(solver: QuasiStaticSolver, guess: RodState, reference: np.ndarray, coefficient: float, *,
+                 anchors_from: tuple[np.ndarray, ContactSet] | None = None, slip_length: float | None = None,
                  tolerance: float = LAG_TOLERANCE, max_passes: int = MAX_LAG_PASSES, **solve_args) -> LaggedSolve:
     """A frictional load step: solve from ``guess`` (a :class:`~yarnfit.engine.RodState`) with
     friction anchored at ``reference`` (the step's start, ``(N, 3)`` m), re-anchor at the solution
