@@ -7,7 +7,8 @@ import pytest
 
 from yarnfit.engine import Loads, QuasiStaticOptions, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState
 from yarnfit.engine import _friction_kernels
-from yarnfit.engine.friction import FrictionAnchors, anchor_contacts, lagged_solve
+from yarnfit.engine.friction import FrictionAnchors, anchor_contacts
+from yarnfit.engine.lagged import lagged_solve
 
 # Central differences of a smooth function at step 1e-7 of a 1e-4 m scale: truncation ~1e-10 and
 # round-off ~1e-9 relative to the largest entry.

@@ -7,7 +7,8 @@ force ``N``, its tangent plane and its contact points, and adding the dissipatio
 gives ``f``): a convex term whose minimiser sticks a contact while its tangential force is below
 ``μ N`` and lets it slide at ``μ N`` beyond. A quasi-static load step is such a step with
 displacements for velocities. The frozen quantities are then refreshed from the solution and the
-step solved again (IPC's lagged iterations) until the normal forces settle: :func:`lagged_solve`.
+step solved again (IPC's lagged iterations) until the normal forces settle:
+:func:`yarnfit.engine.lagged.lagged_solve`.
 
 Each sampled contact constraint carrying force becomes one :class:`FrictionAnchors` entry, so a
 line contact's friction is spread over its samples as its normal force is.
@@ -21,7 +22,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,11 +29,7 @@ from . import _contact_kernels, _friction_kernels
 from .contact_lagrangian import ContactSet
 from .model import RodModel
 
-if TYPE_CHECKING:  # the solver imports this module
-    from .quasistatic import QuasiStaticResult, QuasiStaticSolver
-    from .state import RodState
-
-__all__ = ["FRICTION_SLIP", "FrictionAnchors", "LaggedSolve", "anchor_contacts", "lagged_solve"]
+__all__ = ["FRICTION_SLIP", "FrictionAnchors", "anchor_contacts", "constraint_forces"]
 
 # Slip ε (in sums of radii ra + rb) at which a contact's friction reaches the Coulomb bound μ N;
 # below it the contact sticks elastically with stiffness 2 μ N / ε. The model has no tangential
@@ -130,66 +126,3 @@ def anchor_contacts(model: RodModel, position: np.ndarray, contacts: ContactSet,
         assert written == n
     return FrictionAnchors(nodes, weight, rotation, translation, tangent, origin, coefficient * normal,
                            float(slip_length))
-
-
-@dataclass(frozen=True)
-class LaggedSolve:
-    """Outcome of :func:`lagged_solve`: the last solve's result and the anchors it was solved
-    with, whether the normal forces settled, the number of lagged passes and Newton iterations
-    over all of them, and the relative change of the total anchored normal force between the
-    last two passes."""
-
-    result: QuasiStaticResult
-    anchors: FrictionAnchors
-    settled: bool
-    passes: int
-    iterations: int
-    force_change: float
-
-
-# Lagged passes stop when the anchored normal forces' total changes by less than this fraction
-# between passes (IPC iterates its lagging to a tolerance the same way): the friction bound μ N
-# is then that close to the step's own normal forces. Friction raises the normal forces it is
-# bounded by (it holds yarn tension that presses the crossings), so the passes climb: the
-# cotton twill's warp strip from rest to 2 % anchored 1.5, 3.2, 4.6, 5.5, 5.9, 6.07, 6.08 N over
-# its first seven passes, its pull 434 → 815 N/m. It settled in 7 / 4 / 8 passes at 2 / 5 / 10 %;
-# wool jersey's 4 × 3 warp strip at 5 % still moved 1.2 % at the tenth (each pass closing ~35 %
-# of the remaining gap), and the passes after the first few take tens of Newton iterations each.
-# Letting the bounds follow the contact multipliers within a solve (at each update) was tried and
-# not kept: the multipliers are the normal forces only to the contact tolerance, so such a bound
-# never matched its solution's forces (0.76 % apart on the dragged rod of tests/test_friction.py),
-# and on that wool strip it took 326 / 2210 Newton iterations at 2 / 5 % against 241 / 503.
-LAG_TOLERANCE = 1e-2
-MAX_LAG_PASSES = 20
-
-
-def lagged_solve(solver: QuasiStaticSolver, guess: RodState, reference: np.ndarray, coefficient: float, *,
-                 anchors_from: tuple[np.ndarray, ContactSet] | None = None, slip_length: float | None = None,
-                 tolerance: float = LAG_TOLERANCE, max_passes: int = MAX_LAG_PASSES, **solve_args) -> LaggedSolve:
-    """A frictional load step: solve from ``guess`` (a :class:`~yarnfit.engine.RodState`) with
-    friction anchored at ``reference`` (the step's start, ``(N, 3)`` m), re-anchor at the solution
-    (normal forces, tangent planes and contact points there, slip still from ``reference``) and
-    solve again from it, until the anchored normal force changes by less than ``tolerance`` (or
-    ``max_passes``). ``anchors_from`` ``(position, contacts)``: where the first pass takes its
-    normal forces (the step's start, solved; default: a frictionless first pass). ``solver`` a
-    :class:`~yarnfit.engine.QuasiStaticSolver`; other keywords go to its ``solve``."""
-    model = solver.model
-    if anchors_from is None:
-        result = solver.solve(guess, **solve_args)
-        anchors_from = (result.state.node_position, result.contacts)
-        guess, iterations, passes = result.state, result.iterations, 1
-    else:
-        iterations, passes = 0, 0
-    anchors = anchor_contacts(model, anchors_from[0], anchors_from[1], reference, coefficient, slip_length)
-    change = math.inf
-    while True:
-        result = solver.solve(guess, friction=anchors, **solve_args)
-        iterations += result.iterations
-        passes += 1
-        updated = anchor_contacts(model, result.state.node_position, result.contacts, reference, coefficient,
-                                  slip_length)
-        before, after = float(anchors.bound.sum()), float(updated.bound.sum())
-        change = abs(after - before) / max(after, before) if max(after, before) > 0.0 else 0.0
-        if change < tolerance or passes >= max_passes or coefficient == 0.0:
-            return LaggedSolve(result, anchors, change < tolerance, passes, iterations, change)
-        anchors, guess = updated, result.state

@@ -41,7 +41,7 @@ Outputs per direction and strain:
   slid in from the sides; null where none is cut in the middle half of the gauge).
 - the solver's residuals, iterations and wall time; with friction (``stretch_swatch(...,
   friction=μ)``, off by default), ``friction_passes`` and ``friction_change``, the lagged passes
-  and the last change of the anchored normal force (:func:`yarnfit.engine.friction.lagged_solve`).
+  and the last change of the anchored normal force (:func:`yarnfit.engine.lagged.lagged_solve`).
 
 Recording (:class:`SwatchRecording`, one ``rr.RecordingStream`` per file as in
 :mod:`yarnfit.record`, application id ``yarnfit``), default ``logs/<material>/yarn.rrd``.
@@ -86,7 +86,7 @@ from ..engine import (
     RodState,
     energy_gradient,
 )
-from ..engine.friction import lagged_solve
+from ..engine.lagged import lagged_solve
 from ..engine.rotations import as_frames, as_rotations, quaternion_between
 from ..engine.tiling import YarnPiece, cut_rectangle
 from ..jsonfile import finite_or_none
@@ -351,7 +351,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     each solve (k = 0 for the unstrained state, then 1, 2, ...). ``width_band`` (m, default a
     quarter of the strip width) is the half-length of the mid-length slab the width is measured
     in (:func:`extent_width`). ``friction`` μ > 0: Coulomb friction at the yarn contacts, each
-    strain a lagged frictional step from the last (:func:`yarnfit.engine.friction.lagged_solve`;
+    strain a lagged frictional step from the last (:func:`yarnfit.engine.lagged.lagged_solve`;
     a point's ``iterations`` then count every pass, ``friction_passes`` how many, and it is
     converged only if the normal forces settled). Returns a JSON-able dict (see the module
     docstring)."""
