@@ -20,7 +20,8 @@ import math
 import numpy as np
 from numba import njit
 
-from ._contact_kernels import _pair_nodes, _pair_points, sample_closest_point
+from ._contact_kernels import _map, _pair_nodes, _pair_points, sample_closest_point
+from ._quat import cross, dot, mat_t_vec, normalized, row3
 
 
 @njit(cache=True)
@@ -37,10 +38,8 @@ def _tangent_basis(n, out, k):
         e = (0.0, 1.0, 0.0)
     else:
         e = (0.0, 0.0, 1.0)
-    t1 = (n[1] * e[2] - n[2] * e[1], n[2] * e[0] - n[0] * e[2], n[0] * e[1] - n[1] * e[0])
-    length = math.sqrt(t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2])
-    t1 = (t1[0] / length, t1[1] / length, t1[2] / length)
-    t2 = (n[1] * t1[2] - n[2] * t1[1], n[2] * t1[0] - n[0] * t1[2], n[0] * t1[1] - n[1] * t1[0])
+    t1 = normalized(cross(n, e))
+    t2 = cross(n, t1)
     for i in range(3):
         out[k, 0, i] = t1[i]
         out[k, 1, i] = t2[i]
@@ -53,12 +52,11 @@ def _relative(pos, nodes, weight, rotation, translation, k):
     r1 = 0.0
     r2 = 0.0
     for m in range(4):
-        x = pos[nodes[k, m]]
-        rot = rotation[k, m]
+        x = _map(rotation[k, m], translation[k, m], row3(pos, nodes[k, m]))
         w = weight[k, m]
-        r0 += w * (rot[0, 0] * x[0] + rot[0, 1] * x[1] + rot[0, 2] * x[2] + translation[k, m, 0])
-        r1 += w * (rot[1, 0] * x[0] + rot[1, 1] * x[1] + rot[1, 2] * x[2] + translation[k, m, 1])
-        r2 += w * (rot[2, 0] * x[0] + rot[2, 1] * x[1] + rot[2, 2] * x[2] + translation[k, m, 2])
+        r0 += w * x[0]
+        r1 += w * x[1]
+        r2 += w * x[2]
     return r0, r1, r2
 
 
@@ -87,8 +85,7 @@ def anchor_constraints(pos, reference_pos, edge_nodes, edge_samples, pairs, pair
             _tangent_basis(n, out_tangent, k)
             r = _relative(reference_pos, out_nodes, out_weight, out_rotation, out_translation, k)
             for i in range(2):
-                out_origin[k, i] = (out_tangent[k, i, 0] * r[0] + out_tangent[k, i, 1] * r[1]
-                                    + out_tangent[k, i, 2] * r[2])
+                out_origin[k, i] = dot(row3(out_tangent[k], i), r)
             out_normal_force[k] = force[constraint_start[p] + c]
             k += 1
     return k
@@ -98,9 +95,7 @@ def anchor_constraints(pos, reference_pos, edge_nodes, edge_samples, pairs, pair
 def _slip(pos, nodes, weight, rotation, translation, tangent, origin, k):
     """The anchor ``k``'s tangential slip ``u = T r(x) − u0`` (m)."""
     r = _relative(pos, nodes, weight, rotation, translation, k)
-    u0 = tangent[k, 0, 0] * r[0] + tangent[k, 0, 1] * r[1] + tangent[k, 0, 2] * r[2] - origin[k, 0]
-    u1 = tangent[k, 1, 0] * r[0] + tangent[k, 1, 1] * r[1] + tangent[k, 1, 2] * r[2] - origin[k, 1]
-    return u0, u1
+    return dot(row3(tangent[k], 0), r) - origin[k, 0], dot(row3(tangent[k], 1), r) - origin[k, 1]
 
 
 @njit(cache=True)
@@ -130,14 +125,11 @@ def friction_energy_gradient(pos, nodes, weight, rotation, translation, tangent,
                  tangent[k, 0, 2] * gu[0] + tangent[k, 1, 2] * gu[1])
         for m in range(4):
             w = weight[k, m]
-            rot = rotation[k, m]
+            g = mat_t_vec(rotation[k, m], world)
             i = nodes[k, m]
-            magnitude = 0.0
             for j in range(3):
-                g = w * (rot[0, j] * world[0] + rot[1, j] * world[1] + rot[2, j] * world[2])
-                node_grad[i, j] += g
-                magnitude += g * g
-            node_scale[i] += math.sqrt(magnitude)
+                node_grad[i, j] += w * g[j]
+            node_scale[i] += abs(w) * math.sqrt(dot(g, g))
     return energy
 
 
@@ -167,11 +159,10 @@ def friction_hessian_coo(pos, nodes, weight, rotation, translation, tangent, ori
         hu[1, 0] = hu[0, 1]
         hu[1, 1] = bound[k] * (along + outer * u1 * u1)
         for m in range(4):
-            rot = rotation[k, m]
             for a in range(2):
+                g = mat_t_vec(rotation[k, m], row3(tangent[k], a))
                 for j in range(3):
-                    jac[a, 3 * m + j] = weight[k, m] * (tangent[k, a, 0] * rot[0, j] + tangent[k, a, 1] * rot[1, j]
-                                                        + tangent[k, a, 2] * rot[2, j])
+                    jac[a, 3 * m + j] = weight[k, m] * g[j]
         for i in range(12):
             for j in range(12):
                 value = 0.0

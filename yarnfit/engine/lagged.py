@@ -5,7 +5,6 @@ the other."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,7 +66,6 @@ def lagged_solve(solver: QuasiStaticSolver, guess: RodState, reference: np.ndarr
     else:
         iterations, passes = 0, 0
     anchors = anchor_contacts(model, anchors_from[0], anchors_from[1], reference, coefficient, slip_length)
-    change = math.inf
     while True:
         result = solver.solve(guess, friction=anchors, **solve_args)
         iterations += result.iterations
