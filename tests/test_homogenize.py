@@ -28,6 +28,7 @@ from yarnfit.homogenize import (
     _next_free_strain,
     _solve_with_continuation,
     default_ranges,
+    periodic_pull,
     solve_sample,
     solve_samples,
     tile_repeat,
@@ -68,6 +69,18 @@ STRAIGHT_RTOL = 0.01
 STRETCH_SHARE_ATOL = 1e-3
 # Warp stretch, shear and warp bending of non-touching parallel weft yarns: "at least 100× smaller".
 DECOUPLED_RATIO = 1e-2
+# The periodic pull of straight non-touching yarns against EA ε / d: the slope's central difference
+# costs ~1e-6 of it (STRAIN_SLOPE_STEP's note) and the solve's force residual (1e-8 relative) less.
+STRAIGHT_PULL_RTOL = 1e-5
+# A periodic pull's force (the potential's slope at the uniaxial sample) against the central
+# difference of the uniaxial samples' Ū at λ ± PULL_SPAN. The free-strain search stops with a
+# transverse stress of up to FREE_SLOPE_RTOL (1 %) of the pure stretch's, which the weave's Poisson
+# coupling carries into the pull by about as much, and the difference has a truncation of
+# ~PULL_SPAN² Ū‴ / 6: measured on the plain weave, 0.5 % at 3 % (2.1 % at 1 %, where the pure
+# stretch's transverse stress is largest against the pull's; 1.6 % and 4.2 % at 3 % with spans 2
+# and 4 times this one).
+PULL_RTOL = 0.02
+PULL_SPAN = 1e-3
 # A square plain weave: weft and warp constants "equal within 5 %".
 SYMMETRY_RTOL = 0.05
 # The undeformed sample against a 1 % weft stretch: touching contacts without multipliers push with
@@ -391,6 +404,48 @@ def test_straight_parallel_yarns_give_the_closed_form_stiffness(model, breaking_
         if sample.family is Family.WEFT_BEND:
             assert sample.stretch_share == pytest.approx(0.0, abs=STRETCH_SHARE_ATOL), sample.spec
     assert any("weft_uniaxial sample" in note for note in fit_shell(results, shell_thickness(relaxed)).notes)
+
+
+def test_a_periodic_pull_of_straight_yarns_is_their_tensile_rigidity():
+    # Straight weft yarns, spacing d = 3r, not touching: pulled along them the sheet's force per
+    # width is EA ε / d exactly (the rod's energy is quadratic in its engineering strain) and
+    # nothing holds the width, which stays as it is; across them nothing resists at all.
+    r, d, E = 1e-4, 3e-4, 2e9
+    fiber = Fiber(name="linear", density_kg_m3=1000.0, young_min_pa=E, young_max_pa=E, breaking_strain=0.1,
+                  poisson=0.3, friction=0.2, fineness_dtex=2.0, flexural_rigidity_nm2_per_tex2=0.5e-9,
+                  torsional_rigidity_nm2_per_tex2=0.2e-9)
+    x = np.linspace(0.0, 2e-3, 16, endpoint=False)
+    points = np.column_stack([x, np.full_like(x, 0.5 * d), np.zeros_like(x)])
+    pattern = YarnPattern.from_yarns("parallel", "woven", (2e-3, d), r, [(points, (1, 0))])
+    relaxed = relax_pattern(pattern, fiber, shrink=1.0, yarn=YarnConstruction(model="solid"))
+    for strain in (0.01, 0.05):
+        pull = periodic_pull(relaxed, 0, strain)
+        assert pull.converged
+        assert pull.force_n_per_m == pytest.approx(E * math.pi * r**2 * strain / d, rel=STRAIGHT_PULL_RTOL)
+        assert pull.width_ratio == 1.0
+    across = periodic_pull(relaxed, 1, 0.05)
+    assert abs(across.force_n_per_m) <= DECOUPLED_RATIO * pull.force_n_per_m
+
+
+def test_a_periodic_pull_is_the_slope_of_the_uniaxial_samples_energy():
+    # Independent of the envelope argument: re-solved uniaxial samples on either side.
+    relaxed = fitted().relaxed
+    pull = periodic_pull(relaxed, 0, 0.03)
+    assert pull.converged and 0.9 < pull.width_ratio < 1.0
+    sample = solve_sample(relaxed, SampleSpec.at(Family.WEFT_UNIAXIAL, 0.03))
+    assert pull.width_ratio == pytest.approx(math.sqrt(sample.spec.I[1, 1]), rel=1e-12)
+    above, below = (solve_sample(relaxed, SampleSpec.at(Family.WEFT_UNIAXIAL, 0.03 + d)).energy_density
+                    for d in (PULL_SPAN, -PULL_SPAN))
+    assert pull.force_n_per_m == pytest.approx((above - below) / (2.0 * PULL_SPAN), rel=PULL_RTOL)
+
+
+def test_a_periodic_pull_refuses_bad_input():
+    relaxed = fitted().relaxed
+    with pytest.raises(ValueError, match="axis"):
+        periodic_pull(relaxed, 2, 0.05)
+    for strain in (0.0, -0.01, math.nan):
+        with pytest.raises(ValueError, match="strain"):
+            periodic_pull(relaxed, 0, strain)
 
 
 def test_a_square_plain_weave_is_as_stiff_along_weft_as_along_warp():

@@ -25,8 +25,11 @@ against the largest strip of each direction
 (issue 14's acceptance): a long strip of the shell pulled at the strip's angle with every other
 stress free (:meth:`yarnfit.shell.ShellMaterial.uniaxial_pull`), force per width and width ratio
 at each strain, with a verdict (force within SHELL_FORCE_RTOL, width within
-SHELL_COMPRESSION_ATOL). ``--from-json`` reads curves written by earlier runs instead of solving
-(runs of several sizes or directions made in parallel).
+SHELL_COMPRESSION_ATOL). Beside them the periodic repeat pulled the same way along weft and warp
+(:func:`yarnfit.homogenize.periodic_pull`: the limit a strip tends to as it widens), and then the
+shell against that pull: the fit's own error, told apart from the strip's size. ``--from-json``
+reads curves written by earlier runs instead of solving (runs of several sizes or directions made
+in parallel).
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ import numba
 
 from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
+from yarnfit.homogenize import periodic_pull
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, stretch_swatch
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
@@ -111,28 +115,55 @@ def _micrometres(value) -> str:
     return "—" if value is None else f"{1e6 * value:.3g}"
 
 
-def shell_rows(file: MaterialFile, curves: dict) -> tuple[list[str], bool]:
-    """Table rows of the shell (nonlinear and linear) against the largest strip per direction,
-    and whether every converged point of the nonlinear shell meets both criteria."""
+def periodic_pulls(relaxed, directions) -> dict:
+    """``{(direction, strain): PeriodicPull}``: the periodic repeat pulled along weft and warp at
+    each of STRAINS (:func:`yarnfit.homogenize.periodic_pull`), the limit a strip tends to as it
+    widens and the reference the shell was fitted towards. (A bias pull of the periodic repeat
+    would need a sheared free strain: not sampled.)"""
+    pulls = {}
+    for direction in directions:
+        if direction in ("weft", "warp"):
+            for strain in STRAINS:
+                pulls[direction, strain] = periodic_pull(relaxed, 0 if direction == "weft" else 1, strain)
+    return pulls
+
+
+def _against(value: float, reference: float) -> str:
+    ratio = value / reference if reference > 0 else math.inf
+    return f"{value:.4g} ({100 * (ratio - 1.0):+.0f} %)"
+
+
+def shell_rows(file: MaterialFile, curves: dict, pulls: dict) -> tuple[list[str], list[str], bool]:
+    """Table rows of the shell (nonlinear and linear) and of the periodic repeat's pull against
+    the largest strip per direction, rows of the nonlinear shell against the periodic pulls (the
+    fit's own error, apart from the strip's size), and whether every converged point of the
+    nonlinear shell meets both criteria against the strip."""
     largest = {}
     for curve in curves.values():
         if curve["nodes"] > largest.get(curve["direction"], {"nodes": -1})["nodes"]:
             largest[curve["direction"]] = curve
     shells = {"nonlinear": file.shell, "linear": file.linear_shell}  # the linear (StVK) fit from the same samples
-    rows, passed = [], True
+    rows, fit_rows, passed = [], [], True
     for direction, curve in largest.items():
         angle = math.radians(curve["angle_deg"])
         gauge, width = curve["repeats"]
         for point in curve["points"][1:]:
             strain = point["strain"]
-            cells, verdicts = [], {}
+            periodic = pulls.get((direction, strain))
+            cells = ["— | —" if periodic is None else
+                     f"{_against(periodic.force_n_per_m, point['force_n_per_m'])} | {periodic.width_ratio:.3f}"]
+            verdicts = {}
             for name, shell in shells.items():
                 pull = shell.uniaxial_pull(angle, 1.0 + strain)
                 ratio = pull.force_n_per_m / point["force_n_per_m"] if point["force_n_per_m"] > 0 else math.inf
                 within = (abs(ratio - 1.0) <= SHELL_FORCE_RTOL
                           and abs(pull.width_ratio - point["compression_ratio"]) <= SHELL_COMPRESSION_ATOL)
                 verdicts[name] = within
-                cells.append(f"{pull.force_n_per_m:.4g} ({100 * (ratio - 1.0):+.0f} %) | {pull.width_ratio:.3f}")
+                cells.append(f"{_against(pull.force_n_per_m, point['force_n_per_m'])} | {pull.width_ratio:.3f}")
+                if name == "nonlinear" and periodic is not None:
+                    fit_rows.append(f"| {direction} | {100 * strain:g} % | {periodic.force_n_per_m:.4g} | "
+                                    f"{periodic.width_ratio:.3f} | {'yes' if periodic.converged else 'NO'} | "
+                                    f"{_against(pull.force_n_per_m, periodic.force_n_per_m)} | {pull.width_ratio:.3f} |")
             converged = point["converged"]
             if converged:
                 passed &= verdicts["nonlinear"]
@@ -140,7 +171,7 @@ def shell_rows(file: MaterialFile, curves: dict) -> tuple[list[str], bool]:
                        "within" if verdicts["nonlinear"] else "MISSED")
             rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * strain:g} % | {point['force_n_per_m']:.4g} | "
                         f"{point['compression_ratio']:.3f} | " + " | ".join(cells) + f" | {verdict} |")
-    return rows, passed
+    return rows, fit_rows, passed
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -166,6 +197,7 @@ def main(argv: list[str] | None = None) -> int:
                     curve.setdefault("repeats", parse_sizes(label.split()[1])[0])
                     curves[label] = curve
         name = file.fabric().name
+        relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
     else:
         relaxed, curves = solve_curves(file, parse_sizes(args.sizes), args.directions.split(","), args.selvedge,
                                        not args.frictionless)
@@ -177,13 +209,21 @@ def main(argv: list[str] | None = None) -> int:
     print("|" + "---|" * (5 + 3 * len(STRAINS)))
     order = sorted(curves.values(), key=lambda c: (c["direction"], c["nodes"]))
     print("\n".join(convergence_row(curve) for curve in order))
-    rows, passed = shell_rows(file, curves)
-    print(f"\n{name}: shell against the largest strip per direction (force within {SHELL_FORCE_RTOL:.0%}, "
-          f"compression within {SHELL_COMPRESSION_ATOL})\n")
-    print("| direction | repeats | strain | swatch N/m | swatch compression | nonlinear N/m | nonlinear compression "
-          "| linear N/m | linear compression | verdict (nonlinear) |")
-    print("|" + "---|" * 10)
+    pulls = periodic_pulls(relaxed, sorted({curve["direction"] for curve in curves.values()}))
+    rows, fit_rows, passed = shell_rows(file, curves, pulls)
+    print(f"\n{name}: shell and periodic repeat against the largest strip per direction (force within "
+          f"{SHELL_FORCE_RTOL:.0%}, compression within {SHELL_COMPRESSION_ATOL}; % against the strip)\n")
+    print("| direction | repeats | strain | swatch N/m | swatch compression | periodic N/m | periodic compression "
+          "| nonlinear N/m | nonlinear compression | linear N/m | linear compression | verdict (nonlinear) |")
+    print("|" + "---|" * 12)
     print("\n".join(rows))
+    if fit_rows:
+        print(f"\n{name}: nonlinear shell against the periodic repeat's pull (the fit's own error; % against "
+              f"the periodic pull)\n")
+        print("| direction | strain | periodic N/m | periodic compression | periodic converged | nonlinear N/m "
+              "| nonlinear compression |")
+        print("|" + "---|" * 7)
+        print("\n".join(fit_rows))
     print(f"\nshell (nonlinear) vs largest swatch: {'within' if passed else 'MISSED'}")
     if args.json:
         with open(args.json, "w") as out:

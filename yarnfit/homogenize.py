@@ -44,7 +44,7 @@ from .engine.model import aligned_frames
 from .engine.rotations import rotate_frames
 from .engine.tiling import CurvedTiling, retile, scale_images
 from .relax import RelaxedRepeat, yarn_centroid_constraints
-from .samples import SampleRanges, SampleResult, SampleSpec, stretch_share
+from .samples import UNIAXIAL_FAMILIES, SampleRanges, SampleResult, SampleSpec, stretch_share
 from .shell import as_first_fundamental_form, as_second_fundamental_form
 from .tasks import Backend, LocalPool, Task, run_tasks
 
@@ -418,12 +418,12 @@ FREE_STRAIN_PROBE = 10.0 * FREE_STRAIN_TOLERANCE
 # (relative) towards its neighbour: the energy has stopped changing with E⊥ to the accuracy the
 # fit can use.
 PLATEAU_RTOL = 1e-3
-# Step of E⊥ for the slope dŪ/dE⊥ (central difference along the affine path, see
-# :func:`_transverse_slope`): nodes move ~1e-7 of the repeat (~1e-10 m), inside the contact
+# Step of a Green strain for the slope of Ū along it (dŪ/dE⊥ across a uniaxial sample, dŪ/dE
+# along its pull: central differences along the affine path, see :func:`_strain_slope`): nodes move ~1e-7 of the repeat (~1e-10 m), inside the contact
 # smoothing band (1.6e-8 m for an 80 µm yarn) so the difference stays on one smooth branch, and
 # the energy's round-off (~1e-13 relative) costs ~1e-6 of the slope. Measured on HYLC's
 # stockinette at 5.6 % weft: steps from 5.6e-10 to 5.6e-8 agree to 3e-7 relative, 5.6e-6 is 1e-3 off.
-TRANSVERSE_SLOPE_STEP = 1e-7
+STRAIN_SLOPE_STEP = 1e-7
 
 
 @dataclass(frozen=True)
@@ -435,25 +435,31 @@ class _FreeStrainPoint:
     slope: float
 
 
-def _transverse_slope(model: RodModel, result, axis: int, free: float, area: float) -> float:
-    """dŪ/dE⊥ (J/m²) at ``result``, the equilibrium on ``model`` (a flat sample's tiling) of a
-    sample pulled along ``axis`` at the free Green strain E⊥ = ``free``. By the envelope theorem
-    it is the derivative of the potential the solve balanced (rods, plus the contacts' augmented
-    Lagrangian with the multipliers and penalties it ended with) along any path of configurations
-    that keeps C_RVE; here the affine one, every node and image scaled across by
-    μ(E⊥ ± h) / μ(E⊥) (:func:`~yarnfit.engine.tiling.scale_images`,
-    :meth:`~yarnfit.engine.contact.ContactPairs.scaled`). Frames stay as they are:
-    they are balanced, so turning them changes the potential only to second order."""
+def _strain_slope(model: RodModel, result, axis: int, green: float, area: float) -> float:
+    """dŪ/dE_aa (J/m²) at ``result``, the equilibrium on ``model`` (a flat sample's tiling) whose
+    Green strain along ``axis`` (0 weft, 1 warp) is ``green``. By the envelope theorem it is the
+    derivative of the potential the solve balanced (rods, plus the contacts' augmented Lagrangian
+    with the multipliers and penalties it ended with) along any path of configurations that keeps
+    C_RVE; here the affine one, every node and image scaled along ``axis`` by
+    λ(E ± h) / λ(E) (:func:`~yarnfit.engine.tiling.scale_images`,
+    :meth:`~yarnfit.engine.contact.ContactPairs.scaled`). Frames stay as they are: they are
+    balanced, so turning them changes the potential only to second order."""
     values = []
-    for step in (TRANSVERSE_SLOPE_STEP, -TRANSVERSE_SLOPE_STEP):
+    for step in (STRAIN_SLOPE_STEP, -STRAIN_SLOPE_STEP):
         scale = np.ones(3)
-        scale[1 - axis] = math.sqrt((1.0 + 2.0 * (free + step)) / (1.0 + 2.0 * free))
+        scale[axis] = math.sqrt((1.0 + 2.0 * (green + step)) / (1.0 + 2.0 * green))
         scaled = scale_images(model, scale)
         position = result.state.node_position * scale
         contacts = replace(result.contacts, pairs=result.contacts.pairs.scaled(scale))
         rods = sum(internal_forces(scaled, position, result.state.edge_quaternion).terms)
         values.append(rods + contact_potential(scaled, position, contacts))
-    return (values[0] - values[1]) / (2.0 * TRANSVERSE_SLOPE_STEP * area)
+    return (values[0] - values[1]) / (2.0 * STRAIN_SLOPE_STEP * area)
+
+
+def _transverse_slope(model: RodModel, result, axis: int, free: float, area: float) -> float:
+    """dŪ/dE⊥ (J/m²) of a sample pulled along ``axis`` at the free Green strain E⊥ = ``free``
+    (:func:`_strain_slope` across the pull)."""
+    return _strain_slope(model, result, 1 - axis, free, area)
 
 
 def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: float) -> tuple[float | None, str]:
@@ -542,7 +548,21 @@ def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: fl
     return min(max(outer.free + step, low), 0.0), "search"
 
 
-def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:
+@dataclass(frozen=True)
+class _UniaxialSearch:
+    """Outcome of :func:`_search_uniaxial`: the free Green strain E⊥ chosen, the solve there (its
+    quasi-static result, ``None`` if none was usable) on ``tiled``, the Newton iterations of every
+    trial, and why it did not converge (``None`` if it did)."""
+
+    free: float
+    form: np.ndarray
+    result: object
+    tiled: TiledRepeat
+    iterations: int
+    failure: str | None
+
+
+def _search_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions) -> _UniaxialSearch:
     """Find the free transverse Green strain E⊥ where Ū is least, each trial a full solve started
     from the nearest solved E⊥'s equilibrium stretched across (exact for its affine part, and it
     keeps C_RVE's values, which are linear in the positions), each solve giving Ū's slope
@@ -553,7 +573,7 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
     stretch = math.sqrt(float(spec.I[axis, axis]))
     strain = 0.5 * (stretch**2 - 1.0)
     low = max(0.5 * (SMALLEST_FREE_STRETCH**2 - 1.0), -FREE_STRAIN_RANGE * strain)
-    solved: dict[float, tuple] = {}  # E⊥ -> (quasi-static result, area, point or None if unusable)
+    solved: dict[float, tuple] = {}  # E⊥ -> (quasi-static result, tiled repeat, point or None if unusable)
     iterations = 0
 
     def form(free: float) -> np.ndarray:
@@ -596,7 +616,7 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
         if result is not None and result.converged:
             point = _FreeStrainPoint(free, result.energy.internal / tiled.area,
                                      _transverse_slope(tiled.model, result, axis, free, tiled.area))
-        return result, tiled.area, point
+        return result, tiled, point
 
     def solve(free: float, depth: int = 0) -> None:
         outcome = solve_at(free)
@@ -640,25 +660,92 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
         least = min(p.energy for p in points)
         free = min((p for p in points if p.energy <= least + SEARCH_ENERGY_RTOL * abs(least)),
                    key=lambda p: abs(p.slope)).free
-    result, area, _ = solved[free]
+    result, tiled, _ = solved[free]
     converged = verdict in ("minimum", "upper end", "plateau")
-    if not converged:
-        why = {"lower end": "the free strain reached the search interval's end with Ū still falling",
-               "out of solves": "the search ran out of solves",
-               "failed": "the solves near the best free strain did not converge"}[verdict]
-        warnings.warn(f"uniaxial sample {spec.family} {spec.parameter:+.3g} did not converge: {why} "
-                      f"(E⊥ = {free:.4g}, {iterations} iterations)"
+    failure = None if converged else {
+        "lower end": "the free strain reached the search interval's end with Ū still falling",
+        "out of solves": "the search ran out of solves",
+        "failed": "the solves near the best free strain did not converge"}[verdict]
+    return _UniaxialSearch(free, form(free), result, tiled, iterations, failure)
+
+
+def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:
+    """A uniaxial-tension sample (:func:`_search_uniaxial`): its spec carries the free strain found."""
+    search = _search_uniaxial(relaxed, spec, options)
+    result, area = search.result, search.tiled.area
+    if search.failure is not None:
+        warnings.warn(f"uniaxial sample {spec.family} {spec.parameter:+.3g} did not converge: {search.failure} "
+                      f"(E⊥ = {search.free:.4g}, {search.iterations} iterations)"
                       + ("" if result is None else f": {result.residual}"), ConvergenceWarning, stacklevel=3)
     return SampleResult(
-        spec=SampleSpec(spec.family, form(free), spec.II, spec.parameter),
+        spec=SampleSpec(spec.family, search.form, spec.II, spec.parameter),
         energy_density=result.energy.internal / area if result is not None else math.nan,
-        converged=converged,
+        converged=search.failure is None,
         residual=result.residual if result is not None else Residual(math.nan, math.nan, math.nan, math.nan),
-        iterations=iterations,
+        iterations=search.iterations,
         seconds=time.perf_counter() - start,
         position=result.state.node_position if result is not None else None,
         stretch_share=stretch_share(result.energy) if result is not None else math.nan,
     )
+
+
+@dataclass(frozen=True)
+class PeriodicPull:
+    """The periodic fabric pulled along weft or warp with the other direction free: what a
+    uniaxial-tension sample gives a tensile test (:func:`periodic_pull`).
+
+    Attributes:
+        axis: 0 weft, 1 warp.
+        strain: the pull's engineering strain λ − 1.
+        force_n_per_m: force per reference width, dŪ/dλ (N/m).
+        width_ratio: the free transverse stretch μ (deformed over reference width).
+        converged: the sample converged (its solve and the free-strain search).
+        residual: the solve's residuals at the result.
+        iterations: Newton iterations over every trial of the search.
+        seconds: wall time (s).
+    """
+
+    axis: int
+    strain: float
+    force_n_per_m: float
+    width_ratio: float
+    converged: bool
+    residual: Residual
+    iterations: int
+    seconds: float
+
+
+def periodic_pull(relaxed: RelaxedRepeat, axis: int, strain: float,
+                  options: QuasiStaticOptions | None = None) -> PeriodicPull:
+    """The infinite fabric of ``relaxed`` pulled to the engineering ``strain`` (λ − 1) along
+    ``axis`` (0 weft, 1 warp) with the other direction free: the uniaxial-tension sample
+    (:func:`_search_uniaxial`) and its force per reference width ``dŪ/dλ = λ dŪ/dE`` (N/m), ``E``
+    the Green strain along the pull, from the derivative of the potential the solve balanced
+    (:func:`_strain_slope`; the free strain is at Ū's minimum, so its own change adds nothing).
+    The yarn-level reference a cut strip converges to as it widens, and that the fitted shell's
+    :meth:`~yarnfit.shell.ShellMaterial.uniaxial_pull` should follow. Warns
+    :class:`~yarnfit.engine.ConvergenceWarning` when the sample does not converge."""
+    if axis not in (0, 1):
+        raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
+    if not (isinstance(strain, (int, float)) and math.isfinite(strain) and strain > 0.0):
+        raise ValueError(f"strain must be a positive engineering strain, got {strain!r}")
+    start = time.perf_counter()
+    options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
+    family = next(f for f in UNIAXIAL_FAMILIES if f.uniaxial_axis == axis)
+    search = _search_uniaxial(relaxed, SampleSpec.at(family, float(strain)), options)
+    result, tiled = search.result, search.tiled
+    if search.failure is not None:
+        warnings.warn(f"periodic pull along {family} at {strain:.3g} did not converge: {search.failure}"
+                      + ("" if result is None else f": {result.residual}"), ConvergenceWarning, stacklevel=2)
+    if result is None:
+        return PeriodicPull(axis, float(strain), math.nan, math.nan, False,
+                            Residual(math.nan, math.nan, math.nan, math.nan), search.iterations,
+                            time.perf_counter() - start)
+    stretch = 1.0 + float(strain)
+    slope = _strain_slope(tiled.model, result, axis, 0.5 * (stretch**2 - 1.0), tiled.area)
+    return PeriodicPull(axis, float(strain), stretch * slope, math.sqrt(1.0 + 2.0 * search.free),
+                        search.failure is None and result.converged, result.residual, search.iterations,
+                        time.perf_counter() - start)
 
 
 # -- sample ranges --------------------------------------------------------------------------------
