@@ -596,7 +596,9 @@ def bench_swatch(friction: bool = True) -> None:
     node budget included), 2 / 5 / 10 % on one core, with the fibre's friction at the yarn contacts
     as the suite pulls them (:mod:`yarnfit.engine.friction`; section ``swatch_frictionless``
     without): nodes, and per strain the solve's wall time, Newton iterations (over every lagged
-    pass), the pull (N/m) and the lagged passes. Cotton jersey along the weft, cotton twill along
+    pass), the pull (N/m), and with friction the load steps it was reached in
+    (:data:`yarnfit.validate.swatch.FRICTION_STRAIN_STEP` apart), the slowest step's wall time and
+    the lagged passes. Cotton jersey along the weft, cotton twill along
     weft and warp (the warp strip, 1819 nodes, is the presets' largest; a satin is cut to the node
     budget). ``validation/swatch_convergence.py`` gives the strips of other sizes."""
     import warnings
@@ -624,6 +626,8 @@ def bench_swatch(friction: bool = True) -> None:
                     report(f"{key}_{percent}_converged", int(point["converged"]), "bool")
                     report(f"{key}_{percent}_force", point["force_n_per_m"], "N/m")
                     if friction:
+                        report(f"{key}_{percent}_load_steps", point["load_steps"], "steps")
+                        report(f"{key}_{percent}_slowest_step_seconds", point["slowest_step_seconds"], "s (one core)")
                         report(f"{key}_{percent}_friction_passes", point["friction_passes"], "passes")
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 

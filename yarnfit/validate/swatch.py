@@ -20,8 +20,8 @@ residuals, energy change and contact penetration; never a fixed iteration count,
 ``docs/design.md`` §5), warm-started from the previous strain's equilibrium stretched affinely
 between the jaws (an x-stretch never brings two segments closer, so the guess adds no overlap).
 The validation scene (:func:`run_yarn`) pulls with Coulomb friction at the yarn contacts, the
-fibre's coefficient, each strain a lagged frictional step (:mod:`yarnfit.engine.friction`): the
-yarn ends cut at a strip's long sides are held by friction, as a real strip's are; frictionless,
+fibre's coefficient, each strain reached in lagged frictional load steps of at most
+:data:`FRICTION_STRAIN_STEP` (:mod:`yarnfit.engine.friction`): the yarn ends cut at a strip's long sides are held by friction, as a real strip's are; frictionless,
 they slide in freely and the strip stays soft at any width (``docs/design.md`` §3).
 
 Outputs per direction and strain:
@@ -39,9 +39,11 @@ Outputs per direction and strain:
   (:func:`extent_width`: cut ends splaying out count); ``edge_draw_in_m`` how far the yarn ends cut
   at the long sides lie inside where the strip's narrowing puts them (:func:`edge_draw_in`: yarn
   slid in from the sides; null where none is cut in the middle half of the gauge).
-- the solver's residuals, iterations and wall time; with friction (``stretch_swatch(...,
-  friction=μ)``, off by default), ``friction_passes`` and ``friction_change``, the lagged passes
-  and the last change of the anchored normal force (:func:`yarnfit.engine.lagged.lagged_solve`).
+- the solver's residuals, iterations and wall time, and ``load_steps``; with friction
+  (``stretch_swatch(..., friction=μ)``, off by default), ``slowest_step_seconds``,
+  ``friction_passes`` and ``friction_change``, the slowest load step's wall time, the lagged passes
+  and the last step's last change of the anchored normal force
+  (:func:`yarnfit.engine.lagged.lagged_solve`).
 
 Recording (:class:`SwatchRecording`, one ``rr.RecordingStream`` per file as in
 :mod:`yarnfit.record`, application id ``yarnfit``), default ``logs/<material>/yarn.rrd``.
@@ -126,6 +128,21 @@ CROSSING_SLOPE = 0.5
 # 1835 iterations, ~60 ms each on one core (session 29): 800 lets its 5 % converge (45 s) and keeps
 # a solve that will not within about a minute.
 MAX_ITERATIONS = 800
+# Largest strain increment of a frictional load step: a pull with friction reaches each reported
+# strain in equal steps no larger than this. Lagged friction (IPC) charges each contact the net
+# slip of its whole step against normal forces frozen per pass, so a large step slides contacts
+# that the path would have held, and the frictional strip comes out soft and step-dependent: the
+# cotton twill's warp strip (1819 nodes) at 2 % pulls at 815 / 821 / 1235 / 1227 N/m reached in
+# 1 / 2 / 4 / 8 steps, and 0.5 % steps agree with 0.25 % ones to 0.7 % up to 3 % (2177 against
+# 2167 N/m) at ~8 s a step (session 33). Beyond 3 % that strip slips in events (its pull falls
+# 2177 → 1575 N/m in one 0.5 % step at 3.5 %, 2075 → 1159 at 6 %; 9–12 lagged passes, ~65 s each
+# such step), whose timing depends on the path: at 10 % it pulls 1796 N/m in steps of 0.5 % and
+# 2142 in steps of 0.25 % (645 in one step from 5 %), so a strip that small has no sharper figure
+# there. A frictionless pull has no path and takes each strain in one step.
+FRICTION_STRAIN_STEP = 0.005
+# Round-off allowance in counting a pull's load steps: 0.05 − 0.02 is 0.030000000000000002, which
+# must be six steps of 0.5 %, not seven.
+STEP_COUNT_SLACK = 1e-9
 # Tolerances of the swatch solves: the solver's defaults except the force and torque imbalance,
 # which at 1e-8 sat below the round-off floor of a cut swatch (many contacts, ~1e4 nodes); 1e-6 of
 # the force scale is still six digits on the reaction.
@@ -342,24 +359,42 @@ def edge_draw_in(swatch: Swatch, position: np.ndarray, compression_ratio: float)
     return float(np.mean(np.sign(offset) * (compression_ratio * offset - (position[ends, 1] - centre))))
 
 
+def _stretched_guess(swatch: Swatch, state: RodState, strain: float, previous: float) -> RodState:
+    """The warm start of a pull to ``strain`` from ``state``, the equilibrium at ``previous``: its
+    free nodes stretched affinely between the jaws, the moving jaw's nodes exactly at their new
+    place (a rigid translation, frames unchanged)."""
+    model = swatch.model
+    jaw0 = -swatch.gauge / 2
+    x = state.node_position.copy()
+    free = ~model.node_pinned
+    x[free, 0] = jaw0 + (x[free, 0] - jaw0) * (1.0 + strain) / (1.0 + previous)
+    x[swatch.moving, 0] = swatch.position[swatch.moving, 0] + strain * swatch.gauge
+    return replace(state, node_position=x)
+
+
 def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                    options: QuasiStaticOptions | None = None, width_band: float | None = None,
                    on_step: Callable[[int, float, np.ndarray, dict], None] | None = None,
-                   progress: Callable[[str], None] | None = None, friction: float = 0.0) -> dict:
+                   progress: Callable[[str], None] | None = None, friction: float = 0.0,
+                   strain_step: float = FRICTION_STRAIN_STEP) -> dict:
     """Pull ``swatch`` to each of ``strains`` (ascending, > 0) in turn, each a converged solve
     warm-started from the previous one. ``on_step(k, strain, position, point)`` is called after
     each solve (k = 0 for the unstrained state, then 1, 2, ...). ``width_band`` (m, default a
     quarter of the strip width) is the half-length of the mid-length slab the width is measured
     in (:func:`extent_width`). ``friction`` μ > 0: Coulomb friction at the yarn contacts, each
-    strain a lagged frictional step from the last (:func:`yarnfit.engine.lagged.lagged_solve`;
-    a point's ``iterations`` then count every pass, ``friction_passes`` how many, and it is
-    converged only if the normal forces settled). Returns a JSON-able dict (see the module
+    strain reached from the last in equal lagged frictional load steps of at most ``strain_step``
+    (:data:`FRICTION_STRAIN_STEP`; :func:`yarnfit.engine.lagged.lagged_solve`; a point's
+    ``load_steps`` says how many, its ``iterations``, ``friction_passes`` and ``seconds`` count
+    all of them, ``slowest_step_seconds`` is the longest one's time, and it is converged only if
+    every step converged and its normal forces settled). Returns a JSON-able dict (see the module
     docstring)."""
     strains = [float(e) for e in strains]
     if not strains or any(not (math.isfinite(e) and e > 0) for e in strains) or strains != sorted(strains):
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
     if not (math.isfinite(friction) and friction >= 0.0):
         raise ValueError(f"friction must be a finite coefficient >= 0, got {friction!r}")
+    if not (math.isfinite(strain_step) and strain_step > 0.0):
+        raise ValueError(f"strain_step must be a positive strain, got {strain_step!r}")
     model = swatch.model
     options = options or QuasiStaticOptions(**SWATCH_OPTIONS)
     solver = QuasiStaticSolver(model, options)
@@ -368,7 +403,6 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     width0 = mid_width(swatch, rest)
     extent0 = extent_width(swatch, rest, band)
     state = RodState.from_model(model)
-    jaw0 = -swatch.gauge / 2
     points = [{"strain": 0.0, "force_n_per_m": 0.0, "fixed_force_n_per_m": 0.0, "rod_force_n_per_m": 0.0,
                "compression_ratio": 1.0, "extent_ratio": 1.0, "width_m": width0,
                "edge_draw_in_m": 0.0 if len(free_side_ends(swatch)) else None, "converged": True, "iterations": 0,
@@ -379,23 +413,27 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     contacts = None
     for k, strain in enumerate(strains, start=1):
         start = time.perf_counter()
-        # Warm start: the last equilibrium stretched affinely between the jaws; the moving jaw's
-        # nodes go exactly to their new place (rigid translation, frames unchanged).
-        x = state.node_position.copy()
-        factor = (1.0 + strain) / (1.0 + previous)
-        free = ~model.node_pinned
-        x[free, 0] = jaw0 + (x[free, 0] - jaw0) * factor
-        x[swatch.moving, 0] = rest[swatch.moving, 0] + strain * swatch.gauge
-        guess = replace(state, node_position=x)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            if friction > 0.0:
-                lagged = lagged_solve(solver, guess, state.node_position, friction,
-                                      anchors_from=None if contacts is None else (state.node_position, contacts))
-                result = lagged.result
-            else:
-                lagged, result = None, solver.solve(guess)
-        state, contacts = result.state, result.contacts
+        steps = max(1, math.ceil((strain - previous) / strain_step - STEP_COUNT_SLACK)) if friction > 0.0 else 1
+        iterations, passes, settled, converged, reached, slowest = 0, 0, True, True, previous, 0.0
+        for j in range(1, steps + 1):
+            step_start = time.perf_counter()
+            target = strain if j == steps else previous + (strain - previous) * j / steps
+            guess = _stretched_guess(swatch, state, target, reached)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ConvergenceWarning)
+                if friction > 0.0:
+                    lagged = lagged_solve(solver, guess, state.node_position, friction,
+                                          anchors_from=None if contacts is None else (state.node_position, contacts))
+                    result = lagged.result
+                    passes += lagged.passes
+                    settled &= lagged.settled
+                    iterations += lagged.iterations
+                else:
+                    lagged, result = None, solver.solve(guess)
+                    iterations += result.iterations
+            converged &= bool(result.converged)
+            state, contacts, reached = result.state, result.contacts, target
+            slowest = max(slowest, time.perf_counter() - step_start)
         _, rod_gradient, _ = energy_gradient(model, state)
         pull = float(result.reaction_force[swatch.moving, 0].sum())
         back = float(result.reaction_force[swatch.fixed, 0].sum())
@@ -412,9 +450,11 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
             "width_m": width,
             "edge_draw_in_m": finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
-            "converged": bool(result.converged) and (lagged is None or lagged.settled),
-            "iterations": int(result.iterations if lagged is None else lagged.iterations),
-            "friction_passes": None if lagged is None else lagged.passes,
+            "converged": converged and settled,
+            "iterations": int(iterations),
+            "load_steps": steps,
+            "slowest_step_seconds": slowest,
+            "friction_passes": None if lagged is None else passes,
             "friction_change": None if lagged is None else lagged.force_change,
             "seconds": time.perf_counter() - start,
             "residual": {"force": float(r.force), "torque": float(r.torque), "energy_change": float(r.energy_change),
@@ -429,7 +469,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             progress(f"{swatch.direction} {100 * strain:g} %: {point['force_n_per_m']:.5g} N/m, compression "
                      f"{point['compression_ratio']:.4f}, {'converged' if point['converged'] else 'NOT converged'} "
                      f"in {point['iterations']} iterations"
-                     f"{'' if lagged is None else f' over {lagged.passes} friction passes'} "
+                     f"{'' if lagged is None else f' over {steps} load steps and {passes} friction passes'} "
                      f"({point['seconds']:.1f} s; {r})")
         if on_step is not None:
             on_step(k, strain, state.node_position, point)
