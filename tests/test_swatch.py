@@ -310,3 +310,36 @@ def test_fabric_from_inputs_rebuilds_the_preset():
     assert fabric_from_inputs(inputs) == Fabric.preset("cotton-twill", yarn=YarnConstruction(model="solid"))
     with pytest.raises(ValueError, match="inputs"):
         fabric_from_inputs({"fabric": "x"})
+
+
+def test_the_suite_runs_the_yarn_scene_per_direction_and_merges_it(tmp_path):
+    # `yarnfit validate` pulls each direction's strip as its own task (side by side on workers);
+    # its summary is one yarn scene, the same curves a single run of both directions gives.
+    import json
+    from dataclasses import asdict
+
+    import yarnfit
+    from fabric_shell import FABRIC
+    from yarnfit.fabric import Fabric
+    from yarnfit.validate.suite import run_suite
+    from yarnfit.validate.swatch import merge_yarn_summaries, run_yarn
+
+    fabric = Fabric.preset("cotton-jersey")  # its quick strips are 150 nodes
+    inputs = {"fabric": fabric.name, "fiber": asdict(fabric.fiber), "pattern": fabric.structure, "family": "knit",
+              "counts_per_m": list(fabric.counts), "areal_density_kg_m2": fabric.areal_density,
+              "yarn": fabric.yarn.to_dict()}
+    path = tmp_path / "jersey.json"
+    path.write_text(json.dumps({"yarnfit_version": yarnfit.__version__, "inputs": inputs, "shell": FABRIC.to_dict(),
+                                "engineering": FABRIC.engineering()}))
+    summary, _ = run_suite(path, ("yarn",), quick=True, logs=tmp_path / "logs")
+    yarn = summary["scenes"]["yarn"]
+    folder = tmp_path / "logs" / fabric.name
+    assert list(yarn["directions"]) == ["weft", "warp"] and summary["wall_seconds"]["yarn"] > 0
+    assert yarn["recordings"] == [str(folder / "yarn_weft.rrd"), str(folder / "yarn_warp.rrd")]
+    assert all((folder / f"yarn_{d}.rrd").is_file() for d in ("weft", "warp")) and "recording" not in yarn
+    whole = run_yarn(path, quick=True, recording_path=False).summary()
+    for direction, curve in whole["directions"].items():
+        assert yarn["directions"][direction]["force_n_per_m"] == curve["force_n_per_m"]
+    assert yarn["seconds"] >= sum(c["seconds"] for c in yarn["directions"].values())  # and the cutting
+    with pytest.raises(ValueError, match="no yarn"):
+        merge_yarn_summaries([])

@@ -1,5 +1,5 @@
 """``yarnfit validate``: run the validation scenes on one material file, record each to
-``<logs>/<material>/<scene>.rrd`` and write every figure to ``<logs>/<material>/summary.json``.
+``<logs>/<material>/<scene>.rrd`` (the yarn scene to ``yarn_<direction>.rrd``) and write every figure to ``<logs>/<material>/summary.json``.
 
 ``summary.json``: ``yarnfit_version``, ``material`` (file, name), ``quick``, ``scenes`` (scene →
 its runner's summary, keys carrying their units), ``wall_seconds`` (scene → s, and
@@ -12,6 +12,9 @@ strips (``fab_8x5``), both by :func:`compare_shell_yarn`; with ``stretch``,
 The scenes are independent (each reads the material file and writes its own recording), so they
 run as tasks of :mod:`yarnfit.tasks` on a :class:`~yarnfit.tasks.Backend`: one at a time in this
 process by default, or side by side on worker processes (``yarnfit validate`` uses every core).
+The yarn scene runs as one task per direction (recorded to ``yarn_<direction>.rrd``; its summary
+merged by :func:`~yarnfit.validate.swatch.merge_yarn_summaries`): its strips are the suite's
+longest computations, the twill's warp strip alone 477 s of its 638 (session 33).
 On 2 cores the cotton twill's full suite took 613.5 s one scene after another and 407.7 s two at a
 time (session 28, ``yarnfit validate --workers 1`` against the default); every figure of the two
 summaries was the same, each scene being a deterministic computation of its own. Two scenes at once
@@ -57,9 +60,6 @@ def _runner(scene: str) -> Callable:
     if scene in DRAPES:
         from .drape import run_drape
         return lambda material, **options: run_drape(material, scene, **options)
-    if scene == "yarn":
-        from .swatch import run_yarn
-        return run_yarn
     if scene == "body":
         from .body import run_body
         return run_body
@@ -67,15 +67,17 @@ def _runner(scene: str) -> Callable:
 
 
 # Expected wall time of each scene (s, full size, 2 cores, cotton twill, session 27), so that the
-# longest start first when scenes run side by side; quick runs keep the same order.
-SCENE_COST = {"stretch": 187.0, "yarn": 173.0, "body": 60.0, "wall": 57.0, "sphere": 43.0, "cusick": 5.0}
+# longest start first when scenes run side by side; quick runs keep the same order. The yarn
+# scene's directions (session 33, with friction in load steps of 0.5 %): the warp strip first.
+SCENE_COST = {"stretch": 187.0, "body": 60.0, "wall": 57.0, "sphere": 43.0, "cusick": 5.0}
+YARN_COST = {"warp": 477.0, "weft": 82.0, "bias": 77.0}
 LIKE_SWATCH_COST = 75.0
 
 
 def run_scene(file: MaterialFile, scene: str, quick: bool, folder: Path, reference=None,
               progress: Callable[[str], None] | None = None) -> tuple[dict, float]:
-    """One scene of the suite on the material file (read once by :func:`run_suite`): its summary
-    and wall time (s). A task's function (module level, picklable arguments; ``progress`` a
+    """One MuJoCo scene of the suite on the material file (read once by :func:`run_suite`; the yarn
+    scene runs per direction, :func:`yarn_direction_task`): its summary and wall time (s). A task's function (module level, picklable arguments; ``progress`` a
     picklable :class:`ForwardedProgress` on worker processes)."""
     if progress:
         progress(f"{scene}: running")
@@ -83,21 +85,33 @@ def run_scene(file: MaterialFile, scene: str, quick: bool, folder: Path, referen
     options = {"quick": quick, "recording_path": Path(folder) / f"{scene}.rrd", "progress": progress}
     if scene == "stretch" and reference is not None:
         options["reference"] = reference
-    if scene == "yarn":
-        source = file  # the yarn swatch takes the file's relaxed repeat and inputs (and names the file in its errors)
-    else:
-        from ..mujoco.scenes import ClothMaterial
+    from ..mujoco.scenes import ClothMaterial
 
-        source = ClothMaterial.from_file(file)
-    summary = _runner(scene)(source, **options).summary()
+    summary = _runner(scene)(ClothMaterial.from_file(file), **options).summary()
     return summary, time.perf_counter() - start
 
 
-def like_swatch_task(material, yarn: tuple[dict, float], quick: bool) -> tuple[dict, float]:
-    """:func:`shell_strips_like_swatch` of the yarn scene's outcome (``material`` a
-    :class:`~yarnfit.mujoco.scenes.ClothMaterial`), timed like a scene."""
+def yarn_direction_task(file: MaterialFile, direction: str, quick: bool, folder: Path,
+                        progress: Callable[[str], None] | None = None) -> tuple[dict, float]:
+    """The yarn scene's strip along one ``direction`` (recorded to ``yarn_<direction>.rrd``): its
+    summary and wall time (s), as :func:`run_scene` gives a scene's."""
+    from .swatch import run_yarn
+
+    if progress:
+        progress(f"yarn: {direction} running")
     start = time.perf_counter()
-    like = shell_strips_like_swatch(material, yarn[0], quick=quick)
+    result = run_yarn(file, quick=quick, directions=(direction,),
+                      recording_path=Path(folder) / f"yarn_{direction}.rrd", progress=progress)
+    return result.summary(), time.perf_counter() - start
+
+
+def like_swatch_task(material, quick: bool, *yarn: tuple[dict, float]) -> tuple[dict, float]:
+    """:func:`shell_strips_like_swatch` of the yarn scene's outcomes, one per direction
+    (``material`` a :class:`~yarnfit.mujoco.scenes.ClothMaterial`), timed like a scene."""
+    from .swatch import merge_yarn_summaries
+
+    start = time.perf_counter()
+    like = shell_strips_like_swatch(material, merge_yarn_summaries([part[0] for part in yarn]), quick=quick)
     return like, time.perf_counter() - start
 
 
@@ -167,7 +181,10 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
     backend = LocalPool(1) if backend is None else backend
     in_process = isinstance(backend, LocalPool) and backend.workers == 1
 
+    from .swatch import merge_yarn_summaries, yarn_directions
+
     finished = set()
+    yarn_keys = yarn_directions(quick) if "yarn" in scenes else ()
 
     def done(task, outcome, count, total):
         finished.add(task.key)
@@ -184,11 +201,19 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
                 return progress
             return None if queue is None else ForwardedProgress(queue, scene)
 
-        tasks = [Task(scene, run_scene, (file, scene, quick, folder, reference, scene_progress(scene)),
-                      cost=SCENE_COST.get(scene, 0.0), cached=False, label=scene)
-                 for scene in scenes]
+        tasks = []
+        for scene in scenes:
+            if scene == "yarn":
+                tasks += [Task(f"yarn_{direction}", yarn_direction_task,
+                               (file, direction, quick, folder, scene_progress("yarn")),
+                               cost=YARN_COST.get(direction, 0.0), cached=False, label=f"yarn {direction}")
+                          for direction in yarn_keys]
+            else:
+                tasks.append(Task(scene, run_scene, (file, scene, quick, folder, reference, scene_progress(scene)),
+                                  cost=SCENE_COST.get(scene, 0.0), cached=False, label=scene))
         if "stretch" in scenes and "yarn" in scenes:
-            tasks.append(Task("like_swatch", like_swatch_task, (material, Result("yarn"), quick),
+            tasks.append(Task("like_swatch", like_swatch_task,
+                              (material, quick, *(Result(f"yarn_{direction}") for direction in yarn_keys)),
                               cost=LIKE_SWATCH_COST, cached=False, label="shell strips of the yarn swatch's proportions"))
         if progress and not in_process:
             workers = getattr(backend, "workers", None)
@@ -202,15 +227,21 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
             if not in_process:
                 from ..record import Recording
 
-                for scene in set(scenes) - finished:
-                    Recording.partial_path(folder / f"{scene}.rrd").unlink(missing_ok=True)
+                for task in tasks:
+                    if task.key not in finished and task.key != "like_swatch":  # each task records to <key>.rrd
+                        Recording.partial_path(folder / f"{task.key}.rrd").unlink(missing_ok=True)
             raise
     failed = [outcomes[task.key] for task in tasks if isinstance(outcomes[task.key], BaseException)]
     first = next((error for error in failed if not isinstance(error, SkippedTask)), None)
     if first is not None:
         raise first
     for scene in scenes:
-        summary["scenes"][scene], summary["wall_seconds"][scene] = outcomes[scene]
+        if scene == "yarn":
+            parts = [outcomes[f"yarn_{direction}"] for direction in yarn_keys]
+            summary["scenes"]["yarn"] = merge_yarn_summaries([part[0] for part in parts])
+            summary["wall_seconds"]["yarn"] = float(sum(part[1] for part in parts))
+        else:
+            summary["scenes"][scene], summary["wall_seconds"][scene] = outcomes[scene]
     if "stretch" in summary["scenes"]:
         from .paper import bias_softness
 

@@ -140,6 +140,9 @@ MAX_ITERATIONS = 800
 # 2142 in steps of 0.25 % (645 in one step from 5 %), so a strip that small has no sharper figure
 # there. A frictionless pull has no path and takes each strain in one step.
 FRICTION_STRAIN_STEP = 0.005
+# The load step of a quick run (``stretch_repeat(quick=True)``, ``yarnfit validate --quick``): one
+# step per strain level (2, 3 and 5 %), as a smoke run affords; its strips are small anyway.
+QUICK_FRICTION_STRAIN_STEP = 0.05
 # Round-off allowance in counting a pull's load steps: 0.05 − 0.02 is 0.030000000000000002, which
 # must be six steps of 0.5 %, not seven.
 STEP_COUNT_SLACK = 1e-9
@@ -500,7 +503,8 @@ def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection |
     ``position`` its rest positions, ``material`` the yarns'). ``size``: gauge, width and clamp in
     repeats of the larger repeat side (default :data:`FULL_SIZE`, or :data:`QUICK_SIZE` with
     ``quick``), or in metres with keys ``gauge_m``, ``width_m``, ``clamp_m``; ``friction`` μ at the
-    yarn contacts (:func:`stretch_swatch`). Returns a JSON-able dict: per direction the curves of
+    yarn contacts (:func:`stretch_swatch`; in load steps of :data:`FRICTION_STRAIN_STEP`, or
+    :data:`QUICK_FRICTION_STRAIN_STEP` with ``quick``). Returns a JSON-able dict: per direction the curves of
     :func:`stretch_swatch`."""
     start = time.perf_counter()
     repeat = max(np.linalg.norm(model.lattice[0]), np.linalg.norm(model.lattice[1]))
@@ -530,8 +534,9 @@ def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection |
                 if recording is not None:
                     recording.step(base + k, swatch, pos, strain, point)
 
-            out["directions"][direction] = stretch_swatch(swatch, strains, options=options, on_step=on_step,
-                                                          progress=progress, friction=friction)
+            out["directions"][direction] = stretch_swatch(
+                swatch, strains, options=options, on_step=on_step, progress=progress, friction=friction,
+                strain_step=QUICK_FRICTION_STRAIN_STEP if quick else FRICTION_STRAIN_STEP)
             step = base + len(strains) + 1
         out["seconds"] = time.perf_counter() - start
         if recording is not None:
@@ -561,6 +566,26 @@ class YarnResult(SceneResult):
     friction: float = 0.0
 
 
+def yarn_directions(quick: bool) -> tuple[str, ...]:
+    """The directions the yarn scene pulls by default: weft and warp, and bias unless ``quick``."""
+    return ("weft", "warp") if quick else ("weft", "warp", "bias")
+
+
+def merge_yarn_summaries(parts: Sequence[dict]) -> dict:
+    """One yarn scene's summary from the summaries of runs of one direction each
+    (:func:`run_yarn` with ``directions=(d,)``, as the suite runs them side by side): the curves of
+    every part in order, the pulls' ``seconds`` summed, and ``recordings``, every part's recording,
+    in place of ``recording``; the rest (material, strains, relaxation, friction) is the first
+    part's, which every part shares."""
+    if not parts:
+        raise ValueError("no yarn scene parts to merge")
+    merged = {key: value for key, value in parts[0].items() if key != "recording"}
+    merged["directions"] = {direction: curve for part in parts for direction, curve in part["directions"].items()}
+    merged["seconds"] = float(sum(part["seconds"] for part in parts))
+    merged["recordings"] = [part["recording"] for part in parts if part.get("recording") is not None]
+    return merged
+
+
 def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Callable[[str], None] | None = None,
              directions: Sequence[str] | None = None, size: dict | None = None, friction: bool = True) -> YarnResult:
     """The yarn-level stretch test of a material file (path or its decoded dict): take the relaxed
@@ -581,7 +606,7 @@ def run_yarn(material, *, quick: bool = False, recording_path=None, progress: Ca
         recording_path = Path("logs") / fabric.name / "yarn.rrd"
     elif recording_path is False:
         recording_path = None
-    directions = directions or (("weft", "warp") if quick else ("weft", "warp", "bias"))
+    directions = directions or yarn_directions(quick)
     coefficient = float(fabric.fiber.friction) if friction else 0.0
     out = stretch_repeat(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), name=fabric.name,
                          directions=directions, size=size, quick=quick, recording_path=recording_path,
