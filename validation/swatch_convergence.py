@@ -174,6 +174,15 @@ def shell_rows(file: MaterialFile, curves: dict, pulls: dict) -> tuple[list[str]
     return rows, fit_rows, passed
 
 
+def print_table(title: str, header: list[str], rows: list[str], columns: int | None = None) -> None:
+    """A Markdown table after a blank line and its ``title`` (none if empty): ``header`` cells,
+    the separator over ``columns`` (default one per header cell) and the ``rows`` as given."""
+    print(f"\n{title}\n" if title else "")
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * (columns or len(header)))
+    print("\n".join(rows))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("material", help="a material file written by `yarnfit fit`")
@@ -204,26 +213,22 @@ def main(argv: list[str] | None = None) -> int:
         name = relaxed.name
         print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
     strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
-    print(f"\n| direction | repeats (gauge × width) | nodes | N/m at {strains} | compression at {strains} "
-          f"| edge draw-in (µm) at {strains} | slowest strain (s) | converged |")
-    print("|" + "---|" * (5 + 3 * len(STRAINS)))
     order = sorted(curves.values(), key=lambda c: (c["direction"], c["nodes"]))
-    print("\n".join(convergence_row(curve) for curve in order))
+    print_table("", ["direction", "repeats (gauge × width)", "nodes", f"N/m at {strains}", f"compression at {strains}",
+                     f"edge draw-in (µm) at {strains}", "slowest strain (s)", "converged"],
+                [convergence_row(curve) for curve in order], columns=5 + 3 * len(STRAINS))
     pulls = periodic_pulls(relaxed, sorted({curve["direction"] for curve in curves.values()}))
     rows, fit_rows, passed = shell_rows(file, curves, pulls)
-    print(f"\n{name}: shell and periodic repeat against the largest strip per direction (force within "
-          f"{SHELL_FORCE_RTOL:.0%}, compression within {SHELL_COMPRESSION_ATOL}; % against the strip)\n")
-    print("| direction | repeats | strain | swatch N/m | swatch compression | periodic N/m | periodic compression "
-          "| nonlinear N/m | nonlinear compression | linear N/m | linear compression | verdict (nonlinear) |")
-    print("|" + "---|" * 12)
-    print("\n".join(rows))
+    print_table(f"{name}: shell and periodic repeat against the largest strip per direction (force within "
+                f"{SHELL_FORCE_RTOL:.0%}, compression within {SHELL_COMPRESSION_ATOL}; % against the strip)",
+                ["direction", "repeats", "strain", "swatch N/m", "swatch compression", "periodic N/m",
+                 "periodic compression", "nonlinear N/m", "nonlinear compression", "linear N/m", "linear compression",
+                 "verdict (nonlinear)"], rows)
     if fit_rows:
-        print(f"\n{name}: nonlinear shell against the periodic repeat's pull (the fit's own error; % against "
-              f"the periodic pull)\n")
-        print("| direction | strain | periodic N/m | periodic compression | periodic converged | nonlinear N/m "
-              "| nonlinear compression |")
-        print("|" + "---|" * 7)
-        print("\n".join(fit_rows))
+        print_table(f"{name}: nonlinear shell against the periodic repeat's pull (the fit's own error; % against "
+                    f"the periodic pull)",
+                    ["direction", "strain", "periodic N/m", "periodic compression", "periodic converged",
+                     "nonlinear N/m", "nonlinear compression"], fit_rows)
     print(f"\nshell (nonlinear) vs largest swatch: {'within' if passed else 'MISSED'}")
     if args.json:
         with open(args.json, "w") as out:
