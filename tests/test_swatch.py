@@ -313,8 +313,9 @@ def test_fabric_from_inputs_rebuilds_the_preset():
 
 
 def test_the_suite_runs_the_yarn_scene_per_direction_and_merges_it(tmp_path):
-    # `yarnfit validate` pulls each direction's strip as its own task (side by side on workers);
-    # its summary is one yarn scene, the same curves a single run of both directions gives.
+    # `yarnfit validate` pulls each direction's strip as its own task (side by side on workers),
+    # each followed by its shell strip; its summary is one yarn scene, the same curves a single run
+    # of both directions gives.
     import json
     from dataclasses import asdict
 
@@ -331,8 +332,12 @@ def test_the_suite_runs_the_yarn_scene_per_direction_and_merges_it(tmp_path):
     path = tmp_path / "jersey.json"
     path.write_text(json.dumps({"yarnfit_version": yarnfit.__version__, "inputs": inputs, "shell": FABRIC.to_dict(),
                                 "engineering": FABRIC.engineering()}))
-    summary, _ = run_suite(path, ("yarn",), quick=True, logs=tmp_path / "logs")
+    summary, _ = run_suite(path, ("stretch", "yarn"), quick=True, logs=tmp_path / "logs")
     yarn = summary["scenes"]["yarn"]
+    # Each direction's shell strip of the swatch's proportions follows its own yarn strip.
+    assert set(summary["shell_vs_yarn"]["shell_strips"]) == {"swatch_weft", "swatch_warp"}
+    assert set(summary["shell_vs_yarn"]["same_proportions"]) == {"weft", "warp"}
+    assert summary["wall_seconds"]["shell_strips_like_swatch"] > 0
     folder = tmp_path / "logs" / fabric.name
     assert list(yarn["directions"]) == ["weft", "warp"] and summary["wall_seconds"]["yarn"] > 0
     assert yarn["recordings"] == [str(folder / "yarn_weft.rrd"), str(folder / "yarn_warp.rrd")]

@@ -13,8 +13,9 @@ The scenes are independent (each reads the material file and writes its own reco
 run as tasks of :mod:`yarnfit.tasks` on a :class:`~yarnfit.tasks.Backend`: one at a time in this
 process by default, or side by side on worker processes (``yarnfit validate`` uses every core).
 The yarn scene runs as one task per direction (recorded to ``yarn_<direction>.rrd``; its summary
-merged by :func:`~yarnfit.validate.swatch.merge_yarn_summaries`): its strips are the suite's
-longest computations, the twill's warp strip alone 477 s of its 638 (session 33).
+merged by :func:`~yarnfit.validate.swatch.merge_yarn_summaries`), each followed by its own shell
+strip of the swatch's proportions: its strips are the suite's longest computations, the twill's
+warp strip alone 477 s of its 638 (session 33).
 On 2 cores the cotton twill's full suite took 613.5 s one scene after another and 407.7 s two at a
 time (session 28, ``yarnfit validate --workers 1`` against the default); every figure of the two
 summaries was the same, each scene being a deterministic computation of its own. Two scenes at once
@@ -105,13 +106,13 @@ def yarn_direction_task(file: MaterialFile, direction: str, quick: bool, folder:
     return result.summary(), time.perf_counter() - start
 
 
-def like_swatch_task(material, quick: bool, *yarn: tuple[dict, float]) -> tuple[dict, float]:
-    """:func:`shell_strips_like_swatch` of the yarn scene's outcomes, one per direction
-    (``material`` a :class:`~yarnfit.mujoco.scenes.ClothMaterial`), timed like a scene."""
-    from .swatch import merge_yarn_summaries
-
+def like_swatch_task(material, quick: bool, yarn: tuple[dict, float]) -> tuple[dict, float]:
+    """:func:`shell_strips_like_swatch` of one yarn direction task's outcome (``material`` a
+    :class:`~yarnfit.mujoco.scenes.ClothMaterial`), timed like a scene: each direction's shell strip
+    starts as soon as its yarn strip is pulled, so the longest yarn strip is followed by its own
+    shell strip only."""
     start = time.perf_counter()
-    like = shell_strips_like_swatch(material, merge_yarn_summaries([part[0] for part in yarn]), quick=quick)
+    like = shell_strips_like_swatch(material, yarn[0], quick=quick)
     return like, time.perf_counter() - start
 
 
@@ -212,9 +213,10 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
                 tasks.append(Task(scene, run_scene, (file, scene, quick, folder, reference, scene_progress(scene)),
                                   cost=SCENE_COST.get(scene, 0.0), cached=False, label=scene))
         if "stretch" in scenes and "yarn" in scenes:
-            tasks.append(Task("like_swatch", like_swatch_task,
-                              (material, quick, *(Result(f"yarn_{direction}") for direction in yarn_keys)),
-                              cost=LIKE_SWATCH_COST, cached=False, label="shell strips of the yarn swatch's proportions"))
+            tasks += [Task(f"like_swatch_{direction}", like_swatch_task, (material, quick, Result(f"yarn_{direction}")),
+                           cost=LIKE_SWATCH_COST / len(yarn_keys), cached=False,
+                           label=f"shell strip of the yarn swatch's proportions, {direction}")
+                      for direction in yarn_keys]
         if progress and not in_process:
             workers = getattr(backend, "workers", None)
             progress(f"{len(tasks)} tasks on {f'{workers} worker processes' if workers else 'the cluster'}: "
@@ -228,7 +230,7 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
                 from ..record import Recording
 
                 for task in tasks:
-                    if task.key not in finished and task.key != "like_swatch":  # each task records to <key>.rrd
+                    if task.key not in finished and not task.key.startswith("like_swatch"):  # recorded to <key>.rrd
                         Recording.partial_path(folder / f"{task.key}.rrd").unlink(missing_ok=True)
             raise
     failed = [outcomes[task.key] for task in tasks if isinstance(outcomes[task.key], BaseException)]
@@ -246,8 +248,10 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
         from .paper import bias_softness
 
         summary["bias_softness"] = bias_softness(summary["scenes"]["stretch"])
-    if "like_swatch" in outcomes:
-        like, summary["wall_seconds"]["shell_strips_like_swatch"] = outcomes["like_swatch"]
+    if "stretch" in scenes and "yarn" in scenes:
+        parts = [outcomes[f"like_swatch_{direction}"] for direction in yarn_keys]
+        like = {"strips": {name: strip for part in parts for name, strip in part[0]["strips"].items()}}
+        summary["wall_seconds"]["shell_strips_like_swatch"] = float(sum(part[1] for part in parts))
         summary["shell_vs_yarn"] = {
             "same_proportions": compare_shell_yarn(like, summary["scenes"]["yarn"], strip="swatch"),
             "fab_8x5": compare_shell_yarn(summary["scenes"]["stretch"], summary["scenes"]["yarn"]),
