@@ -163,7 +163,8 @@ def shell_rows(file: MaterialFile, curves: dict, pulls: dict) -> tuple[list[str]
                 if name == "nonlinear" and periodic is not None:
                     fit_rows.append(f"| {direction} | {100 * strain:g} % | {periodic.force_n_per_m:.4g} | "
                                     f"{periodic.width_ratio:.3f} | {'yes' if periodic.converged else 'NO'} | "
-                                    f"{_against(pull.force_n_per_m, periodic.force_n_per_m)} | {pull.width_ratio:.3f} |")
+                                    f"{_against(pull.force_n_per_m, periodic.force_n_per_m)} | "
+                                    f"{pull.width_ratio:.3f} |")
             converged = point["converged"]
             if converged:
                 passed &= verdicts["nonlinear"]

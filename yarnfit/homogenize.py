@@ -35,8 +35,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .engine import (ConvergenceWarning, LinearConstraints, QuasiStaticOptions, QuasiStaticSolver, Residual, RodModel,
-                     RodState)
+from .checks import positive_number
+from .engine import (ConvergenceWarning, LinearConstraints, QuasiStaticOptions, QuasiStaticResult, QuasiStaticSolver,
+                     Residual, RodModel, RodState)
 from .engine.contact import TilingReachError, image_range
 from .engine.contact_lagrangian import contact_potential
 from .engine.energy import internal_forces
@@ -419,9 +420,10 @@ FREE_STRAIN_PROBE = 10.0 * FREE_STRAIN_TOLERANCE
 # fit can use.
 PLATEAU_RTOL = 1e-3
 # Step of a Green strain for the slope of Ū along it (dŪ/dE⊥ across a uniaxial sample, dŪ/dE
-# along its pull: central differences along the affine path, see :func:`_strain_slope`): nodes move ~1e-7 of the repeat (~1e-10 m), inside the contact
-# smoothing band (1.6e-8 m for an 80 µm yarn) so the difference stays on one smooth branch, and
-# the energy's round-off (~1e-13 relative) costs ~1e-6 of the slope. Measured on HYLC's
+# along its pull: central differences along the affine path, see :func:`_strain_slope`): nodes
+# move ~1e-7 of the repeat (~1e-10 m), inside the contact smoothing band (1.6e-8 m for an 80 µm
+# yarn) so the difference stays on one smooth branch, and the energy's round-off (~1e-13
+# relative) costs ~1e-6 of the slope. Measured on HYLC's
 # stockinette at 5.6 % weft: steps from 5.6e-10 to 5.6e-8 agree to 3e-7 relative, 5.6e-6 is 1e-3 off.
 STRAIN_SLOPE_STEP = 1e-7
 
@@ -556,7 +558,7 @@ class _UniaxialSearch:
 
     free: float
     form: np.ndarray
-    result: object
+    result: QuasiStaticResult | None
     tiled: TiledRepeat
     iterations: int
     failure: str | None
@@ -727,23 +729,22 @@ def periodic_pull(relaxed: RelaxedRepeat, axis: int, strain: float,
     :class:`~yarnfit.engine.ConvergenceWarning` when the sample does not converge."""
     if axis not in (0, 1):
         raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
-    if not (isinstance(strain, (int, float)) and math.isfinite(strain) and strain > 0.0):
-        raise ValueError(f"strain must be a positive engineering strain, got {strain!r}")
+    strain = positive_number(strain, "strain")
     start = time.perf_counter()
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
     family = next(f for f in UNIAXIAL_FAMILIES if f.uniaxial_axis == axis)
-    search = _search_uniaxial(relaxed, SampleSpec.at(family, float(strain)), options)
+    search = _search_uniaxial(relaxed, SampleSpec.at(family, strain), options)
     result, tiled = search.result, search.tiled
     if search.failure is not None:
         warnings.warn(f"periodic pull along {family} at {strain:.3g} did not converge: {search.failure}"
                       + ("" if result is None else f": {result.residual}"), ConvergenceWarning, stacklevel=2)
     if result is None:
-        return PeriodicPull(axis, float(strain), math.nan, math.nan, False,
+        return PeriodicPull(axis, strain, math.nan, math.nan, False,
                             Residual(math.nan, math.nan, math.nan, math.nan), search.iterations,
                             time.perf_counter() - start)
-    stretch = 1.0 + float(strain)
+    stretch = 1.0 + strain
     slope = _strain_slope(tiled.model, result, axis, 0.5 * (stretch**2 - 1.0), tiled.area)
-    return PeriodicPull(axis, float(strain), stretch * slope, math.sqrt(1.0 + 2.0 * search.free),
+    return PeriodicPull(axis, strain, stretch * slope, math.sqrt(1.0 + 2.0 * search.free),
                         search.failure is None and result.converged, result.residual, search.iterations,
                         time.perf_counter() - start)
 

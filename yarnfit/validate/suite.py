@@ -1,5 +1,6 @@
 """``yarnfit validate``: run the validation scenes on one material file, record each to
-``<logs>/<material>/<scene>.rrd`` (the yarn scene to ``yarn_<direction>.rrd``) and write every figure to ``<logs>/<material>/summary.json``.
+``<logs>/<material>/<scene>.rrd`` (the yarn scene to ``yarn_<direction>.rrd``) and write every
+figure to ``<logs>/<material>/summary.json``.
 
 ``summary.json``: ``yarnfit_version``, ``material`` (file, name), ``quick``, ``scenes`` (scene →
 its runner's summary, keys carrying their units), ``wall_seconds`` (scene → s, and
@@ -75,15 +76,16 @@ YARN_COST = {"warp": 477.0, "weft": 82.0, "bias": 77.0}
 LIKE_SWATCH_COST = 75.0
 
 
-def run_scene(file: MaterialFile, scene: str, quick: bool, folder: Path, reference=None,
+def run_scene(file: MaterialFile, scene: str, quick: bool, recording: Path, reference=None,
               progress: Callable[[str], None] | None = None) -> tuple[dict, float]:
     """One MuJoCo scene of the suite on the material file (read once by :func:`run_suite`; the yarn
-    scene runs per direction, :func:`yarn_direction_task`): its summary and wall time (s). A task's function (module level, picklable arguments; ``progress`` a
-    picklable :class:`ForwardedProgress` on worker processes)."""
+    scene runs per direction, :func:`yarn_direction_task`), recorded to ``recording``: its summary
+    and wall time (s). A task's function (module level, picklable arguments; ``progress`` a picklable
+    :class:`ForwardedProgress` on worker processes)."""
     if progress:
         progress(f"{scene}: running")
     start = time.perf_counter()
-    options = {"quick": quick, "recording_path": Path(folder) / f"{scene}.rrd", "progress": progress}
+    options = {"quick": quick, "recording_path": recording, "progress": progress}
     if scene == "stretch" and reference is not None:
         options["reference"] = reference
     from ..mujoco.scenes import ClothMaterial
@@ -92,17 +94,16 @@ def run_scene(file: MaterialFile, scene: str, quick: bool, folder: Path, referen
     return summary, time.perf_counter() - start
 
 
-def yarn_direction_task(file: MaterialFile, direction: str, quick: bool, folder: Path,
+def yarn_direction_task(file: MaterialFile, direction: str, quick: bool, recording: Path,
                         progress: Callable[[str], None] | None = None) -> tuple[dict, float]:
-    """The yarn scene's strip along one ``direction`` (recorded to ``yarn_<direction>.rrd``): its
-    summary and wall time (s), as :func:`run_scene` gives a scene's."""
+    """The yarn scene's strip along one ``direction``, recorded to ``recording``: its summary and
+    wall time (s), as :func:`run_scene` gives a scene's."""
     from .swatch import run_yarn
 
     if progress:
         progress(f"yarn: {direction} running")
     start = time.perf_counter()
-    result = run_yarn(file, quick=quick, directions=(direction,),
-                      recording_path=Path(folder) / f"yarn_{direction}.rrd", progress=progress)
+    result = run_yarn(file, quick=quick, directions=(direction,), recording_path=recording, progress=progress)
     return result.summary(), time.perf_counter() - start
 
 
@@ -186,6 +187,8 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
 
     finished = set()
     yarn_keys = yarn_directions(quick) if "yarn" in scenes else ()
+    like_swatch = "stretch" in scenes and "yarn" in scenes  # shell strips of the yarn swatch's proportions
+    recordings = {}  # task key -> the recording it writes (a stopped worker's is part-written)
 
     def done(task, outcome, count, total):
         finished.add(task.key)
@@ -205,14 +208,18 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
         tasks = []
         for scene in scenes:
             if scene == "yarn":
-                tasks += [Task(f"yarn_{direction}", yarn_direction_task,
-                               (file, direction, quick, folder, scene_progress("yarn")),
-                               cost=YARN_COST.get(direction, 0.0), cached=False, label=f"yarn {direction}")
-                          for direction in yarn_keys]
+                for direction in yarn_keys:
+                    key = f"yarn_{direction}"
+                    recordings[key] = folder / f"{key}.rrd"
+                    tasks.append(Task(key, yarn_direction_task,
+                                      (file, direction, quick, recordings[key], scene_progress("yarn")),
+                                      cost=YARN_COST.get(direction, 0.0), cached=False, label=f"yarn {direction}"))
             else:
-                tasks.append(Task(scene, run_scene, (file, scene, quick, folder, reference, scene_progress(scene)),
+                recordings[scene] = folder / f"{scene}.rrd"
+                tasks.append(Task(scene, run_scene,
+                                  (file, scene, quick, recordings[scene], reference, scene_progress(scene)),
                                   cost=SCENE_COST.get(scene, 0.0), cached=False, label=scene))
-        if "stretch" in scenes and "yarn" in scenes:
+        if like_swatch:
             tasks += [Task(f"like_swatch_{direction}", like_swatch_task, (material, quick, Result(f"yarn_{direction}")),
                            cost=LIKE_SWATCH_COST / len(yarn_keys), cached=False,
                            label=f"shell strip of the yarn swatch's proportions, {direction}")
@@ -229,9 +236,9 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
             if not in_process:
                 from ..record import Recording
 
-                for task in tasks:
-                    if task.key not in finished and not task.key.startswith("like_swatch"):  # recorded to <key>.rrd
-                        Recording.partial_path(folder / f"{task.key}.rrd").unlink(missing_ok=True)
+                for key, recording in recordings.items():
+                    if key not in finished:
+                        Recording.partial_path(recording).unlink(missing_ok=True)
             raise
     failed = [outcomes[task.key] for task in tasks if isinstance(outcomes[task.key], BaseException)]
     first = next((error for error in failed if not isinstance(error, SkippedTask)), None)
@@ -248,7 +255,7 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
         from .paper import bias_softness
 
         summary["bias_softness"] = bias_softness(summary["scenes"]["stretch"])
-    if "stretch" in scenes and "yarn" in scenes:
+    if like_swatch:
         parts = [outcomes[f"like_swatch_{direction}"] for direction in yarn_keys]
         like = {"strips": {name: strip for part in parts for name, strip in part[0]["strips"].items()}}
         summary["wall_seconds"]["shell_strips_like_swatch"] = float(sum(part[1] for part in parts))

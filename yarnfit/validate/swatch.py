@@ -21,8 +21,9 @@ residuals, energy change and contact penetration; never a fixed iteration count,
 between the jaws (an x-stretch never brings two segments closer, so the guess adds no overlap).
 The validation scene (:func:`run_yarn`) pulls with Coulomb friction at the yarn contacts, the
 fibre's coefficient, each strain reached in lagged frictional load steps of at most
-:data:`FRICTION_STRAIN_STEP` (:mod:`yarnfit.engine.friction`): the yarn ends cut at a strip's long sides are held by friction, as a real strip's are; frictionless,
-they slide in freely and the strip stays soft at any width (``docs/design.md`` §3).
+:data:`FRICTION_STRAIN_STEP` (:mod:`yarnfit.engine.friction`): the yarn ends cut at a strip's
+long sides are held by friction, as a real strip's are; frictionless, they slide in freely and
+the strip stays soft at any width (``docs/design.md`` §3).
 
 Outputs per direction and strain:
 
@@ -77,6 +78,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 from scipy.spatial.transform import Rotation
 
+from ..checks import positive_number
 from ..engine import (
     ConvergenceWarning,
     QuasiStaticOptions,
@@ -396,8 +398,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
     if not (math.isfinite(friction) and friction >= 0.0):
         raise ValueError(f"friction must be a finite coefficient >= 0, got {friction!r}")
-    if not (math.isfinite(strain_step) and strain_step > 0.0):
-        raise ValueError(f"strain_step must be a positive strain, got {strain_step!r}")
+    strain_step = positive_number(strain_step, "strain_step")
     model = swatch.model
     options = options or QuasiStaticOptions(**SWATCH_OPTIONS)
     solver = QuasiStaticSolver(model, options)
@@ -504,8 +505,8 @@ def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection |
     repeats of the larger repeat side (default :data:`FULL_SIZE`, or :data:`QUICK_SIZE` with
     ``quick``), or in metres with keys ``gauge_m``, ``width_m``, ``clamp_m``; ``friction`` μ at the
     yarn contacts (:func:`stretch_swatch`; in load steps of :data:`FRICTION_STRAIN_STEP`, or
-    :data:`QUICK_FRICTION_STRAIN_STEP` with ``quick``). Returns a JSON-able dict: per direction the curves of
-    :func:`stretch_swatch`."""
+    :data:`QUICK_FRICTION_STRAIN_STEP` with ``quick``). Returns a JSON-able dict: per direction
+    the curves of :func:`stretch_swatch`."""
     start = time.perf_counter()
     repeat = max(np.linalg.norm(model.lattice[0]), np.linalg.norm(model.lattice[1]))
     size = dict(size or (QUICK_SIZE if quick else FULL_SIZE))
