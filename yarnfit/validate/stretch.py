@@ -59,8 +59,14 @@ STRIPS = {"8x5": (0.08, 0.05), "2x5": (0.02, 0.05)}
 # Engineering strain levels of the pull (the 2 %, 5 % and 10 % the yarn comparison reads, and
 # small ones for the law).
 STRAIN_LEVELS = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1)
-# Vertices along the strip (the width gets the same spacing): full and quick (CI).
-RESOLUTION = {False: 25, True: 9}
+# Vertices along each strip (the width gets the same spacing), full and quick (CI); a strip of
+# other dimensions gets the 8 × 5 strip's. The 2 × 5 strip's 17 make 1.25 mm cells, finer than the
+# 8 × 5 strip's 3.3 mm, as its clamp zones fill it. Measured on the cotton twill (session 34, one
+# core): its 2 × 5 weft and bias strips on 17 read within 0.5 % and 0.9 % of 25 (0.83 mm cells,
+# 2965 vertices) at every level, and on 13 within 1.1 % and 1.8 %, converging towards 25 from
+# above; the weft strip's pull took 43 s on 17 against 156 s on 25. On 25 the three 2 × 5 strips
+# were 514 s of the scene's 587 s of work, and the full suite's 10:05.
+RESOLUTION = {"8x5": {False: 25, True: 9}, "2x5": {False: 17, True: 9}}
 # Criss-cross cells (scenes.grid_mesh): with one diagonal per cell a twill's bias strip reads 10
 # times its force on the quick mesh and 3.8 times on the full one, a jersey's strips twice and
 # 1.25 times (locking); criss-cross cells stay within 6 % on the quick mesh.
@@ -145,7 +151,7 @@ def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bo
     levels = [e for e in STRAIN_LEVELS if e <= max_strain + 1e-12]
     if not levels:
         raise ValueError(f"max_strain must be at least {STRAIN_LEVELS[0]}, got {max_strain!r}")
-    built = build_scene(material, "stretch", resolution=resolution or RESOLUTION[quick], size=length, width=width,
+    built = build_scene(material, "stretch", resolution=resolution or RESOLUTION.get(strip, RESOLUTION["8x5"])[quick], size=length, width=width,
                         angle=angle, max_strain=levels[-1], mesh=MESH, membrane=MEMBRANE,
                         stiffening_bound=max(DEFAULT_STIFFENING_BOUND, levels[-1]))
     model = compile_quietly(built.spec)
@@ -348,8 +354,8 @@ def run_stretch(material: ClothMaterial | str | Path, *, quick: bool = False, re
         return pull_strip(material, strip, direction, quick=quick, max_strain=max_strain, on_level=callback,
                           stop=stop)
 
-    # Longest first (the 2 × 5 strips: the same vertices along a quarter of the length, so cells a
-    # quarter the size and 7 times the wall time), so no core is left with one long strip at the end.
+    # Longest first (the 2 × 5 strips: 1337 vertices in finer cells against the 8 × 5 strips' 760,
+    # and slower), so no core is left with one long strip at the end.
     order = sorted(range(len(jobs)), key=lambda i: STRIPS[jobs[i][0]][0])
     pool = ThreadPoolExecutor(max_workers=max(1, min(len(jobs), os.cpu_count() or 1)))
     try:
