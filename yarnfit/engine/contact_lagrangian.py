@@ -226,6 +226,16 @@ class ContactLagrangian:
         self._neighbours = NeighbourList(model, self._margin, ImageMaps(model))
         self.restart()
 
+    def remember(self, contacts: ContactSet) -> None:
+        """Start from ``contacts``' multipliers and penalty factors (a previous solve's
+        :attr:`~yarnfit.engine.QuasiStaticResult.contacts`): a warm start for a solve that begins
+        near that solution, such as the next lagged friction pass or load step."""
+        if len(contacts.pairs):
+            if len(contacts.edge_samples) != self.model.n_edges:
+                raise ValueError(f"contacts of a model with {len(contacts.edge_samples)} edges cannot start a solve of "
+                                 f"one with {self.model.n_edges}")
+            self._memory.store(contacts)
+
     def restart(self) -> None:
         """Start a load step: the update threshold back to MULTIPLIER_UPDATE_RESIDUAL (multipliers
         and penalties are kept)."""

@@ -57,7 +57,12 @@ def lagged_solve(solver: QuasiStaticSolver, guess: RodState, reference: np.ndarr
     solve again from it, until the anchored normal force changes by less than ``tolerance`` (or
     ``max_passes``). ``anchors_from`` ``(position, contacts)``: where the first pass takes its
     normal forces (the step's start, solved; default: a frictionless first pass). ``solver`` a
-    :class:`~yarnfit.engine.QuasiStaticSolver`; other keywords go to its ``solve``."""
+    :class:`~yarnfit.engine.QuasiStaticSolver`; other keywords go to its ``solve``.
+
+    Each pass starts from the last one's contact multipliers (``solve(contacts=...)``), the first
+    from those of ``anchors_from``: a pass starts at the last one's solution, where they nearly
+    balance, and from zero every pass spent its first multiplier updates pushing the residual
+    back up (design notes §5, "Lagged friction")."""
     model = solver.model
     if anchors_from is None:
         result = solver.solve(guess, **solve_args)
@@ -66,8 +71,9 @@ def lagged_solve(solver: QuasiStaticSolver, guess: RodState, reference: np.ndarr
     else:
         iterations, passes = 0, 0
     anchors = anchor_contacts(model, anchors_from[0], anchors_from[1], reference, coefficient, slip_length)
+    contacts = anchors_from[1]
     while True:
-        result = solver.solve(guess, friction=anchors, **solve_args)
+        result = solver.solve(guess, friction=anchors, contacts=contacts, **solve_args)
         iterations += result.iterations
         passes += 1
         updated = anchor_contacts(model, result.state.node_position, result.contacts, reference, coefficient,
@@ -76,4 +82,4 @@ def lagged_solve(solver: QuasiStaticSolver, guess: RodState, reference: np.ndarr
         change = abs(after - before) / max(after, before) if max(after, before) > 0.0 else 0.0
         if change < tolerance or passes >= max_passes or coefficient == 0.0:
             return LaggedSolve(result, anchors, change < tolerance, passes, iterations, change)
-        anchors, guess = updated, result.state
+        anchors, guess, contacts = updated, result.state, result.contacts

@@ -514,12 +514,15 @@ class QuasiStaticSolver:
         callback: Callable[[Progress], None] | None = None,
         constraints: LinearConstraints | None = None,
         friction: FrictionAnchors | None = None,
+        contacts: ContactSet | None = None,
     ) -> QuasiStaticResult:
         """Equilibrium of ``state`` under ``loads`` (and ``constraints``, which ``state`` must
         satisfy), with the lagged ``friction`` anchors' potential added when given
-        (:mod:`yarnfit.engine.friction`). Warns :class:`ConvergenceWarning` when the tolerances are
-        not met within the iteration limit; ``callback(progress)`` is called after every iteration
-        with a :class:`Progress`."""
+        (:mod:`yarnfit.engine.friction`). ``contacts``: a previous solve's
+        :attr:`QuasiStaticResult.contacts` whose multipliers and penalties this one starts from,
+        for a ``state`` near that solution (default: every multiplier from zero). Warns
+        :class:`ConvergenceWarning` when the tolerances are not met within the iteration limit;
+        ``callback(progress)`` is called after every iteration with a :class:`Progress`."""
         model, opt = self.model, self.options
         state.check(model)
         loads = loads if loads is not None else Loads.zeros(model)
@@ -534,6 +537,8 @@ class QuasiStaticSolver:
             quaternion=np.array(state.edge_quaternion, dtype=np.float64),
         )
         lagrangian = ContactLagrangian(model, opt)
+        if contacts is not None:
+            lagrangian.remember(contacts)
         history: list[Residual] = []
         total_iterations = 0
         converged = False

@@ -433,7 +433,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                     settled &= lagged.settled
                     iterations += lagged.iterations
                 else:
-                    lagged, result = None, solver.solve(guess)
+                    lagged, result = None, solver.solve(guess, contacts=contacts)
                     iterations += result.iterations
             converged &= bool(result.converged)
             state, contacts, reached = result.state, result.contacts, target
