@@ -211,6 +211,7 @@ def test_a_solve_warm_started_from_the_last_multipliers_lands_on_the_same_equili
 def test_a_warm_start_refuses_another_models_contacts():
     model, loads, _ = _dragged_rod(1.0)
     rest = QuasiStaticSolver(model).solve(RodState.from_model(model), loads)
-    other = RodModel.from_rods([Rod(np.column_stack([np.linspace(0, 1e-3, 4), np.zeros(4), np.zeros(4)]), RADIUS, YARN)])
+    straight = np.column_stack([np.linspace(0, 1e-3, 4), np.zeros(4), np.zeros(4)])
+    other = RodModel.from_rods([Rod(straight, RADIUS, YARN)])
     with pytest.raises(ValueError, match="edges"):
         QuasiStaticSolver(other).solve(RodState.from_model(other), contacts=rest.contacts)

@@ -151,8 +151,9 @@ def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bo
     levels = [e for e in STRAIN_LEVELS if e <= max_strain + 1e-12]
     if not levels:
         raise ValueError(f"max_strain must be at least {STRAIN_LEVELS[0]}, got {max_strain!r}")
-    built = build_scene(material, "stretch", resolution=resolution or RESOLUTION.get(strip, RESOLUTION["8x5"])[quick], size=length, width=width,
-                        angle=angle, max_strain=levels[-1], mesh=MESH, membrane=MEMBRANE,
+    resolution = resolution or RESOLUTION.get(strip, RESOLUTION["8x5"])[quick]
+    built = build_scene(material, "stretch", resolution=resolution, size=length, width=width, angle=angle,
+                        max_strain=levels[-1], mesh=MESH, membrane=MEMBRANE,
                         stiffening_bound=max(DEFAULT_STIFFENING_BOUND, levels[-1]))
     model = compile_quietly(built.spec)
     data = mujoco.MjData(model)
