@@ -23,7 +23,7 @@ from yarnfit.mujoco.scenes import (DEFAULT_STRIP_WIDTH, FLEX_RADIUS, VERTEX_CLAS
                                    compile_quietly, export_scene, strip_columns)
 from yarnfit.mujoco.split import (MJCF_DIGITS, POISSON_LIMIT, builtin_elasticity, builtin_isotropic,
                                   isotropic_fallback, isotropic_stiffness)
-from yarnfit.shell import NonlinearMembrane, ShellMaterial
+from yarnfit.shell import RidgeMembrane, ShellMaterial
 
 # The split's minimisation stops within 1e-10 in ν (POISSON_XATOL) at a kink of the objective; E
 # and ν then agree with the closed form to ~1e-9. 1e-7 leaves room without hiding a wrong answer
@@ -148,16 +148,16 @@ def test_split_written_to_mjcf_is_representable_and_still_covers_half(material):
 
 
 def test_split_with_a_stiffening_bound_covers_half_the_largest_tangent():
-    """With ``stiffening_bound`` the built-in membrane covers half the stiffening membrane's
-    largest tangent up to that stiffening strain, more than without it, and exactly the linear
-    split for a material without stiffening terms."""
+    """With ``stiffening_bound`` the built-in membrane covers half the ridge membrane's largest
+    tangent up to that strain, more than without it, and exactly the linear split for a material
+    without a ridge membrane."""
     s = FABRIC
-    stiff = dataclasses.replace(s, nonlinear=NonlinearMembrane(NonlinearMembrane.from_keys(
-        {"s00p3": 400.0 * s.s00, "s11p3": 400.0 * s.s11}).coefficients, NonlinearMembrane.coupling_of(s.s00, s.s01, s.s11)))
+    stiff = dataclasses.replace(s, nonlinear=RidgeMembrane((s.s00, s.s01, s.s11, s.s22), (
+        (1.0, 0.0, 0.0, 0.02, 20.0 * s.s00), (0.0, 1.0, 0.0, 0.03, 20.0 * s.s11))))
     bound = 0.05
     split = builtin_elasticity(stiff, stiffening_bound=bound)
     builtin = split.thickness_m * isotropic_stiffness(split.young_pa, split.poisson)
-    half = stiff.thickness * stiff.nonlinear.largest_tangent(s.s00, s.s01, s.s11, s.s22, bound) / 2
+    half = stiff.thickness * stiff.nonlinear.largest_tangent(bound) / 2
     assert np.linalg.eigvalsh(builtin - half).min() >= -PSD_ATOL * np.abs(half).max()
     plain = builtin_elasticity(stiff, stiffening_bound=0.0)
     assert split.young_pa * split.thickness_m > 1.5 * plain.young_pa * plain.thickness_m

@@ -29,7 +29,7 @@ REBUILD_ITERATIONS = 30
 def fitted():
     fabric = Fabric(name="plain", fiber=get_fiber("cotton"), structure="plain", areal_density=0.2,
                     counts=(2500.0, 2500.0))
-    return fit_fabric(fabric, samples=16, workers=1)
+    return fit_fabric(fabric, samples=26, workers=1)
 
 
 def test_what_fit_writes_reads_back(tmp_path):
@@ -82,3 +82,16 @@ def test_files_this_version_cannot_use_are_refused(tmp_path):
         MaterialFile.read({"inputs": {}}).shell
     with pytest.raises(ValueError, match="relaxed_repeat must be an object with the key 'pyp'"):
         MaterialFile.read({**data, "relaxed_repeat": "plain.pyp"}).relaxed_repeat()
+
+
+def test_an_earlier_membrane_model_is_refused_and_its_linear_fit_still_reads():
+    """A file whose ``shell.nonlinear`` is an earlier yarnfit's ``green-polynomial`` block: its
+    shell is refused with what to do, and ``linear_shell`` (what ``export --linear`` reads) is
+    its linear fit, the nonlinear block not read."""
+    data = json.loads(json.dumps(fitted().to_dict()))
+    data["shell"]["nonlinear"] = {"model": "green-polynomial", "stress_terms_pa": {}, "stiffening_strain": {},
+                                  "compression_pa": {}}
+    old = MaterialFile.read(data)
+    with pytest.raises(ValueError, match="no longer supported: fit the fabric again .* or export --linear"):
+        old.shell
+    assert old.linear_shell == fitted().fit.linear

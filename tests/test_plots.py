@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 import yarnfit
-from fabric_shell import H
-from test_fit_nonlinear import RANGES, REST_ENERGY, RESIDUAL, TRUE, samples_of
+from fabric_shell import FABRIC, H
+from test_fit_nonlinear import RANGES, REST_ENERGY, RESIDUAL, samples_of
 from yarnfit.engine import Residual
 from yarnfit.fit import fit_shell
 from yarnfit.material_file import MaterialFile
@@ -38,14 +38,16 @@ GF_CM2_PER_CM_PER_N_M = 1.0 / (GRAM_FORCE_N * 1e-2)
 # The tables write floats with repr, so a number copied from a source reads back exactly; one
 # converted by a factor differs from the same conversion done here by a rounding or two.
 CONVERSION_RTOL = 1e-14
-# The fitted shell recovers the exact material to the fit's tolerance (test_fit_nonlinear's
-# RECOVERY_REL): the plotted shell part of a sample against the true material's energy.
+# The fitted shell recovers the exact material, a StVK one the ridges represent exactly, to the
+# fit's tolerance (test_fit_nonlinear's RECOVERY_REL; its residual stress to 1e-6): the plotted
+# shell part of a sample against the true material's energy.
 RECOVERY_RTOL = 2e-5
 # The fit's own prediction at a sample (the file's fitted_energy_density_j_per_m2) against the
 # plotted shell curve plus the rest state: the same arithmetic in another order, round-off only.
 PREDICTION_RTOL = 1e-10
 
 FABRIC_NAME = "test twill"
+TRUE = FABRIC
 MEMBRANE_RESIDUAL = {k: v for k, v in RESIDUAL.items() if k.startswith("n")}
 
 
@@ -53,7 +55,7 @@ MEMBRANE_RESIDUAL = {k: v for k, v in RESIDUAL.items() if k.startswith("n")}
 def material_data() -> str:
     """A material file's contents (as JSON text: every test decodes its own copy): the fit of the
     exact samples, plus two samples that did not converge, one with an energy and one without."""
-    samples = samples_of(TRUE, REST_ENERGY, MEMBRANE_RESIDUAL)
+    samples = samples_of(TRUE, REST_ENERGY, MEMBRANE_RESIDUAL)  # TRUE: FABRIC, below
     samples.append(SampleResult(SampleSpec.at("weft_stretch", 0.15), 5.0, False, Residual(0.1, 0.1, 0.0, 0.0)))
     samples.append(SampleResult(SampleSpec.at("weft_stretch", 0.18), math.nan, False,
                                 Residual(math.nan, math.nan, math.nan, math.nan)))

@@ -198,13 +198,14 @@ def bench_fit() -> None:
     from yarnfit.fabric import PRESETS, Fabric
     from yarnfit.fabric_fit import fit_fabric
     from yarnfit.fibers import get_fiber
+    from yarnfit.samples import design_size
 
     stockinette = Path(__file__).parents[1] / "tests" / "data" / "hylc" / "stockinette.pyp"
     fabrics = [Fabric.preset(name) for name in PRESETS]
     fabrics.append(Fabric(name="stockinette", fiber=get_fiber("polyester"), pattern_file=stockinette))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fit_fabric(fabrics[0], samples=16, workers=1)
+        fit_fabric(fabrics[0], samples=design_size(1), workers=1)
         for fabric in fabrics:
             fitted = fit_fabric(fabric)
             key = "fit_" + fabric.name.replace("-", "_")
@@ -301,11 +302,11 @@ def bench_mujoco() -> None:
 
 # -- plugin_nonlinear_stable_step -----------------------------------------------------------------
 
-# Strain stiffening added to the woven for this section: weft and warp tangents 5 times their
-# small-strain value at 10 % strain, from the x³ stress term alone on the tension side
-# (s00p3 = 4 s00 / (3 · 0.1²), s11p3 likewise); compression and shear unchanged.
-STIFFENING_RATIO = 5.0
-STIFFENING_STRAIN = 0.1
+# The ridge membrane given to the woven for this section: its S as the base, and along weft and warp
+# tension ridges of 2 S_dd at 2 % and 5 %, so the tangent is 5 S_dd from 5 % (and at 10 %);
+# compression and shear unchanged.
+STIFFENING_KNOTS = (0.02, 0.05)
+STIFFENING_STEP = 2.0
 # Cell sizes (m) of the exported 0.5 m hanging cloth: 26 and 51 vertices per side.
 STABLE_STEP_CELLS = (0.02, 0.01)
 # Simulated time per trial (s). The cloth falls from horizontal and swings; its pinned corners are
@@ -339,21 +340,25 @@ class _Hang(NamedTuple):
     strain: float
 
 
-def _stiffening_keys(shell) -> dict[str, float]:
-    """The section's strain-stiffening keys for ``shell`` (Pa)."""
-    k3 = (STIFFENING_RATIO - 1.0) / (3.0 * STIFFENING_STRAIN**2)
-    return {"s00p3": k3 * shell.s00, "s11p3": k3 * shell.s11}
+def _ridged(shell):
+    """``shell`` with the section's ridge membrane (STIFFENING_KNOTS, STIFFENING_STEP)."""
+    import dataclasses
+
+    from yarnfit.shell import RidgeMembrane
+
+    ridges = tuple((1.0, 0.0, 0.0, knot, STIFFENING_STEP * shell.s00) for knot in STIFFENING_KNOTS)
+    ridges += tuple((0.0, 1.0, 0.0, knot, STIFFENING_STEP * shell.s11) for knot in STIFFENING_KNOTS)
+    return dataclasses.replace(shell, nonlinear=RidgeMembrane((shell.s00, shell.s01, shell.s11, shell.s22), ridges))
 
 
-def _hanging_cloth(material, cell: float, timestep: float, damping: float, stiffening: dict[str, float]):
-    """The exported cloth scene (built-in split, discrete integrator) at ``cell`` spacing, its
-    plugin given the ``stiffening`` keys on top of the material."""
+def _hanging_cloth(material, cell: float, timestep: float, damping: float, stiffening_bound: float):
+    """The exported cloth scene (built-in split covering the ridges up to ``stiffening_bound``,
+    discrete integrator) at ``cell`` spacing."""
     from yarnfit.mujoco.scenes import DEFAULT_SIZE, build_scene, compile_quietly
 
     size = DEFAULT_SIZE["cloth"]
-    built = build_scene(material, "cloth", resolution=round(size / cell) + 1, timestep=timestep, damping=damping)
-    plugin = built.spec.plugins[0]
-    plugin.config = {**plugin.config, **{key: repr(value) for key, value in stiffening.items()}}
+    built = build_scene(material, "cloth", resolution=round(size / cell) + 1, timestep=timestep, damping=damping,
+                        stiffening_bound=stiffening_bound)
     return compile_quietly(built.spec)
 
 
@@ -392,7 +397,7 @@ def _hang(model, seconds: float) -> _Hang:
     return _Hang(True, "", speed, strain)
 
 
-def _largest_stable_step(material, cell: float, damping: float, stiffening: dict[str, float], start: float):
+def _largest_stable_step(material, cell: float, damping: float, stiffening_bound: float, start: float):
     """Scan the step grid from the grid step nearest ``start`` (s). Returns the largest stable step
     found (s, None if none down to the minimum) with its trial, and the failing step above it (s,
     inf if every step up to the maximum ran) with its trial."""
@@ -400,8 +405,8 @@ def _largest_stable_step(material, cell: float, damping: float, stiffening: dict
 
     def trial(k):
         timestep = DEFAULT_TIMESTEP * STABLE_STEP_GRID**k
-        result = _hang(_hanging_cloth(material, cell, timestep, damping, stiffening), STABLE_STEP_SECONDS)
-        print(f"  {cell * 100:g} cm, damping {damping:g} s, {'stiffening' if stiffening else 'stvk'}: "
+        result = _hang(_hanging_cloth(material, cell, timestep, damping, stiffening_bound), STABLE_STEP_SECONDS)
+        print(f"  {cell * 100:g} cm, damping {damping:g} s, {material.name}, cover {stiffening_bound:g}: "
               f"{timestep * 1e3:.4g} ms {result.failure or 'stable'}", file=sys.stderr, flush=True)  # progress
         return timestep, result
 
@@ -431,34 +436,38 @@ def _largest_stable_step(material, cell: float, damping: float, stiffening: dict
 
 def bench_plugin_nonlinear_stable_step() -> None:
     """Largest stable time step of the exported hanging cloth (0.5 m, two corners pinned, built-in
-    split, discrete integrator) of the realistic woven of tests/fabric_shell.py, as StVK and with
-    strain stiffening (tangents 5× at 10 % weft/warp strain), at 2 cm and 1 cm cells, with the
-    export's damping time and without damping. The stiffening forces, and their damping, are
-    explicit: nothing of them is in the implicit built-in part."""
+    split, discrete integrator) of the realistic woven of tests/fabric_shell.py, as StVK and with a
+    ridge membrane (tangents 5× from 5 % weft/warp strain), the latter with the export's split
+    (the built-in share covering half the ridges' largest tangent within ±DEFAULT_STIFFENING_BOUND)
+    and with a split that covers S alone; at 2 cm and 1 cm cells, with the export's damping time
+    and without damping. The ridges' forces, and their damping, are explicit: nothing of them is in
+    the implicit built-in part but what the split's cover puts there."""
     from pathlib import Path
 
     from yarnfit.mujoco import DEFAULT_DAMPING, DEFAULT_TIMESTEP
     from yarnfit.mujoco.scenes import ClothMaterial
+    from yarnfit.mujoco.split import DEFAULT_STIFFENING_BOUND
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from fabric_shell import FABRIC  # a realistic medium-weight woven
 
-    material = ClothMaterial("medium woven", FABRIC, 0.2)
-    variants = {"stvk": {}, "stiffening": _stiffening_keys(FABRIC)}
-    for name, value in variants["stiffening"].items():
-        report(f"plugin_nonlinear_{name}", value, "Pa")
+    variants = {"stvk": (ClothMaterial("stvk", FABRIC, 0.2), DEFAULT_STIFFENING_BOUND),
+                "ridges": (ClothMaterial("ridges", _ridged(FABRIC), 0.2), DEFAULT_STIFFENING_BOUND),
+                "ridges_no_cover": (ClothMaterial("ridges", _ridged(FABRIC), 0.2), 0.0)}
+    for knot in STIFFENING_KNOTS:
+        report(f"plugin_nonlinear_ridge_at_{knot * 100:g}_percent", STIFFENING_STEP, "× s00 (weft), × s11 (warp)")
     report("plugin_nonlinear_trial_seconds", STABLE_STEP_SECONDS, "s simulated per trial")
     found = {}  # (damping, variant) -> (cell, largest stable step) at the coarser cell
     for cell in STABLE_STEP_CELLS:
         for damping in (DEFAULT_DAMPING, 0.0):
-            for variant, keys in variants.items():
+            for variant, (material, bound) in variants.items():
                 key = f"plugin_nonlinear_{cell * 100:g}cm_{variant}_damping_{damping * 1e3:g}ms"
                 # From the export's step, or from the coarser cloth's limit scaled with the cell (as
                 # an explicit elastic limit scales): fewer trials where they are expensive.
                 coarser = found.get((damping, variant))
                 start = DEFAULT_TIMESTEP if coarser is None else coarser[1] * cell / coarser[0]
                 start_time = time.perf_counter()
-                stable, unstable = _largest_stable_step(material, cell, damping, keys, start)
+                stable, unstable = _largest_stable_step(material, cell, damping, bound, start)
                 if unstable is None:
                     above = f"stable at every grid step up to {stable[0] * 1e3:.3g} ms"
                 else:

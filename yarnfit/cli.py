@@ -81,8 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
         description=(
             "Relax the fabric's yarn repeat, tile it over sampled stretches, shears and bends (from 0.1 % "
             "and 1 /m up to what the fibre bears), solve each sample at the yarn level (in parallel), fit an "
-            "orthotropic shell by least squares: a strain-stiffening membrane (its small-strain tangent "
-            "s00 s01 s11 s22 and stress terms per direction), the linear StVK membrane beside it, and bending "
+            "orthotropic shell by least squares: a strain-stiffening membrane (convex ridges in the Green "
+            "strain), the linear StVK membrane s00 s01 s11 s22 beside it, and bending "
             "b00 b01 b11 b22; write the material file (JSON, SI units). The summary gives the engineering "
             "constants (small-strain) in N/m and gf·cm²/cm beside SI."
         ),
@@ -651,16 +651,21 @@ def _stiffening_summary(fit) -> str:
     (the pure stretch or shear: the other strains held)."""
     import numpy as np
 
+    from .shell import SMALL_STRAIN
+
     material = fit.material
     if material.nonlinear is None:
-        return "none (too few samples on every side)"
+        return "none (its fit failed: see the notes)"
     parts = []
     for k, (direction, label) in enumerate((("s00", "weft"), ("s11", "warp"), ("s22", "shear"))):
         top = fit.strain_range.get(direction, [0.0, 0.0])[1]
         eps = np.zeros(3)
+        eps[k] = SMALL_STRAIN
+        small = float(material.nonlinear.hessian(eps)[k, k])
         eps[k] = top
-        tangent = getattr(material, direction) + float(material.nonlinear.hessian(eps)[k, k])
-        parts.append(f"{label} ×{tangent / getattr(material, direction):.3g} at {100 * top:.3g} %")
+        tangent = float(material.nonlinear.hessian(eps)[k, k])
+        parts.append(f"{label} ×{tangent / small:.3g} at {100 * top:.3g} %" if small > 0.0
+                     else f"{label} {tangent:.3g} Pa at {100 * top:.3g} % (0 at small strain)")
     return ", ".join(parts)
 
 

@@ -1,5 +1,5 @@
 """Weighted least-squares fit of an orthotropic shell to yarn-level energy densities: a linear
-(StVK) model, and a strain-stiffening membrane (:class:`~yarnfit.shell.NonlinearMembrane`) fitted
+(StVK) model, and a strain-stiffening membrane (:class:`~yarnfit.shell.RidgeMembrane`) fitted
 from the same samples.
 
 Input: samples (:class:`~yarnfit.samples.SampleResult`), each a prescribed surface deformation (first and second fundamental forms
@@ -32,30 +32,25 @@ samples, the surface strain ``‖II‖_F h/2`` for bending samples. ``σ`` is th
 ``weight_width`` (dimensionless strain) or half the largest ``s`` of the group, so the fit favours
 the small-strain behaviour the StVK model is meant to capture.
 
-The strain-stiffening membrane (``membrane="nonlinear"``, the default; ``docs/design.md`` §3) adds
-per Voigt direction and strain sign the stress terms ``k2 ε² + k3 ε³`` (:data:`~yarnfit.shell.NONLINEAR_KEYS`)
-and, where a Voigt strain is negative, a tangent change ``q_d``
-(:data:`~yarnfit.shell.NONLINEAR_COMPRESSION_KEYS`) to a quadratic part ``S`` that is then the
-small-strain tangent in tension. Its energy is still linear in its parameters; it is fitted to the
-*relative* energy error of every membrane sample (weight ``1/Ū²``), so a sample at 0.1 % strain
-counts as much as one at the range and ``S`` is the tangent the small strains measure, and to a
-uniaxial sample's zero transverse stress. A side (tension or compression, positive or negative
-shear) carries terms only if its own pure family has at least :data:`MIN_SIDE_SAMPLES` samples
-there; the others extrapolate with the tangent.
-The fit keeps the membrane convex in the Green strain at every strain (``S + Dᵀ diag(min φ'') D +
-diag(min(q, 0))`` positive definite, within the coupling bound), which the plugin checks again.
-The bending group is the linear fit's in both models.
+The strain-stiffening membrane (``membrane="nonlinear"``, the default; ``docs/design.md`` §3) is
+a :class:`~yarnfit.shell.RidgeMembrane`: a sum of one-sided quadratic ridges along candidate
+strain directions (:func:`ridge_candidates`), whose energy is linear in each ray's tangent
+stiffness between consecutive knots. Those tangents, each ``>= 0`` (convex by construction), are
+fitted to the *relative* energy error of every membrane sample (weight ``1/Ū²``, so a sample at
+0.1 % strain counts as much as one at the range) and to each uniaxial sample's zero transverse
+stress, by non-negative least squares, with weak rows that choose among equal fits the one with
+the fewest kinks (:data:`RIDGE_SMOOTHING`). The material's ``S`` stays the linear fit; the
+bending group is the linear fit's in both models.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field, replace
-from typing import NamedTuple
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares, lsq_linear
+from scipy.optimize import least_squares, lsq_linear, nnls
 
 from .checks import real_number
 from .jsonfile import finite_or_none
@@ -63,10 +58,8 @@ from .samples import BENDING_FAMILIES, FAMILIES, MEMBRANE_FAMILIES, Group, Sampl
 from .shell import (
     BENDING_PARAMETERS,
     MEMBRANE_PARAMETERS,
-    NONLINEAR_COMPRESSION_KEYS,
-    NONLINEAR_KEYS,
     PARAMETER_NAMES,
-    NonlinearMembrane,
+    RidgeMembrane,
     ShellMaterial,
     bending_strain,
     membrane_strain,
@@ -79,6 +72,7 @@ __all__ = [
     "design_matrix",
     "fit_residual_jacobian",
     "fit_shell",
+    "ridge_candidates",
     "sample_strain",
     "sample_weights",
     "shell_energy_of",
@@ -87,54 +81,43 @@ __all__ = [
 
 # "full" fits all eight parameters; "paper" fixes b01 = 0 (the paper's model).
 MODELS = ("full", "paper")
-# The membrane of the fitted material: "nonlinear" (strain-stiffening, S its small-strain tangent)
-# or "linear" (the paper's StVK, the Gaussian-weighted fit).
+# The membrane of the fitted material: "nonlinear" (the strain-stiffening RidgeMembrane; S stays
+# the linear fit) or "linear" (the paper's StVK, the Gaussian-weighted fit).
 MEMBRANE_MODELS = ("nonlinear", "linear")
-# Samples a side of a direction (its pure family's tension or compression, positive or negative
-# shear) needs before it carries stiffening terms: the tangent and the two terms are three
-# unknowns along that side's curve.
-MIN_SIDE_SAMPLES = 3
-# Samples a direction needs with its Voigt strain negative before its compression-side term q_d
-# (NonlinearMembrane.compression) is fitted: one unknown, the tangent's change across zero strain.
-# By default only the uniaxial samples compress (across their pull) and negative shear does.
-MIN_COMPRESSION_SAMPLES = 1
-# A stretch stiffness below this fraction of the other one is a direction that carries no energy
-# (a sheet of parallel yarns' warp): the nonlinear fit then holds s01 at 0, as the linear fit does
-# for a diagonal at its floor. Real fabrics' weft/warp ratios stay within 1e-3..1e3; the constrained
-# solve leaves such a direction at ~1e-10 of the other, not exactly on its floor.
-ZERO_STIFFNESS_REL = 1e-6
-# Relative weighting of the nonlinear fit: a sample's energy error is divided by its energy Ū, but
-# not by less than this fraction of the energy a quadratic law through the group's largest sample
-# gives at its strain. A slack sample (Ū ≈ 0: a knit's wales under compression) would otherwise
-# get an unbounded weight; a thousandth keeps its say at a 0.1 % relative error of that law.
+# Samples a direction's own pure family (weft or warp stretch, shear) needs away from zero before
+# the strain-stiffening fit measures that direction's residual stress: with fewer, the linear term
+# takes up whatever the ridges miss (−2.8 kN/m from one level).
+MIN_RESIDUAL_SAMPLES = 3
+# Relative weighting of the strain-stiffening fit: a sample's energy error is divided by its energy
+# Ū, but not by less than this fraction of the energy a quadratic law through the group's largest
+# sample gives at its strain. A slack sample (Ū ≈ 0: a knit's wales under compression) would
+# otherwise get an unbounded weight; a thousandth keeps its say at a 0.1 % relative error of that law.
 RELATIVE_WEIGHT_FLOOR = 1.0e-3
-# Passes of the stiffening fit, each with the stiffening strains' coupling (c01, c10) =
-# (s01/s00, s01/s11) of the previous pass's S, until it changes by less than COUPLING_RTOL: the
-# tangent S barely depends on the terms. Plain passes contract by ~0.4; with Aitken's
-# extrapolation 1e-7 takes about ten to twenty (each a least-squares solve, constrained ones ~1 s). The
-# fitted parameters follow the coupling to ~10x that (s01, the smallest, to ~2e-6).
-COUPLING_ITERATIONS = 30
-COUPLING_RTOL = 1e-7
-# A membrane with s01²/(s00 s11) below this is uncoupled for the constrained stiffening fit (may
-# soften): a fit of data with s01 = 0 leaves ~1e-8; a real fabric's Poisson coupling is >= 1e-3.
-UNCOUPLED = 1e-6
-# Evaluations of the constrained (convexity, coupling) nonlinear solve: a problem of at most ~20
-# unknowns usually converges in hundreds, but at round-off tolerances (BOUNDED_SOLVE_TOLERANCE's)
-# it can crawl (polyester jersey: intermediate coupling passes ran to 20000 evaluations, 30 s of
-# its fit, for engineering constants equal to 3e-9 to those at 1000: 1.8 s; the other presets to
-# 2e-8 or exactly). Its iterates meet the constraints by construction, so the last one is kept
-# when it fits better than the linear membrane it started from, with a note; throwing it away had
-# swapped the jersey's stiffening membrane for the linear one, whose secant through 40 % put the
-# small-strain weft and warp stretch 5.4x too stiff.
-CONSTRAINED_SOLVE_ITERATIONS = 1000
-# The parametrised solve meets its constraints by construction; recomputing them from the
-# parameters it returns leaves round-off (~1e-15 relative) on a solution that sits on a bound.
-CONSTRAINT_RTOL = 1e-12
-# A side's terms are dropped when they change the stress at its largest sampled strain by less than
-# this fraction of the stiffest direction's linear stress there: 1e-9 is far above the least-squares
-# round-off of a direction that carries no energy (~1e-12 relative) and far below any stiffening a
-# fabric shows (>= 1e-2).
-NEGLIGIBLE_TERM_REL = 1e-9
+# The strain-stiffening membrane's candidate ridges (ridge_candidates). A fan of directions in the
+# normal-strain plane every 15°: with 7.5° the five presets' periodic free-width pulls at 2/5/10 %
+# were met no better (24 of 30 within 20 % against 27; session 35's trials on the same samples), and
+# the unknowns double. Around each principal direction of the linear fit's S, offsets of 0, ±1 and
+# ±3°: a knit's S is near rank one (coupling 0.99+), its stiff combination (the yarn length)
+# between fan directions; without them cotton jersey's pure stretches came out 60 % off.
+RIDGE_FAN_STEP_DEG = 15.0
+RIDGE_PRINCIPAL_OFFSETS_DEG = (-3.0, -1.0, 0.0, 1.0, 3.0)
+# Knots per ray besides 0: log-spaced from RIDGE_LEAST_KNOT (0.2 %, twice the smallest sampled
+# strain, so the 0.1 % samples see the tangent at zero alone) to the farthest sample along the ray.
+# Six resolve a knit's jam (its free-width warp energy grows sevenfold from 5 to 7.5 %); ten
+# followed the samples no better (the same trials).
+RIDGE_LEAST_KNOT = 2.0e-3
+RIDGE_KNOTS = 6
+# Weight of the rows that ask a ray's tangent not to jump between segments, nor to differ from the
+# opposite ray's at zero (_fit_ridge_membrane), squared, against the samples' relative energy
+# errors, with the jump measured in units of the linear fit's stiffest tangent: a jump of that size costs what a 1e-3 relative error of one sample
+# does, so the data decide wherever they can and the rows only choose among equal fits.
+RIDGE_SMOOTHING = 1e-6
+# Iteration limit of the non-negative least squares (an active-set method over a few hundred
+# unknowns: each iteration frees or binds one, so a few times their number; scipy's default is 3x).
+RIDGE_SOLVE_ITERATIONS = 10000
+# A fitted ridge below this fraction of the stiffest term is dropped: the active-set solve leaves
+# exact zeros and values at the data's scale; 1e-9 only removes round-off.
+NEGLIGIBLE_RIDGE_REL = 1e-9
 
 # Lower bound of a diagonal stiffness (s00, s11, s22, b00, b11, b22) relative to the largest
 # diagonal of its group in the unbounded fit. Positive, so a fitted material stays strictly positive
@@ -193,14 +176,14 @@ class ShellFit:
 
     Attributes:
         material: the fitted material, with the thickness given to the fit: for ``membrane``
-            "nonlinear" with its stiffening terms (``material.nonlinear``, ``None`` if no side had
-            enough samples) and ``S`` the small-strain tangent; for "linear" the linear fit.
+            "nonlinear" with its strain-stiffening membrane (``material.nonlinear``, ``None`` if
+            its fit failed: see ``notes``) and ``S`` the linear fit; for "linear" the linear fit.
         model: ``"full"`` or ``"paper"``.
         membrane: ``"nonlinear"`` or ``"linear"``.
         linear: the linear (StVK) fit from the same samples; the bending block is shared.
         linear_families: per family statistics of ``linear`` (as ``families``).
         parameters: fitted stiffnesses (Pa) by name, all eight (b01 = 0 for the paper model): the
-            material's (for "nonlinear", ``S`` is the tangent).
+            linear fit's (the material's ``S`` and ``B``).
         std_error: standard errors (Pa) by name; 0 for a parameter the model fixes, NaN for a group
             with no more samples than parameters.
         families: per family ``{"r2": float, "relative_rms": float, "samples": int}`` of the
@@ -218,8 +201,8 @@ class ShellFit:
         weight_widths: σ (dimensionless strain) per group, ``{"membrane": σ, "bending": σ}``.
         fitted_energy: ``(len(used),)`` the material's energy density (J/m²) at the used samples.
         strain_range: per nonlinear direction (``s00``, ``s11``, ``s22``) the least and largest
-            Voigt strain of the used membrane samples ``[lo, hi]``: where the stiffening terms
-            were fitted (beyond it they extrapolate).
+            Voigt strain of the used membrane samples ``[lo, hi]``: where the ridges were fitted
+            (beyond it each ray keeps its last tangent).
         reference_energy: Ū of the undeformed samples (J/m², their mean; 0 without one): the
             relaxed repeat's own energy, which every sample's Ū includes.
         residual_stress: what the repeat carries at rest (0 without an undeformed sample):
@@ -598,8 +581,8 @@ def fit_shell(
     fit_stress = reference and residual_stress
     if membrane == "nonlinear" or fit_stress:
         membrane_used = [(s, e) for s, e, u in zip(used, relative, undeformed) if s.is_membrane and not u]
-        stiffening_fit = _fit_nonlinear_membrane(membrane_used, h, start, coupling_limit, fit_stress)
-        rest_stress.update(stiffening_fit[5])
+        stiffening_fit = _fit_ridge_membrane(membrane_used, h, start, fit_stress)
+        rest_stress.update(stiffening_fit[3])
     if fit_stress:
         shifted = relative - linear_terms[:, :3] @ np.array([rest_stress[n] for n in RESIDUAL_STRESS_NAMES["membrane"]])
         values, errors, at_bound, group_notes, _ = linear_group("membrane", membrane_families, membrane_names, shifted,
@@ -635,9 +618,7 @@ def fit_shell(
     linear_families = _family_statistics(used, predicted(linear, rest_stress), target)
     material, strain_range = linear, {}
     if membrane == "nonlinear":
-        tangent, errors, stiffening, membrane_notes, strain_range, _ = stiffening_fit
-        parameters = {**parameters, **tangent}
-        std_error = {**std_error, **errors}
+        stiffening, membrane_notes, strain_range, _ = stiffening_fit
         material = ShellMaterial(h, **parameters, nonlinear=stiffening)
         notes += membrane_notes
     notes += stretch_dominated_notes(used)
@@ -694,169 +675,43 @@ def _residual_stress_columns(samples: list[SampleResult]) -> np.ndarray:
 
 # -- the strain-stiffening membrane ---------------------------------------------------------------
 
-# The pure family whose samples decide whether a direction's side carries terms.
-_SIDE_FAMILY = {"s00": "weft_stretch", "s11": "warp_stretch", "s22": "shear"}
 
+def _fit_ridge_membrane(
+    pairs: list[tuple[SampleResult, float]], h: float, linear: ShellMaterial, residual: bool = False,
+) -> tuple[RidgeMembrane | None, list[str], dict[str, list[float]], dict[str, float]]:
+    """The strain-stiffening membrane (:class:`~yarnfit.shell.RidgeMembrane`) fitted to the
+    membrane samples (module docstring).
 
-def _fit_nonlinear_membrane(
-    pairs: list[tuple[SampleResult, float]], h: float, linear: ShellMaterial, coupling_limit: float | None,
-    residual: bool = False,
-) -> tuple[dict[str, float], dict[str, float], NonlinearMembrane | None, list[str], dict[str, list[float]],
-           dict[str, float]]:
-    """The strain-stiffening membrane fitted to the membrane ``samples`` (module docstring).
+    ``pairs``: each membrane sample with its energy relative to the undeformed one (J/m²);
+    ``linear``: the linear fit, whose principal strain directions join the ridges' fan. Returns
+    ``(the membrane or None, notes, Voigt strain range per direction, residual stress n0 n1 n2
+    (N/m))``; ``residual`` fits the residual-stress terms along.
 
-    ``pairs``: each membrane sample with its energy relative to the undeformed one (J/m²).
-    Returns ``(S by name, its standard errors by name, the stiffening terms or None, notes,
-    strain range per direction, residual stress n0 n1 n2 (N/m))``; ``residual`` fits the
-    residual-stress terms along. Unconstrained (diagonal floors and ``k3 >= 0`` only) when that
-    optimum is convex and within the coupling bound; else the constrained optimum
-    (:func:`_constrained_nonlinear_solve`, from ``linear`` as a feasible start); if that solve
-    fails, the linear membrane with a note. As the linear fit does for a diagonal at its floor, s00
-    or s11 below ZERO_STIFFNESS_REL of the other holds s01 at 0.
+    The candidate ridges (:func:`ridge_candidates`) make ψ linear in the tangent stiffness of each
+    ray's segments between knots (:func:`_ridge_columns`), so the fit is a non-negative linear
+    least-squares problem (every segment's tangent ``>= 0``: each ray's ψ convex, so their sum is)
+    solved exactly by the Lawson–Hanson active-set method. A tangent may fall from one segment
+    to the next: a yarn's energy in the Green strain softens (a straight linear yarn's
+    ``½ k (√(1 + 2E) − 1)²``), which stiffening-only ridges cannot follow (they put a straight
+    yarn's small-strain stretch 4 % low at a 10 % range, 98 % at 40 %). The base stays 0.
     """
     samples = [s for s, _ in pairs]
     eps = np.stack([membrane_strain(s.I) for s in samples])
     target = np.array([e for _, e in pairs])
     strain_range = {d: [float(eps[:, k].min()), float(eps[:, k].max())] for k, d in enumerate(("s00", "s11", "s22"))}
-
-    # The coupling is a fixed point c = g(c) (g: fit with c, take the coupling of its S), iterated
-    # with Aitken's extrapolation every third pass (plain iteration contracts by ~0.4 a pass).
-    # Started uncoupled: the linear fit's coupling is a poor guess where a direction carries
-    # almost no energy (a parallel-yarn sheet's warp: s01/s11 of round-off).
-    coupling = np.zeros(2)
-    iterates = [coupling]
-    for _ in range(COUPLING_ITERATIONS):
-        used = tuple(float(c) for c in coupling)
-        result, strain_range = _stiffening_pass(samples, eps, target, h, linear, coupling_limit, residual, used)
-        fitted = result[0]
-        if fitted is None:
-            break
-        updated = np.array(NonlinearMembrane.coupling_of(fitted["s00"], fitted.get("s01", 0.0), fitted["s11"]))
-        if np.all(np.abs(updated - coupling) <= COUPLING_RTOL * (1.0 + np.abs(coupling))):
-            break
-        iterates.append(updated)
-        coupling = updated
-        if len(iterates) == 3:
-            first, second = iterates[1] - iterates[0], iterates[2] - iterates[1]
-            curvature = second - first
-            with np.errstate(divide="ignore", invalid="ignore"):
-                extrapolated = np.where(np.abs(curvature) > 0.0, iterates[2] - second**2 / curvature, iterates[2])
-            # Keep it a coupling some positive-definite S has: c01 c10 = s01²/(s00 s11) < 1.
-            if np.all(np.isfinite(extrapolated)) and extrapolated[0] * extrapolated[1] < 1.0:
-                coupling = extrapolated
-            iterates = [coupling]
-    else:
-        result[2].append(f"the stiffening strains' coupling did not settle in {COUPLING_ITERATIONS} passes "
-                         f"(c01, c10 = {coupling[0]:.6g}, {coupling[1]:.6g})")
-    fitted, errors, notes = result
-    if fitted is None:
-        return ({n: getattr(linear, n) for n in MEMBRANE_PARAMETERS}, {}, None, notes, strain_range, {})
-    stress = {n: fitted.pop(n) for n in RESIDUAL_STRESS_NAMES["membrane"] if n in fitted}
-    terms = {n: v for n, v in fitted.items() if n not in MEMBRANE_PARAMETERS}
-    S = {k: fitted.get(k, 0.0) for k in MEMBRANE_PARAMETERS}
-    stiffening = None
-    if any(terms.values()):  # with the coupling it was fitted with (that of S to COUPLING_RTOL)
-        stiffening = replace(NonlinearMembrane.from_keys(terms), coupling=used)
-    return (S, errors, stiffening, notes, strain_range, stress)
-
-
-def _stiffening_pass(samples, eps, target, h, linear, coupling_limit, residual, coupling):
-    """One fit of the stiffening membrane with the stiffening strains' ``coupling`` held:
-    ``((values by name or None, errors, notes), stiffening-strain range per direction)``."""
-    y = NonlinearMembrane((0.0,) * len(NONLINEAR_KEYS), coupling).stiffening_strain(eps)
-    strain_range = {d: [float(y[:, k].min()), float(y[:, k].max())] for k, d in enumerate(("s00", "s11", "s22"))}
-    # The terms: the quadratic part (as design_matrix), per free side y³/3 and y⁴/4, per compressed
-    # direction ½ min(ε, 0)², then the residual stress if asked.
-    names = list(MEMBRANE_PARAMETERS)
-    free_sides = []
-    for k, direction in enumerate(("s00", "s11", "s22")):
-        family = _SIDE_FAMILY[direction]
-        for side, sign in (("p", 1.0), ("n", -1.0)):
-            count = sum(s.family == family and sign * s.parameter > 0.0 for s in samples)
-            if count < MIN_SIDE_SAMPLES:
-                continue
-            names += [f"{direction}{side}2", f"{direction}{side}3"]
-            free_sides.append((k, direction, side))
-    names += [key for k, key in enumerate(NONLINEAR_COMPRESSION_KEYS)
-              if np.count_nonzero(eps[:, k] < 0.0) >= MIN_COMPRESSION_SAMPLES]
+    directions, knots = ridge_candidates(eps, linear)
+    columns = _ridge_columns(eps, directions, knots, h)
+    stress_names = []
     if residual:
-        # A direction's residual stress, like its stiffening, needs its own family's samples: with
-        # fewer, the linear term takes up whatever the quadratic misses (−2.8 kN/m from one level).
-        for k, direction in enumerate(("s00", "s11", "s22")):
-            count = sum(s.family == _SIDE_FAMILY[direction] and s.parameter != 0.0 for s in samples)
-            if count >= MIN_SIDE_SAMPLES:
-                names.append(RESIDUAL_STRESS_NAMES["membrane"][k])
-    D = _membrane_columns(eps, names, h, coupling)
-    # A uniaxial sample's free direction is where the yarn-level energy is least, so the shell's
-    # stress across the pull vanishes there too: one more row each, dW/dε⊥ = 0, in energy units
-    # (times |ε⊥|, the energy a slope would put across the sample's own transverse strain) and
-    # weighted as the sample's energy row.
-    free = [(i, 1 - s.family.uniaxial_axis) for i, s in enumerate(samples) if s.family.uniaxial_axis is not None]
-    stress_rows = None
-    if free:
-        rows = np.stack([_membrane_columns(eps[i:i + 1], names, h, coupling, axis=axis)[0] * abs(eps[i, axis])
-                         for i, axis in free])
-        stress_rows = (rows, np.array([i for i, _ in free]))
-    result = _solve_nonlinear_membrane(D, names, target, eps, free_sides, strain_range, linear, coupling_limit,
-                                       coupling, stress_rows)
-    fitted = result[0]
-    if fitted is not None and min(fitted["s00"], fitted["s11"]) <= ZERO_STIFFNESS_REL * max(fitted["s00"], fitted["s11"]):
-        # A direction that carries no energy has nothing to couple to: refit with s01 = 0.
-        keep = [k for k, n in enumerate(names) if n != "s01"]
-        kept_rows = None if stress_rows is None else (stress_rows[0][:, keep], stress_rows[1])
-        result = _solve_nonlinear_membrane(D[:, keep], [names[k] for k in keep], target, eps, free_sides, strain_range,
-                                           linear, coupling_limit, coupling, kept_rows)
-    return result, strain_range
+        # A direction's residual stress needs its own family's samples: with fewer, the linear term
+        # takes up whatever the ridges miss.
+        for k, family in enumerate(("weft_stretch", "warp_stretch", "shear")):
+            if sum(s.family == family and s.parameter != 0.0 for s in samples) >= MIN_RESIDUAL_SAMPLES:
+                stress_names.append(RESIDUAL_STRESS_NAMES["membrane"][k])
+    residual_columns = np.stack([eps[:, RESIDUAL_STRESS_NAMES["membrane"].index(n)] for n in stress_names], axis=1) \
+        if stress_names else np.zeros((len(eps), 0))
+    A = np.hstack([columns, residual_columns])
 
-
-def _membrane_columns(eps: np.ndarray, names: list[str], h: float, coupling: tuple[float, float],
-                      axis: int | None = None) -> np.ndarray:
-    """The stiffening membrane's energy per reference area (J/m²) is linear in its parameters
-    once the coupling is held: ``W = columns @ values``. ``(n, len(names))`` columns at Voigt
-    strains ``eps (n, 3)``, one per parameter name: ``s00 s01 s11 s22`` (the quadratic part, as
-    :func:`design_matrix`), ``<direction><side>2`` / ``3`` (``h y³/3`` and ``h y⁴/4`` on that side of
-    the stiffening strain y), ``<direction>c`` (``½ h min(ε_d, 0)²``) and ``n0 n1 n2`` (``ε_d``, a
-    residual stress). With ``axis``, their derivatives in the Voigt strain ``ε_axis`` instead."""
-    D = NonlinearMembrane((0.0,) * len(NONLINEAR_KEYS), coupling).map
-    y = eps @ D.T
-    e0, e1, e2 = eps[:, 0], eps[:, 1], eps[:, 2]
-    if axis is None:
-        quadratic = {"s00": 0.5 * h * e0**2, "s01": h * e0 * e1, "s11": 0.5 * h * e1**2, "s22": 0.5 * h * e2**2}
-    else:
-        zero = np.zeros(len(eps))
-        quadratic = {"s00": h * e0 if axis == 0 else zero, "s01": h * (e1 if axis == 0 else e0 if axis == 1 else zero),
-                     "s11": h * e1 if axis == 1 else zero, "s22": h * e2 if axis == 2 else zero}
-    columns = []
-    for name in names:
-        if name in quadratic:
-            columns.append(quadratic[name])
-        elif name in NONLINEAR_COMPRESSION_KEYS:
-            k = NONLINEAR_COMPRESSION_KEYS.index(name)
-            compressed = np.minimum(eps[:, k], 0.0)
-            columns.append(0.5 * h * compressed**2 if axis is None else h * compressed * (k == axis))
-        elif name in RESIDUAL_STRESS_NAMES["membrane"]:
-            k = RESIDUAL_STRESS_NAMES["membrane"].index(name)
-            columns.append(eps[:, k] if axis is None else np.full(len(eps), float(k == axis)))
-        else:  # a side's term
-            k = ("s00", "s11", "s22").index(name[:3])
-            x = np.where((1.0 if name[3] == "p" else -1.0) * y[:, k] > 0.0, y[:, k], 0.0)
-            power = int(name[4])
-            if axis is None:
-                columns.append(h * x ** (power + 1) / (power + 1))
-            else:
-                columns.append(h * x**power * D[k, axis])
-    return np.stack(columns, axis=1)
-
-
-def _solve_nonlinear_membrane(
-    D: np.ndarray, names: list[str], target: np.ndarray, eps: np.ndarray, free_sides: list[tuple[int, str, str]],
-    strain_range: dict[str, list[float]], linear: ShellMaterial, coupling_limit: float | None,
-    coupling: tuple[float, float] = (0.0, 0.0), stress_rows: tuple[np.ndarray, np.ndarray] | None = None,
-) -> tuple[dict[str, float] | None, dict[str, float], list[str]]:
-    """One relative-weighted solve of :func:`_fit_nonlinear_membrane` over the columns ``D``
-    named ``names``: ``(values by name or None if it failed, standard errors of S, notes)``.
-    ``stress_rows`` ``(rows (m, p), sample index (m,))``: more rows whose target is 0, each
-    weighted as the sample it belongs to."""
     # Relative weights: the residual is divided by Ū, floored at RELATIVE_WEIGHT_FLOOR of the
     # quadratic law through the largest sample.
     magnitude = np.linalg.norm(eps, axis=1)
@@ -865,222 +720,118 @@ def _solve_nonlinear_membrane(
     scale = np.maximum(np.abs(target), RELATIVE_WEIGHT_FLOOR * quadratic)
     if not np.all(scale > 0.0):
         raise ValueError("the membrane samples carry no energy: they cannot determine a membrane stiffness")
-    A, b = D / scale[:, None], target / scale
-    if stress_rows is not None:
-        rows, index = stress_rows
-        A, b = np.vstack([A, rows / scale[index, None]]), np.concatenate([b, np.zeros(len(rows))])
-    norms = np.linalg.norm(A, axis=0)
-    if np.any(norms == 0.0):
-        zero = [n for n, c in zip(names, norms) if c == 0.0]
-        raise ValueError(f"{', '.join(zero)} undetermined: no used membrane sample strains {'it' if len(zero) == 1 else 'them'}")
-    As = A / norms
-
-    diagonal = np.array([n in ("s00", "s11", "s22") for n in names])
-    cubic = np.array([n.endswith("3") and n not in MEMBRANE_PARAMETERS for n in names])
-    unbounded = np.linalg.lstsq(As, b, rcond=None)[0] / norms
-    floor = DIAGONAL_FLOOR_REL * max(float(np.max(unbounded[diagonal])), max(linear.s00, linear.s11, linear.s22))
-    lower = np.where(diagonal, floor, np.where(cubic, 0.0, -np.inf))
-    result = lsq_linear(As, b, bounds=(lower * norms, np.full(len(names), np.inf)), method="bvls")
+    rows, b = A / scale[:, None], target / scale
+    # A uniaxial sample's free direction is where the yarn-level energy is least, so the shell's
+    # stress across the pull vanishes there too: one more row each, dW/dε⊥ = 0, in energy units
+    # (times |ε⊥|, the energy a slope would put across the sample's own transverse strain) and
+    # weighted as the sample's energy row.
+    free = [(i, 1 - s.family.uniaxial_axis) for i, s in enumerate(samples) if s.family.uniaxial_axis is not None]
+    if free:
+        across = np.stack([np.concatenate([_ridge_columns(eps[i:i + 1], directions, knots, h, axis=axis)[0],
+                                           [float(RESIDUAL_STRESS_NAMES["membrane"].index(n) == axis)
+                                            for n in stress_names]]) * abs(eps[i, axis]) / scale[i]
+                           for i, axis in free])
+        rows, b = np.vstack([rows, across]), np.concatenate([b, np.zeros(len(free))])
+    # Many tangents fit the samples' energies equally well (a few hundred segments, tens of
+    # samples), and they differ between the samples: in a pull's force, the energy's slope (a StVK
+    # material's 10 % weft pull came back 1.6 % off with its energies exact). Rows that ask each
+    # ray's tangent not to jump between segments, RIDGE_SMOOTHING weak, pick among them the one
+    # with the fewest and smallest kinks: a quadratic where the data are one.
+    # Likewise a ray's first tangent and its opposite ray's: the tangent at zero strain should not
+    # depend on the strain's sign unless the samples say so (a StVK material's compression, which
+    # only the uniaxial samples see, came back 50 % soft along some combinations).
+    same = np.flatnonzero(np.all(directions[1:] == directions[:-1], axis=1))
+    first = np.flatnonzero(knots == 0.0)
+    opposite = [(i, j) for i in first for j in first if j > i and np.array_equal(directions[j], -directions[i])]
+    pairs = [(k + 1, k) for k in same] + opposite
+    jumps = np.zeros((len(pairs), A.shape[1]))
+    weight = math.sqrt(RIDGE_SMOOTHING) / max(linear.s00, linear.s11, linear.s22)
+    for row, (i, j) in enumerate(pairs):
+        jumps[row, i], jumps[row, j] = weight, -weight
+    rows, b = np.vstack([rows, jumps]), np.concatenate([b, np.zeros(len(pairs))])
+    norms = np.linalg.norm(rows, axis=0)
+    engaged = norms > 0.0  # a residual stress no sample strains has no say: left at 0
+    scaled = rows[:, engaged] / norms[engaged]
+    # Non-negative least squares (Lawson–Hanson, exact, ~0.05 s here where the bounded-variable
+    # method took 20 s); a residual stress, of either sign, as the difference of two.
+    signed = np.concatenate([np.zeros(len(knots), bool), np.ones(len(stress_names), bool)])[engaged]
     notes = []
-    x = _drop_negligible_terms(result.x / norms, names, free_sides, strain_range, linear) if result.success else None
-    if x is not None and not _nonlinear_problems(x, names, coupling_limit, coupling):
-        values = x
-    else:
-        solved = _constrained_nonlinear_solve(As, b, norms, names, free_sides, floor, linear, coupling_limit,
-                                              coupling)
-        if solved is None:
-            notes.append("the strain-stiffening membrane's constrained fit failed: the material carries the linear "
-                         "membrane")
-            return None, {}, notes
-        values = solved.values
-        why = _nonlinear_problems(x, names, coupling_limit, coupling)[:1] if x is not None else ["failed"]
-        notes.append(f"strain-stiffening membrane fitted under its convexity and coupling bounds (the unconstrained "
-                     f"optimum: {why[0].removeprefix('the stiffening terms make the membrane ')})")
-        if solved.limited:
-            notes.append(f"the constrained stiffening fit stopped at its {CONSTRAINED_SOLVE_ITERATIONS} evaluations "
-                         f"before its round-off tolerance; kept, as every iterate meets the bounds and it fits better "
-                         f"than the linear membrane it started from (cost {solved.cost:.4g} against "
-                         f"{solved.start_cost:.4g})")
-
-    fitted = dict(zip(names, values.tolist()))
-    for n in ("s00", "s11", "s22"):
-        fitted[n] = max(fitted[n], floor)
-    n, p = len(b), len(names)
-    errors = {}
-    if n > p:
-        r = A @ values - b
-        pinv = np.linalg.pinv(As)
-        sigma = np.sqrt(float(r @ r) / (n - p) * np.sum(pinv**2, axis=1)) / norms
-        errors = {name: float(e) for name, e in zip(names, sigma) if name in MEMBRANE_PARAMETERS}
-    return fitted, errors, notes
+    try:
+        x, _ = nnls(np.hstack([scaled, -scaled[:, signed]]), b, maxiter=RIDGE_SOLVE_ITERATIONS)
+    except RuntimeError as exc:  # the iteration limit
+        notes.append(f"the strain-stiffening membrane's fit failed ({exc}): the material carries the linear membrane")
+        return None, notes, strain_range, {}
+    solution = x[:scaled.shape[1]].copy()
+    solution[signed] -= x[scaled.shape[1]:]
+    values = np.zeros(len(engaged))
+    values[engaged] = solution / norms[engaged]
+    tangents = values[:len(knots)]
+    stress = dict(zip(stress_names, values[len(knots):].tolist()))
+    membrane = _ridge_membrane(directions, knots, tangents)
+    notes.append(f"strain-stiffening membrane: {len(membrane.ridges)} ridges of {len(knots)} candidates")
+    return membrane, notes, strain_range, stress
 
 
-def _split(values: np.ndarray, names: list[str],
-           coupling: tuple[float, float] = (0.0, 0.0)) -> tuple[dict[str, float], NonlinearMembrane]:
-    """``S`` by name and the stiffening terms (with ``coupling``) from a parameter vector named by ``names``."""
-    named = dict(zip(names, np.asarray(values, dtype=float).tolist()))
-    terms = {n: (max(v, 0.0) if n.endswith("3") else v) for n, v in named.items()
-             if n in NONLINEAR_KEYS + NONLINEAR_COMPRESSION_KEYS}
-    return ({k: named.get(k, 0.0) for k in MEMBRANE_PARAMETERS},
-            replace(NonlinearMembrane.from_keys(terms), coupling=coupling))
+def ridge_candidates(eps: np.ndarray, linear: ShellMaterial) -> tuple[np.ndarray, np.ndarray]:
+    """The candidate ridges of the strain-stiffening fit for membrane strains ``eps (n, 3)``:
+    ``(directions (k, 3), knots (k,))``.
+
+    Directions: a fan in the normal-strain plane every :data:`RIDGE_FAN_STEP_DEG`, plus the linear
+    fit's principal strain directions and :data:`RIDGE_PRINCIPAL_OFFSETS_DEG` around them (a knit's
+    stiff combination, the yarn length, lies between fan directions: its near-rank-one stretch
+    energies need it exactly), each with both signs; and ``±`` the shear axis. Knots per ray: 0 (a
+    one-sided tangent at zero) and :data:`RIDGE_KNOTS` log-spaced from :data:`RIDGE_LEAST_KNOT` to
+    the largest ``n·ε`` the samples reach along it (none where they reach less than that)."""
+    principal = np.linalg.eigh(linear.S[:2, :2])[1].T
+    angles = np.concatenate([np.arange(0.0, 180.0, RIDGE_FAN_STEP_DEG)]
+                            + [math.degrees(math.atan2(v[1], v[0])) + np.array(RIDGE_PRINCIPAL_OFFSETS_DEG)
+                               for v in principal])
+    angles = np.unique(np.round(np.mod(angles, 180.0), 9))
+    plane = np.stack([np.cos(np.radians(angles)), np.sin(np.radians(angles)), np.zeros(len(angles))], axis=1)
+    rays = np.concatenate([plane, -plane, [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]])
+    directions, knots = [], []
+    for n in rays:
+        reach = float(np.max(eps @ n))
+        ray_knots = [0.0]
+        if reach > RIDGE_LEAST_KNOT:
+            ray_knots += np.geomspace(RIDGE_LEAST_KNOT, reach, RIDGE_KNOTS, endpoint=False).tolist()
+        directions += [n] * len(ray_knots)
+        knots += ray_knots
+    return np.array(directions), np.array(knots)
 
 
-def _nonlinear_problems(values: np.ndarray, names: list[str], coupling_limit: float | None,
-                        coupling: tuple[float, float] = (0.0, 0.0), slack: float = 0.0) -> list[str]:
-    """Why a parameter vector is not an acceptable membrane: non-convex, or its least tangent's
-    coupling beyond ``coupling_limit`` (empty if acceptable); ``slack`` admits a coupling that far
-    (relative) past the bound, the round-off of a solution that sits on it."""
-    S, terms = _split(values, names, coupling)
-    problems = terms.convexity_problems(S["s00"], S["s01"], S["s11"], S["s22"])
-    if coupling_limit is not None and not problems:
-        H = terms.least_tangent(S["s00"], S["s01"], S["s11"], S["s22"])
-        least = math.sqrt(H[0, 0] * H[1, 1])
-        if abs(H[0, 1]) > coupling_limit * least * (1.0 + slack):
-            problems.append(f"|s01| of the least tangent = {abs(H[0, 1]):.6g} Pa > {coupling_limit:g} √(H00 H11) = "
-                            f"{coupling_limit * least:.6g} Pa")
-    return problems
+def _ridge_columns(eps: np.ndarray, directions: np.ndarray, knots: np.ndarray, h: float,
+                   axis: int | None = None) -> np.ndarray:
+    """``(n, k)``: the energy per reference area (J/m²) of each candidate's *segment* with unit
+    tangent stiffness at Voigt strains ``eps (n, 3)``; with ``axis``, its derivative in ``ε_axis``.
+
+    Along a ray ``n`` with knots ``t_0 < t_1 < …`` the membrane's tangent is ``s_k`` on ``[t_k,
+    t_{k+1})``; segment k's energy is ``½ h (max(x − t_k, 0)² − max(x − t_{k+1}, 0)²)`` in ``x = n·ε``
+    (the last one's ``t_{k+1}`` is infinite), so ψ along the ray is ``Σ_k s_k`` times it and its
+    ridge stiffnesses are ``c_k = s_k − s_{k−1}``. Candidates of one ray are contiguous, their knots
+    increasing (:func:`ridge_candidates`)."""
+    following = np.full(len(knots), np.inf)
+    same = np.all(directions[1:] == directions[:-1], axis=1)
+    following[:-1][same] = knots[1:][same]
+    x = eps @ directions.T
+    start, end = np.maximum(x - knots, 0.0), np.maximum(x - following, 0.0)
+    if axis is None:
+        return 0.5 * h * (start**2 - end**2)
+    return h * (start - end) * directions[:, axis]
 
 
-class ConstrainedSolve(NamedTuple):
-    """The constrained stiffening fit's parameters ``values`` (by the fit's names), whether it
-    stopped at CONSTRAINED_SOLVE_ITERATIONS (``limited``), and its least-squares cost against that
-    of the feasible start (the linear membrane)."""
-
-    values: np.ndarray
-    limited: bool
-    cost: float
-    start_cost: float
-
-
-def _constrained_nonlinear_solve(
-    As: np.ndarray, b: np.ndarray, norms: np.ndarray, names: list[str], free_sides: list[tuple[int, str, str]],
-    floor: float, linear: ShellMaterial, coupling_limit: float | None, coupling: tuple[float, float] = (0.0, 0.0),
-) -> np.ndarray | None:
-    """``min ‖As (x norms) − b‖`` over the parameters ``x`` (by ``names``) of an acceptable
-    membrane: with a softening allowance ``t_d >= 0`` per direction and a compression allowance
-    ``u_d >= 0``, ``H = S − Dᵀ diag(t) D − diag(u)`` (D the stiffening strains' map) positive
-    definite with diagonals ``>= floor`` and coupling ``|H01| <= ρ √(H00 H11)``, on every free
-    side ``soft(k2)² <= 3 k3 t_d`` (``soft`` the part of ``k2`` that softens that side), and
-    every compression term ``q_d >= −u_d``. Those say the least tangent ``S + Dᵀ diag(min φ'') D +
-    diag(min(q, 0))`` is positive definite within the coupling bound. The set is convex
-    (second-order cones and a hyperbolic constraint), and so is the objective.
-
-    Solved in a parametrisation that meets the constraints by construction, with simple bounds
-    only (a general constrained solver stalled on this problem's scales): ``H_dd = floor + e_d``,
-    ``H01 = ρ r √(H00 H11)`` with ``r ∈ [−1, 1]``, ``t_d = τ_d²``, ``u_d = ω_d²``,
-    ``S = H + Dᵀ diag(t) D + diag(u)``, per side ``k3 = v²``, ``k2 = ∓√3 v τ_d ± c``, and per
-    compression term ``q_d = z_d − ω_d²``, with ``e, τ, v, c, ω, z >= 0``. Started from ``linear``
-    (feasible). Returns a :class:`ConstrainedSolve`, or ``None`` if the solve fails (or stops at
-    its evaluation limit no better than its start)."""
-    index = {n: k for k, n in enumerate(names)}
-    rho = 1.0 if coupling_limit is None else coupling_limit
-    reference = max(linear.s00, linear.s11, linear.s22)
-    diagonal = [n for n in ("s00", "s11", "s22")]
-    compressions = [(k, key) for k, key in enumerate(NONLINEAR_COMPRESSION_KEYS) if key in index]
-    others = [n for n in names
-              if n not in MEMBRANE_PARAMETERS and n not in NONLINEAR_KEYS and n not in NONLINEAR_COMPRESSION_KEYS]
-    coupled = "s01" in index
-    # θ = e (3), τ (3), r (1 if coupled), per side (v, c), per compression term (ω, z), then the
-    # other (residual-stress) terms; all but the last group in units of ``reference``.
-    sides = [(k, f"{direction}{side}", side) for k, direction, side in free_sides]
-
-    D = NonlinearMembrane((0.0,) * len(NONLINEAR_KEYS), coupling).map
-    # With coupled stiffening strains, S = H + Dᵀ diag(t) D can carry a coupling past ρ even with
-    # H's within it (cotton jersey: s01²/(s00 s11) = 1.000, a free-width stiffness of 1e-5 N/m);
-    # there no side may soften (t = 0, every φ'' >= 0) and S = H keeps the bound. A membrane
-    # whose coupling is round-off (c01 c10 = s01²/(s00 s11) <= UNCOUPLED) may.
-    soften = coupling[0] * coupling[1] <= UNCOUPLED
-
-    def unpack(theta):
-        e = theta[0:3]
-        tau, at = (theta[3:6], 6) if soften else (np.zeros(3), 3)
-        x = np.zeros(len(names))
-        H = np.diag(floor + e * reference)
-        if coupled:
-            H[0, 1] = H[1, 0] = rho * theta[at] * math.sqrt(H[0, 0] * H[1, 1])
-            at += 1
-        S = H + D.T @ np.diag(tau * tau * reference) @ D
-        for k, key, side in sides:
-            v, c = theta[at], theta[at + 1]
-            at += 2
-            x[index[key + "3"]] = v * v * reference
-            soft = math.sqrt(3.0) * v * tau[k] * reference
-            x[index[key + "2"]] = (c * reference - soft) if side == "p" else (soft - c * reference)
-        for k, key in compressions:
-            omega, z = theta[at], theta[at + 1]
-            at += 2
-            S[k, k] += omega * omega * reference
-            x[index[key]] = (z - omega * omega) * reference
-        for k, n in enumerate(diagonal):
-            x[index[n]] = S[k, k]
-        if coupled:
-            x[index["s01"]] = S[0, 1]
-        for n in others:
-            x[index[n]] = theta[at]
-            at += 1
-        return x
-
-    def residual(theta):
-        return As @ (unpack(theta) * norms) - b
-
-    start, low, high = [], [], []
-    for n in diagonal:
-        start.append(max(getattr(linear, n) - floor, 0.0) / reference)
-        low.append(0.0), high.append(np.inf)
-    if soften:
-        start += [1e-3] * 3  # τ: off zero, where the products v τ would have no gradient
-        low += [0.0] * 3
-        high += [np.inf] * 3
-    if coupled:
-        product = (floor + start[0] * reference) * (floor + start[1] * reference)
-        start.append(float(np.clip(linear.s01 / (rho * math.sqrt(product)), -1.0 + 1e-9, 1.0 - 1e-9)))
-        low.append(-1.0), high.append(1.0)
-    for _ in sides:
-        start += [1e-3, 0.0]
-        low += [0.0, 0.0]
-        high += [np.inf, np.inf]
-    for _ in compressions:
-        start += [1e-3, 0.0]  # ω: off zero, where ω² would have no gradient
-        low += [0.0, 0.0]
-        high += [np.inf, np.inf]
-    for _ in others:
-        start.append(0.0), low.append(-np.inf), high.append(np.inf)
-    start = np.array(start)
-    solution = least_squares(residual, start, bounds=(np.array(low), np.array(high)), method="trf",
-                             x_scale="jac", xtol=BOUNDED_SOLVE_TOLERANCE, ftol=BOUNDED_SOLVE_TOLERANCE,
-                             gtol=BOUNDED_SOLVE_TOLERANCE, max_nfev=CONSTRAINED_SOLVE_ITERATIONS)
-    limited = solution.status == 0
-    start_cost = 0.5 * float(np.sum(residual(start) ** 2))
-    if solution.status < 0 or (limited and not solution.cost < start_cost):
-        return None
-    x = unpack(solution.x)
-    # By construction the least tangent is H plus a positive semi-definite term: convex. Its own
-    # coupling may sit a little past ρ (the term has off-diagonals: cotton jersey 1.01 ρ); the
-    # conditioning the bound is for is H's. So only convexity is checked again, for round-off.
-    if _nonlinear_problems(x, names, None, coupling, slack=CONSTRAINT_RTOL):
-        return None
-    return ConstrainedSolve(x, limited, float(solution.cost), start_cost)
-
-
-def _drop_negligible_terms(values: np.ndarray, names: list[str], free_sides: list[tuple[int, str, str]],
-                           strain_range: dict[str, list[float]], linear: ShellMaterial) -> np.ndarray:
-    """``values`` with a side's two terms set to 0 where, at the side's largest sampled strain,
-    they change the stress by less than NEGLIGIBLE_TERM_REL of the stiffest direction's linear
-    stress there: round-off of a direction that carries no energy (a parallel-yarn sheet's warp),
-    whose sign would otherwise decide its convexity; and a compression term below
-    NEGLIGIBLE_TERM_REL of that stiffness (data whose two sides agree)."""
-    values = values.copy()
-    reference = max(linear.s00, linear.s11, linear.s22)
-    index = {n: k for k, n in enumerate(names)}
-    for _, direction, side in free_sides:
-        x = strain_range[direction][1 if side == "p" else 0]
-        i2, i3 = index[f"{direction}{side}2"], index[f"{direction}{side}3"]
-        if abs(values[i2] * x * x) + abs(values[i3] * x**3) < NEGLIGIBLE_TERM_REL * reference * abs(x):
-            values[i2] = values[i3] = 0.0
-    for key in NONLINEAR_COMPRESSION_KEYS:
-        if key in index and abs(values[index[key]]) < NEGLIGIBLE_TERM_REL * reference:
-            values[index[key]] = 0.0
-    return values
+def _ridge_membrane(directions: np.ndarray, knots: np.ndarray, tangents: np.ndarray) -> RidgeMembrane:
+    """The :class:`RidgeMembrane` of fitted segment tangents ``s (k,)`` (:func:`_ridge_columns`):
+    ridge stiffnesses ``c_k = s_k − s_{k−1}`` along each ray, those below
+    :data:`NEGLIGIBLE_RIDGE_REL` of the stiffest tangent dropped (round-off of segments the data
+    left equal)."""
+    previous = np.zeros(len(knots))
+    same = np.all(directions[1:] == directions[:-1], axis=1)
+    previous[1:][same] = tangents[:-1][same]
+    stiffness = tangents - previous
+    keep = np.abs(stiffness) > NEGLIGIBLE_RIDGE_REL * max(float(np.max(tangents, initial=0.0)), 1e-300)
+    ridges = tuple(tuple(directions[j].tolist()) + (float(knots[j]), float(stiffness[j])) for j in np.flatnonzero(keep))
+    return RidgeMembrane((0.0, 0.0, 0.0, 0.0), ridges)
 
 
 # -- helpers --------------------------------------------------------------------------------------

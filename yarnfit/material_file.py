@@ -18,11 +18,11 @@
   ``friction``, and ``shrink``, ``repeat_size_m``, ``yarn_length_per_area_m_per_m2``,
   ``areal_density_kg_m2`` (of the relaxed repeat) and the relaxation's ``converged``,
   ``iterations``, ``residual`` and ``worst_overlap``;
-- ``shell``: ``thickness_m``, ``membrane_pa`` {s00, s01, s11, s22} (the small-strain tangent in tension),
-  ``bending_pa`` {b00, b01, b11, b22} and, for the strain-stiffening membrane, ``nonlinear``
-  {``model``, ``stress_terms_pa``, ``stiffening_strain``, ``compression_pa``} (:attr:`MaterialFile.shell`
-  reads it back, a file without ``compression_pa`` as having none; a reader that knows only StVK
-  reads the tangent, the tension side's);
+- ``shell``: ``thickness_m``, ``membrane_pa`` {s00, s01, s11, s22} (the linear model fitted to the
+  samples), ``bending_pa`` {b00, b01, b11, b22} and, for the strain-stiffening membrane,
+  ``nonlinear`` {``model`` ``"green-ridge"``, ``base_pa``, ``ridges``} (:class:`~yarnfit.shell.RidgeMembrane`,
+  the whole membrane: :attr:`MaterialFile.shell` reads it back; a reader that knows only StVK reads
+  the linear model; an earlier yarnfit's ``green-polynomial`` block is refused, naming the fix);
 - ``engineering``: the small-strain constants of ``docs/design.md`` §3 (``weft_stretch_n_per_m``, …);
 - ``fit``: the fit's quality (model, membrane, parameters and standard errors, R² and relative RMS
   per family, the ``linear`` fit beside it (parameters and quality: :attr:`MaterialFile.linear_shell`),
@@ -193,8 +193,10 @@ class MaterialFile:
     def linear_shell(self) -> ShellMaterial:
         """The linear (StVK) fit from the same samples: ``fit.linear.parameters_pa`` with the
         shell's thickness. A file without it (written before the strain-stiffening membrane) has a
-        linear shell already: its ``shell``. ValueError naming the key at fault."""
-        shell = self.shell
+        linear shell already: its ``shell``. The ``shell.nonlinear`` block is not read, so a file of
+        an earlier membrane model still gives its linear fit. ValueError naming the key at fault."""
+        data = self._block("shell")
+        shell = ShellMaterial.from_dict({k: v for k, v in data.items() if k != "nonlinear"}, f"{self.where}: shell")
         linear = self._block("fit").get("linear")
         if linear is None:
             return shell.linear

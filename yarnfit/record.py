@@ -142,8 +142,12 @@ SHELL_COLOR = np.array([30, 30, 30], dtype=np.uint8)
 SAMPLE_POINT_SIZE = rr.Radius.ui_points(5.0)
 SHELL_LINE_SIZE = rr.Radius.ui_points(1.5)
 # Points of the shell curve's uniform grid (the sampled parameters are added to it): the curve is
-# a quadratic (bends) to quartic (stretches) in p, smooth to the eye at this density.
+# quadratic (bends) or piecewise quadratic (a ridge membrane's stretches) in p, smooth to the eye
+# at this density.
 CURVE_POINTS = 101
+# A grid point this close to a sampled parameter (relative to the grid's span) is left out: far
+# above float64 round-off, far below float32's 6e-8, which the recording stores.
+CURVE_MERGE_REL = 1e-6
 
 # Tile shifts (i, j) of the 3 × 3 tiling, i, j ∈ {−1, 0, 1}; the centre (0, 0) is entry 4.
 _TILE_OFFSETS = tuple((i, j) for i in (-1, 0, 1) for j in (-1, 0, 1))
@@ -434,7 +438,11 @@ def shell_curve(material, family: Family, parameters) -> tuple[np.ndarray, np.nd
     (J/m²) of ``material`` (a :class:`yarnfit.shell.ShellMaterial`)."""
     parameters = np.asarray(parameters, dtype=np.float64)
     low, high = min(0.0, float(parameters.min())), max(0.0, float(parameters.max()))
-    p = np.union1d(np.linspace(low, high, CURVE_POINTS), parameters)
+    grid = np.linspace(low, high, CURVE_POINTS)
+    # A sample on a grid point but for round-off (2.5 % from a log design against 25 × 0.1 %)
+    # would be a second point there, and one point in the recording's float32.
+    apart = np.abs(grid[:, None] - parameters[None, :]).min(axis=1) > CURVE_MERGE_REL * (high - low)
+    p = np.union1d(grid[apart], parameters)
     family = Family.named(family)
     if family.uniaxial_axis is not None:
         # The shell's own free width: the Schur complement, not the yarn-level sample's μ.

@@ -44,7 +44,7 @@ __all__ = [
     "magnitudes",
     "sample_design",
     "stretch_share",
-    "uniaxial_level",
+    "uniaxial_strains",
 ]
 
 # Largest accepted |I − Id| entry of a bending sample (dimensionless strain). The homogenizer
@@ -68,7 +68,7 @@ class Group(StrEnum):
 _TENSION_AND_COMPRESSION = "tension and compression"
 _TENSION = "tension"
 _BOTH_SIGNS = "both signs"
-_MIDDLE_TENSION = "the middle tension level"
+_UNIAXIAL_TENSION = "tension up to UNIAXIAL_LARGEST_STRAIN"
 
 
 def _stretched(axis: int | None):
@@ -128,8 +128,8 @@ class Family(StrEnum):
     BIAXIAL_STRETCH = ("biaxial_stretch", Group.MEMBRANE, "λ − 1", "", "s01", None, False, _TENSION, _stretched(None))
     SHEAR = ("shear", Group.MEMBRANE, "I12", "", "s22", None, False, _BOTH_SIGNS, _sheared)
     # The transverse stretch is found by the solve; the deformation is where its search starts.
-    WEFT_UNIAXIAL = ("weft_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0, True, _MIDDLE_TENSION, _stretched(0))
-    WARP_UNIAXIAL = ("warp_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 1, True, _MIDDLE_TENSION, _stretched(1))
+    WEFT_UNIAXIAL = ("weft_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0, True, _UNIAXIAL_TENSION, _stretched(0))
+    WARP_UNIAXIAL = ("warp_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 1, True, _UNIAXIAL_TENSION, _stretched(1))
     WEFT_BEND = ("weft_bend", Group.BENDING, "curvature", "1/m", "b00", None, False, _BOTH_SIGNS,
                  _bent(lambda e: np.diag([e, 0.0])))
     WARP_BEND = ("warp_bend", Group.BENDING, "curvature", "1/m", "b11", None, False, _BOTH_SIGNS,
@@ -355,10 +355,25 @@ class SampleResult:
 # -- sample design --------------------------------------------------------------------------------
 
 # Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
-# four bend families of both signs; plus weft and warp uniaxial tension at the middle level
-# (uniaxial_level; each costs 5–15 solves).
+# four bend families of both signs; plus weft and warp uniaxial tension at UNIAXIAL_LEVELS strains
+# each (uniaxial_strains).
 SAMPLES_PER_LEVEL = 13
-UNIAXIAL_SAMPLES = 2
+# Uniaxial tension (the transverse direction free) per direction: log-spaced from SMALLEST_STRAIN
+# to the range or UNIAXIAL_LARGEST_STRAIN, whichever is less. The strain-stiffening membrane follows
+# a free-width pull only where one is sampled: a knit's pull jams across its width between 2 and
+# 10 % (cotton jersey's warp energy grows sevenfold from 5 to 7.5 %), which neither the pure
+# stretches nor one uniaxial sample show (with one per direction the five presets' shells met their
+# periodic free-width pulls at 2 / 5 / 10 % in 15 of 30 cases, with three from 2 to 10 % in 24;
+# session 35, the same samples), and at small strain a knit's free width is a mechanism the pure
+# stretches leave undetermined (with none below 2 % the jerseys' fitted weft stretch at small
+# strain came out 0 N/m; cotton jersey's periodic repeat pulls at 324 N/m at 0.1 %). Six levels put
+# three between 1.5 and 10 %. 10 %: the largest strain the yarn swatches are compared at; past it a
+# polyester's range (40 %) collapses the satin's weft past half its width (not converged) and costs
+# HYLC's stockinette 49 s for two samples. Small-strain uniaxial samples converge in one solve each
+# since the transverse strain became an unknown of it (session 33; cotton jersey at 0.1 %: 0.4 s).
+UNIAXIAL_LEVELS = 6
+UNIAXIAL_LARGEST_STRAIN = 0.10
+UNIAXIAL_SAMPLES = 2 * UNIAXIAL_LEVELS
 # Smallest sampled strain (λ − 1, and I12 for shear): the design's levels are spaced
 # logarithmically from here up to the range, so the small-strain stiffness that a drape, a low-load
 # tensile test or a robot's grasp sees is measured, not extrapolated from a few per cent. 0.1 %
@@ -410,9 +425,8 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
       and one compression at ``ranges.compression`` of the range if that is not 0; biaxial
       ``I = λ² Id``, all in tension;
     - shear: ``I = [[1, s], [s, 1]]``, ``s = ±`` the stretch magnitudes;
-    - weft, warp uniaxial tension: λ as for the pure stretches at the middle magnitude
-      (:func:`uniaxial_level`), the other direction free (its stretch μ minimises Ū; the spec
-      holds μ = 1, the result the μ found);
+    - weft, warp uniaxial tension: λ − 1 at :func:`uniaxial_strains`, the other direction free
+      (its stretch μ minimises Ū; the spec holds μ = 1, the result the μ found);
     - weft, warp bends: ``II = diag(κ, 0)`` / ``diag(0, κ)``, ``κ = ±`` the curvature magnitudes;
     - bias bends: cylinders at ±45°, ``II = κ/2 [[1, ±1], [±1, 1]]``;
     - saddles: ``II = ±κ diag(1, −1)`` (the only samples that separate b01 from b22).
@@ -428,7 +442,7 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
                 [[-ranges.compression * largest] if ranges.compression > 0 else [], values]),
             _TENSION: values,
             _BOTH_SIGNS: np.concatenate([-values[::-1], values]),
-            _MIDDLE_TENSION: values[uniaxial_level(levels):uniaxial_level(levels) + 1],
+            _UNIAXIAL_TENSION: uniaxial_strains(largest),
         }
         for family in FAMILIES:
             if family.group is group:
@@ -446,18 +460,11 @@ def magnitudes(largest: float, smallest: float, levels: int) -> np.ndarray:
     return np.geomspace(smallest, largest, levels)
 
 
-def uniaxial_level(levels: int) -> int:
-    """The level (index into the magnitudes) at which the uniaxial-tension families are sampled:
-    the middle one (the upper of two). Not the smallest: at 0.1–0.5 % a knit's transverse direction
-    contracted by several times the pull (polyester jersey, warp at 0.46 %: E⊥ = −1.4 %; there and
-    for cotton jersey at 0.1 % the search ran out of solves), which is not what a tensile test
-    measures. Not the range as well, though the compression side's curve would want a second
-    point (the twill's weft pull contracts to 0.957 of its width at 2 %, then jams at 0.915 from
-    5 %; fitted with a 10 % sample too, its shell's weft pull at 5 / 10 % is 27 / 53 % below its
-    periodic samples' instead of 77 / 90 %): at a polyester's 40 % range the two cost HYLC's
-    stockinette 49 s (its 55 other samples 27 s) and the satin's weft collapses its width past
-    half (not converged)."""
-    return levels // 2
+def uniaxial_strains(largest: float) -> np.ndarray:
+    """The uniaxial families' ``λ − 1`` for a stretch range ``largest``: :data:`UNIAXIAL_LEVELS`
+    magnitudes (:func:`magnitudes`) from :data:`SMALLEST_STRAIN` to ``largest`` or
+    :data:`UNIAXIAL_LARGEST_STRAIN`, whichever is less."""
+    return magnitudes(min(float(largest), UNIAXIAL_LARGEST_STRAIN), SMALLEST_STRAIN, UNIAXIAL_LEVELS)
 
 
 def design_size(levels: int) -> int:

@@ -11,12 +11,11 @@ Conventions (``docs/design.md`` §3), SI units throughout:
 * Bending strain: ``κ = (II_tt, II_pp, 2 II_tp)`` with ``II`` the second fundamental form (2×2
   symmetric, 1/m). Energy per area ``W_b = (h³/2) κᵀ B κ`` (J/m²) with
   ``B = [[b00, b01, 0], [b01, b11, 0], [0, 0, b22]]`` (Pa). The paper's model has ``b01 = 0``.
-* Strain stiffening (optional, :class:`NonlinearMembrane`, ``docs/design.md`` §3): the membrane
-  energy gains ``h Σ_d φ_d(y_d)`` with ``φ_d(y) = k2 y³/3 + k3 y⁴/4`` per direction ``d``, one pair
-  ``(k2, k3)`` (Pa) for ``y_d ≥ 0`` and one for ``y_d < 0``, on the stiffening strains
-  ``y = (ε0 + c01 ε1, ε1 + c10 ε0, ε2)``, and ``h Σ_d ½ q_d min(ε_d, 0)²``: each Voigt direction's
-  tangent is ``S_dd + q_d`` where its strain is negative (weft or warp compression, negative
-  shear). ``S`` is the tangent at zero strain on the tension side (every ``ε_d ≥ 0``).
+* Strain stiffening (optional, :class:`RidgeMembrane`, ``docs/design.md`` §3): the membrane energy
+  per reference area is then ``h ψ(ε)`` with ``ψ = ½ εᵀ Q ε + Σ_j ½ c_j max(n_j·ε − t_j, 0)²``, a
+  convex sum of one-sided quadratic ridges, **instead of** ``(h/2) εᵀ S ε``. ``S`` stays the linear
+  model fitted to the same samples: what a reader that knows only StVK, ``--linear`` and the
+  engineering constants of the linear model use.
 * Moduli (paper Eq. shell_stiffness_moduli), ``D = 1 − ν_tp ν_pt``: ``s00 = E_t/D``, ``s11 = E_p/D``,
   ``s01 = ν_pt E_t/D = ν_tp E_p/D``, ``s22 = μ``.
 
@@ -24,14 +23,13 @@ Matrix arguments. ``I`` and ``II`` are given as full 2×2 matrices, one ``(2, 2)
 ``(n, 2, 2)``. The energy reads them through their symmetric part, so the off-diagonal strains are
 ``2 E_tp = (I_01 + I_10)/2`` and ``2 II_tp = II_01 + II_10``. :meth:`ShellMaterial.energy_gradient`
 returns the derivative with respect to each entry on its own, which is therefore symmetric:
-``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` with ``σ = S ε + Dᵀ φ'(y)`` and ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]``
-with ``m = B κ``. A symmetric variation that changes both ``I_01`` and ``I_10`` by ``d`` changes
+``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` with ``σ = S ε`` (``∂ψ/∂ε`` with a ridge membrane) and
+``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]`` with ``m = B κ``. A symmetric variation that changes both ``I_01`` and ``I_10`` by ``d`` changes
 ``W`` by ``2 d (dW/dI)_01``, i.e. the usual Frobenius pairing ``⟨dW/dI, dI⟩``.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -46,11 +44,9 @@ __all__ = [
     "BENDING_PARAMETERS",
     "GF_CM2_PER_CM",
     "MEMBRANE_PARAMETERS",
-    "NONLINEAR_COMPRESSION_KEYS",
-    "NONLINEAR_COUPLING_KEYS",
-    "NONLINEAR_KEYS",
-    "NonlinearMembrane",
     "PARAMETER_NAMES",
+    "RIDGE_MODEL",
+    "RidgeMembrane",
     "ShellMaterial",
     "as_first_fundamental_form",
     "as_second_fundamental_form",
@@ -63,18 +59,19 @@ BENDING_PARAMETERS = ("b00", "b01", "b11", "b22")
 # The order of the fit's parameter vector γ and of ShellMaterial.parameters.
 PARAMETER_NAMES = MEMBRANE_PARAMETERS + BENDING_PARAMETERS
 
-# The strain-stiffening terms' names (plugin config keys and material-file keys): the stiffness they
-# act along (s00: weft strain ε0, s11: warp strain ε1, s22: shear strain ε2), the strain's sign
-# (p: ε ≥ 0, n: ε < 0) and the power of the strain in the stress term (2: k2 ε², 3: k3 ε³), Pa.
-NONLINEAR_DIRECTIONS = ("s00", "s11", "s22")
-NONLINEAR_SIDES = ("p", "n")
-NONLINEAR_KEYS = tuple(f"{d}{side}{power}" for d in NONLINEAR_DIRECTIONS for side in NONLINEAR_SIDES for power in (2, 3))
-# The stiffening strains' coupling (NonlinearMembrane.coupling): y0 = ε0 + c01 ε1, y1 = ε1 + c10 ε0.
-NONLINEAR_COUPLING_KEYS = ("c01", "c10")
-# The compression-side terms (NonlinearMembrane.compression, Pa): q_d added to the tangent S_dd where
-# the Voigt strain ε_d < 0 (weft, warp compression; negative shear). Plugin config and file keys.
-NONLINEAR_COMPRESSION_KEYS = ("s00c", "s11c", "s22c")
-NONLINEAR_MODEL = "green-polynomial"
+# The strain-stiffening membrane (RidgeMembrane): its model name in the material file, and the names
+# of its base's entries (the plugin's s00 … s22 keys carry the base when a ridge membrane is given).
+RIDGE_MODEL = "green-ridge"
+RIDGE_BASE_KEYS = ("q00", "q01", "q11", "q22")
+# Largest |n| − 1 accepted for a ridge direction: written as unit vectors with repr (~1e-16); a
+# direction off by more than 1e-9 was not normalised by its writer.
+RIDGE_UNIT_RTOL = 1e-9
+# Round-off admitted in a direction's tangent (the running sum of its ridges' stiffnesses, which
+# must stay >= 0): a fitted tangent on its bound of 0 comes back from differences of ~1e-16 relative.
+RIDGE_CONVEXITY_RTOL = 1e-12
+# Round-off admitted in the base's semi-definiteness q01² <= q00·q11: a fitted base of rank one
+# (a knit's, whose compression carries a single combination) sits on the bound to ~1e-16.
+RIDGE_BASE_RTOL = 1e-12
 
 # 1 gf·cm²/cm = 1 gf·cm = 9.80665e-3 N × 1e-2 m (N·m): KES-F and cantilever bending rigidity units.
 GF_CM2_PER_CM = 9.80665e-5
@@ -153,241 +150,223 @@ def bending_strain(II: object) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class NonlinearMembrane:
-    """Strain-stiffening (or -softening) terms of an orthotropic membrane (``docs/design.md`` §3).
+class RidgeMembrane:
+    """A convex, strain-stiffening orthotropic membrane: a quadratic base and one-sided quadratic
+    ridges in the Green strain (``docs/design.md`` §3).
 
-    Each yarn direction stiffens with its own *stiffening strain*: the stress the linear part
-    carries along it, over its axial stiffness,
+    Energy per reference area and thickness (Pa = J/m³) at Voigt Green strain ``ε = (E00, E11, 2 E01)``:
 
-        y = (ε0 + c01 ε1, ε1 + c10 ε0, ε2),   c01 = s01/s00, c10 = s01/s11 (the material's ``coupling``),
+        ψ(ε) = ½ εᵀ Q ε + Σ_j ½ c_j max(n_j·ε − t_j, 0)²,
 
-    and the energy per reference area and thickness gains ``Σ_d φ_d(y_d)``, ``φ_d(y) = k2 y³/3 +
-    k3 y⁴/4`` (Pa) with one pair ``(k2, k3)`` for ``y ≥ 0`` and one for ``y < 0``. The stress (the
-    derivative in ε) gains ``Dᵀ φ'(y)`` with ``D = ∂y/∂ε``, ``φ' = k2 y² + k3 y³``. φ is C² at zero,
-    so the material's ``S`` stays the exact small-strain tangent; frame-invariant, a function of
-    the Green strain.
+    ``Q = [[q00, q01, 0], [q01, q11, 0], [0, 0, q22]]`` positive semi-definite (Pa), and per ridge
+    ``j`` a unit direction ``n_j`` in strain space, a knot ``t_j >= 0`` (dimensionless) and a
+    stiffness ``c_j`` (Pa) of either sign: along each direction the tangent, the sum of the
+    stiffnesses of the ridges passed in knot order, must stay ``>= 0`` (a tangent may fall: a
+    yarn's energy in the Green strain softens). Each direction's part is then a convex function of
+    a linear map of ε, so ψ is convex at every strain and C¹ (its tangent jumps by ``c_j n_j n_jᵀ``
+    where ``n_j·ε`` crosses ``t_j``). Frame-invariant: a function of the Green strain in the
+    material frame.
 
-    **Compression side** (``compression`` = ``(q0, q1, q2)``, Pa): the energy also gains
-    ``Σ_d ½ q_d min(ε_d, 0)²`` on the Voigt strains themselves, so where ``ε_d < 0`` (weft or warp
-    compression, negative shear) that direction's tangent is ``S_dd + q_d``; ``S`` is then the
-    tension side's tangent at zero strain. C¹ at zero, not C². What it is for: a fabric pulled at
-    free width compresses across the pull, and how much it contracts, so how soft the pull is,
-    depends on the *transverse* direction's compression stiffness, which differs from its
-    tension stiffness and between the two directions (a twill's warp gives under compression, its
-    weft does not: free-width over fixed-width energy 0.11 pulled along weft, 0.87 along warp; any
-    quadratic ``S`` gives both ``1 − s01²/(s00 s11)``). Acting on ε, not y: a knit's ``S`` is near
-    rank one, where both stiffening strains follow the one stiff combination (the yarn length) and
-    vanish at free width. Why the stress and not the strain along a direction: a knit's membrane is
-    near rank one; pulled at free width its courses lengthen while its wales shorten and the yarn
-    hardly stretches (``y0 = (1 − s01²/s00 s11) ε0``, 2 % of ε0 for cotton jersey), while at fixed
-    width (``y0 = ε0``) its loops jam and it stiffens eightfold. Stiffening on ε0 alone put the
-    jersey's free-width pull at 3.4 kN/m at 10 % against 10 N/m in its yarn swatch.
+    What it is for: a fabric stiffens as its yarns straighten and its loops or crossings jam, by
+    different amounts along every combination of weft, warp and shear strain, and a pull at free
+    width follows a path on which the transverse direction is compressed. A sum of ridges along a
+    fan of strain directions, each switched on at its own knot, follows energies that grow faster
+    than any quadratic along one path and stay soft along another (a knit: soft along the
+    mechanism its courses and wales trade length on, stiff once the yarn itself is pulled), and
+    stiffer in tension than in compression (ridges with ``t_j = 0`` act on one side of zero only).
 
-    What it cannot represent: a coupling s01 that changes with strain (so a Poisson ratio that
-    does, beyond the tension/compression switch), stiffening that depends on more than each
-    direction's stiffening strain and sign, hysteresis and friction (it is elastic), and buckling
-    (a flat membrane under compression).
+    The **small-strain tangent** therefore depends on the direction of the strain: below the
+    smallest positive knot ψ is ``½ εᵀ T(ε̂) ε`` with ``T = Q + Σ_{t_j = 0, n_j·ε > 0} c_j n_j n_jᵀ``,
+    one matrix per sign pattern. ``Q`` is its part common to every direction.
+
+    What it cannot represent: an energy that is not convex in the Green strain (a membrane that
+    buckles in its own plane), hysteresis and friction (it is elastic), a coupling between shear
+    and the normal strains beyond what its ridges' directions carry (the fit's ridges lie in the
+    normal-strain plane and on the shear axis: an orthotropic membrane), and stiffening sharper
+    than its knots resolve (the fit spaces them logarithmically over the sampled strains).
 
     Attributes:
-        coefficients: the twelve ``k`` (Pa) in :data:`NONLINEAR_KEYS` order, a tuple of floats;
-            every ``k3`` (``…3``) is >= 0.
-        coupling: ``(c01, c10)``, dimensionless (``(0, 0)``: each direction's own strain).
-        compression: ``(q0, q1, q2)`` (Pa), the compression-side tangent changes, any sign.
+        base: ``(q00, q01, q11, q22)`` (Pa), positive semi-definite.
+        ridges: ``((n0, n1, n2, t, c), …)``: a unit direction, its knot (``>= 0``) and stiffness
+            (Pa; the running sum along each direction ``>= 0``).
     """
 
-    coefficients: tuple[float, ...]
-    coupling: tuple[float, float] = (0.0, 0.0)
-    compression: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    base: tuple[float, float, float, float]
+    ridges: tuple[tuple[float, float, float, float, float], ...] = ()
 
     def __post_init__(self) -> None:
-        values = tuple(self.coefficients) if not isinstance(self.coefficients, Mapping) else None
-        if values is None or len(values) != len(NONLINEAR_KEYS):
-            raise ValueError(f"NonlinearMembrane needs {len(NONLINEAR_KEYS)} coefficients ({', '.join(NONLINEAR_KEYS)}), "
-                             f"got {self.coefficients!r}")
-        values = tuple(finite_number(v, k) for k, v in zip(NONLINEAR_KEYS, values))
-        negative = [f"{k} = {v!r}" for k, v in zip(NONLINEAR_KEYS, values) if k.endswith("3") and v < 0.0]
-        if negative:
-            raise ValueError(f"the cubic stress terms must be >= 0 (a negative one makes the energy concave at large "
-                             f"strain): {', '.join(negative)}")
-        coupling = tuple(self.coupling)
-        if len(coupling) != 2:
-            raise ValueError(f"NonlinearMembrane.coupling must be (c01, c10), got {self.coupling!r}")
-        coupling = tuple(finite_number(v, k) for k, v in zip(NONLINEAR_COUPLING_KEYS, coupling))
-        compression = tuple(self.compression)
-        if len(compression) != 3:
-            raise ValueError(f"NonlinearMembrane.compression must be (q0, q1, q2), got {self.compression!r}")
-        compression = tuple(finite_number(v, k) for k, v in zip(NONLINEAR_COMPRESSION_KEYS, compression))
-        object.__setattr__(self, "coefficients", values)
-        object.__setattr__(self, "coupling", coupling)
-        object.__setattr__(self, "compression", compression)
-
-    @classmethod
-    def from_keys(cls, terms: Mapping[str, float]) -> NonlinearMembrane:
-        """From ``{key: value}`` (:data:`NONLINEAR_KEYS` in Pa, ``c01`` and ``c10``,
-        :data:`NONLINEAR_COMPRESSION_KEYS` in Pa); a key left out is 0, an unknown one is an error."""
-        allowed = NONLINEAR_KEYS + NONLINEAR_COUPLING_KEYS + NONLINEAR_COMPRESSION_KEYS
-        unknown = sorted(set(terms) - set(allowed))
-        if unknown:
-            raise ValueError(f"unknown nonlinear membrane keys: {', '.join(unknown)} (allowed: {', '.join(allowed)})")
-        return cls(tuple(terms.get(key, 0.0) for key in NONLINEAR_KEYS),
-                   tuple(terms.get(key, 0.0) for key in NONLINEAR_COUPLING_KEYS),
-                   tuple(terms.get(key, 0.0) for key in NONLINEAR_COMPRESSION_KEYS))
-
-    @classmethod
-    def coupling_of(cls, s00: float, s01: float, s11: float) -> tuple[float, float]:
-        """``(c01, c10) = (s01/s00, s01/s11)``: the stiffening strains of a membrane ``S``."""
-        return (s01 / s00, s01 / s11)
+        base = tuple(self.base)
+        if len(base) != 4:
+            raise ValueError(f"RidgeMembrane.base must be (q00, q01, q11, q22), got {self.base!r}")
+        base = tuple(finite_number(v, f"base.{k}") for k, v in zip(RIDGE_BASE_KEYS, base))
+        q00, q01, q11, q22 = base
+        if q00 < 0.0 or q11 < 0.0 or q22 < 0.0 or q01 * q01 > q00 * q11 * (1.0 + RIDGE_BASE_RTOL):
+            raise ValueError(f"RidgeMembrane.base must be positive semi-definite (q00, q11, q22 >= 0 and "
+                             f"q01² <= q00·q11), got {base!r}")
+        ridges = []
+        for j, ridge in enumerate(self.ridges):
+            values = tuple(ridge)
+            if len(values) != 5:
+                raise ValueError(f"ridge {j} must be (n0, n1, n2, knot, stiffness), got {ridge!r}")
+            n0, n1, n2, knot, stiffness = (finite_number(v, f"ridge {j} {k}")
+                                           for k, v in zip(("n0", "n1", "n2", "knot", "stiffness"), values))
+            norm = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            if abs(norm - 1.0) > RIDGE_UNIT_RTOL:
+                raise ValueError(f"ridge {j}: its direction must be a unit vector, got |n| = {norm!r}")
+            if knot < 0.0:
+                raise ValueError(f"ridge {j}: its knot must be >= 0, got {knot!r}")
+            ridges.append((n0, n1, n2, knot, stiffness))
+        # Convex: along every direction the tangent, the sum of the stiffnesses of the ridges passed
+        # (in knot order, those at one knot together), never falls below zero.
+        for direction, along in _tangents_along(ridges).items():
+            scale = max(abs(r[4]) for r in ridges if r[:3] == direction)
+            for knot, tangent in along:
+                if tangent < -RIDGE_CONVEXITY_RTOL * scale:
+                    raise ValueError(f"the ridges along {list(direction)} make the energy concave: past knot "
+                                     f"{knot!r} their tangent is {tangent!r} Pa < 0")
+        object.__setattr__(self, "base", base)
+        object.__setattr__(self, "ridges", tuple(ridges))
 
     @property
-    def keys(self) -> dict[str, float]:
-        """Every value by name: the twelve terms (Pa, :data:`NONLINEAR_KEYS`), ``c01``, ``c10``, then
-        the compression side's ``s00c s11c s22c`` (Pa) (the plugin's config keys)."""
-        return {**dict(zip(NONLINEAR_KEYS, self.coefficients)), **dict(zip(NONLINEAR_COUPLING_KEYS, self.coupling)),
-                **dict(zip(NONLINEAR_COMPRESSION_KEYS, self.compression))}
+    def Q(self) -> np.ndarray:
+        """The base ``(3, 3)`` (Pa)."""
+        q00, q01, q11, q22 = self.base
+        return np.array([[q00, q01, 0.0], [q01, q11, 0.0], [0.0, 0.0, q22]])
 
     @property
-    def table(self) -> np.ndarray:
-        """The coefficients as ``(3, 2, 2)``: direction (y0, y1, y2), side (y ≥ 0, y < 0), (k2, k3)."""
-        return np.array(self.coefficients).reshape(3, 2, 2)
+    def directions(self) -> np.ndarray:
+        """``(k, 3)`` unit ridge directions."""
+        return np.array([r[:3] for r in self.ridges], dtype=np.float64).reshape(-1, 3)
 
     @property
-    def map(self) -> np.ndarray:
-        """``D = ∂y/∂ε`` ``(3, 3)``."""
-        c01, c10 = self.coupling
-        return np.array([[1.0, c01, 0.0], [c10, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    def knots(self) -> np.ndarray:
+        """``(k,)`` ridge knots."""
+        return np.array([r[3] for r in self.ridges], dtype=np.float64)
 
     @property
-    def is_zero(self) -> bool:
-        """No term at all: the membrane is its quadratic part."""
-        return not any(self.coefficients) and not any(self.compression)
+    def stiffness(self) -> np.ndarray:
+        """``(k,)`` ridge stiffnesses (Pa)."""
+        return np.array([r[4] for r in self.ridges], dtype=np.float64)
 
-    def stiffening_strain(self, eps: np.ndarray) -> np.ndarray:
-        """``y`` for Voigt strains ``eps (…, 3)``, same shape."""
-        return np.asarray(eps, dtype=np.float64) @ self.map.T
-
-    def _sided(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(k2, k3)`` arrays shaped like ``y (…, 3)``: each stiffening strain's own side's pair."""
-        table = self.table
-        negative = y < 0.0
-        k2 = np.where(negative, table[:, 1, 0], table[:, 0, 0])
-        k3 = np.where(negative, table[:, 1, 1], table[:, 0, 1])
-        return k2, k3
+    def _excess(self, eps: np.ndarray) -> np.ndarray:
+        """``max(n_j·ε − t_j, 0)`` ``(…, k)``."""
+        return np.maximum(eps @ self.directions.T - self.knots, 0.0)
 
     def energy(self, eps: np.ndarray) -> np.ndarray:
-        """``Σ_d φ_d(y_d) + Σ_d ½ q_d min(ε_d, 0)²`` (Pa = J/m³) for Voigt strains ``eps (…, 3)``;
-        shape ``(…)``."""
+        """``ψ`` (Pa = J/m³) at Voigt strains ``eps (…, 3)``; shape ``(…)``."""
         eps = np.asarray(eps, dtype=np.float64)
-        y = self.stiffening_strain(eps)
-        k2, k3 = self._sided(y)
-        compressed = np.minimum(eps, 0.0)
-        return np.sum(k2 * y**3 / 3.0 + k3 * y**4 / 4.0 + 0.5 * np.array(self.compression) * compressed**2, axis=-1)
+        excess = self._excess(eps)
+        return 0.5 * np.einsum("...i,ij,...j->...", eps, self.Q, eps) + 0.5 * (excess**2) @ self.stiffness
 
     def stress(self, eps: np.ndarray) -> np.ndarray:
-        """``Dᵀ φ'(y) + q min(ε, 0)`` (Pa), the derivative of :meth:`energy` in ε, shaped like
-        ``eps (…, 3)``."""
+        """``∂ψ/∂ε = Q ε + Σ_j c_j max(n_j·ε − t_j, 0) n_j`` (Pa), shaped like ``eps (…, 3)``."""
         eps = np.asarray(eps, dtype=np.float64)
-        y = self.stiffening_strain(eps)
-        k2, k3 = self._sided(y)
-        return (k2 * y**2 + k3 * y**3) @ self.map + np.array(self.compression) * np.minimum(eps, 0.0)
+        return eps @ self.Q + (self._excess(eps) * self.stiffness) @ self.directions
 
     def hessian(self, eps: np.ndarray) -> np.ndarray:
-        """``Dᵀ diag(φ''(y)) D + diag(q [ε < 0])`` ``(…, 3, 3)`` (Pa), ``φ'' = 2 k2 y + 3 k3 y²``."""
+        """``Q + Σ_j c_j [n_j·ε > t_j] n_j n_jᵀ`` ``(…, 3, 3)`` (Pa)."""
         eps = np.asarray(eps, dtype=np.float64)
-        y = self.stiffening_strain(eps)
-        k2, k3 = self._sided(y)
-        D = self.map
-        compressed = np.where(eps < 0.0, np.array(self.compression), 0.0)
-        return (np.einsum("ki,...k,kj->...ij", D, 2.0 * k2 * y + 3.0 * k3 * y**2, D)
-                + compressed[..., :, None] * np.eye(3))
+        engaged = (eps @ self.directions.T > self.knots) * self.stiffness
+        n = self.directions
+        return self.Q + np.einsum("...k,ki,kj->...ij", engaged, n, n)
 
-    def softening(self) -> np.ndarray:
-        """``(3,)`` least ``φ_d''`` over all strains (Pa, <= 0): ``−k2²/(3 k3)`` on a side whose
-        ``k2`` softens (``k2 < 0`` for y ≥ 0, ``k2 > 0`` for y < 0), ``−inf`` if its ``k3`` is 0."""
-        least = np.zeros(3)
-        for d, ((k2p, k3p), (k2n, k3n)) in enumerate(self.table):
-            for soft, k3 in ((max(0.0, -k2p), k3p), (max(0.0, k2n), k3n)):
-                if soft > 0.0:
-                    least[d] = min(least[d], -soft * soft / (3.0 * k3) if k3 > 0.0 else -math.inf)
-        return least
-
-    def least_tangent(self, s00: float, s01: float, s11: float, s22: float) -> np.ndarray:
-        """``S + Dᵀ diag(softening()) D + diag(min(q, 0))`` ``(3, 3)``: below every tangent the
-        membrane has."""
-        m = self.softening()
-        if np.any(np.isinf(m)):
-            return np.full((3, 3), -np.inf)
-        return self._tangent_with(m, s00, s01, s11, s22) + np.diag(np.minimum(self.compression, 0.0))
-
-    def stiffest(self, bound: float) -> np.ndarray:
-        """``(3,)`` largest ``φ_d''`` (Pa, >= 0) over stiffening strains ``|y_d| <= bound`` on both
-        sides: ``φ''`` is convex in y (every ``k3 >= 0``), so its largest value on each side is at
-        zero (0) or at the bound (``2 k2 b + 3 k3 b²``, ``−2 k2 b + 3 k3 b²`` below zero)."""
+    def largest_tangent(self, bound: float) -> np.ndarray:
+        """``Q + Σ_n T_n n nᵀ`` ``(3, 3)`` (Pa), ``T_n`` the largest tangent along direction ``n``
+        over the knots a strain with every ``|ε_d| <= bound`` reaches (``t <= |n|₁ bound``; at 0 the
+        one-sided ridges at zero): above every tangent the membrane has there, softening ridges
+        included."""
         bound = non_negative_number(bound, "bound")
-        largest = np.zeros(3)
-        for d, ((k2p, k3p), (k2n, k3n)) in enumerate(self.table):
-            largest[d] = max(0.0, 2.0 * k2p * bound + 3.0 * k3p * bound**2,
-                             -2.0 * k2n * bound + 3.0 * k3n * bound**2)
+        largest = self.Q.copy()
+        for direction, along in _tangents_along(self.ridges).items():
+            n = np.array(direction)
+            reached = [tangent for knot, tangent in along if knot <= np.abs(n).sum() * bound]
+            if reached:
+                largest += max(max(reached), 0.0) * np.outer(n, n)
         return largest
 
-    def largest_tangent(self, s00: float, s01: float, s11: float, s22: float, bound: float) -> np.ndarray:
-        """``S + Dᵀ diag(stiffest(bound)) D + diag(max(q, 0))`` ``(3, 3)`` (Pa): above every tangent
-        the membrane has while each stiffening strain stays within ``±bound``."""
-        return self._tangent_with(self.stiffest(bound), s00, s01, s11, s22) + np.diag(np.maximum(self.compression, 0.0))
-
-    def _tangent_with(self, second: np.ndarray, s00: float, s01: float, s11: float, s22: float) -> np.ndarray:
-        """``S + Dᵀ diag(second) D`` ``(3, 3)`` (Pa) for ``φ_d'' = second (3,)``."""
-        D = self.map
-        S = np.array([[s00, s01, 0.0], [s01, s11, 0.0], [0.0, 0.0, s22]])
-        return S + D.T @ np.diag(second) @ D
-
-    def convexity_problems(self, s00: float, s01: float, s11: float, s22: float) -> list[str]:
-        """Why :meth:`least_tangent` is not positive definite with this ``S`` (empty if it is):
-        then the membrane energy is convex in the Green strain at every strain."""
-        H = self.least_tangent(s00, s01, s11, s22)
-        problems = _block_problems(float(H[0, 0]), float(H[0, 1]) if np.isfinite(H[0, 1]) else 0.0, float(H[1, 1]),
-                                   float(H[2, 2]), ("(s00 + min stiffening)", "s01", "(s11 + min stiffening)",
-                                                    "(s22 + min stiffening)"))
-        return [f"the stiffening terms make the membrane non-convex: {p}" for p in problems]
+    @property
+    def plugin_keys(self) -> dict[str, str]:
+        """The ``yarnfit.shell`` plugin's membrane keys for this membrane (``plugins/README.md``):
+        ``s00 s01 s11 s22`` = the base (Pa) and ``ridges``, five numbers per ridge (``n0 n1 n2 t c``),
+        every float written with ``repr`` (round trip)."""
+        keys = {name: repr(float(v)) for name, v in zip(MEMBRANE_PARAMETERS, self.base)}
+        keys["ridges"] = " ".join(repr(float(v)) for ridge in self.ridges for v in ridge)
+        return keys
 
     def to_dict(self) -> dict:
-        """JSON form: ``{"model": "green-polynomial", "stress_terms_pa": {key: Pa},
-        "stiffening_strain": {"c01": …, "c10": …}, "compression_pa": {"s00c": …, "s11c": …,
-        "s22c": …}}``."""
-        return {"model": NONLINEAR_MODEL, "stress_terms_pa": dict(zip(NONLINEAR_KEYS, self.coefficients)),
-                "stiffening_strain": dict(zip(NONLINEAR_COUPLING_KEYS, self.coupling)),
-                "compression_pa": dict(zip(NONLINEAR_COMPRESSION_KEYS, self.compression))}
+        """JSON form: ``{"model": "green-ridge", "base_pa": {"s00": …, "s01": …, "s11": …, "s22": …},
+        "ridges": [{"direction": [n0, n1, n2], "knot": t, "stiffness_pa": c}, …]}``."""
+        return {"model": RIDGE_MODEL, "base_pa": dict(zip(MEMBRANE_PARAMETERS, self.base)),
+                "ridges": [{"direction": list(r[:3]), "knot": r[3], "stiffness_pa": r[4]} for r in self.ridges]}
 
     @classmethod
-    def from_dict(cls, data: Mapping, where: str = "shell material") -> NonlinearMembrane:
+    def from_dict(cls, data: Mapping, where: str = "shell material") -> RidgeMembrane:
         """Inverse of :meth:`to_dict`; ValueError ``<where>: …`` naming the key at fault. A file
-        without ``compression_pa`` (written before it existed) has none."""
-        _check_keys(data, ("model", "stress_terms_pa", "stiffening_strain"), where, "nonlinear.", ("compression_pa",))
-        if data["model"] != NONLINEAR_MODEL:
-            raise ValueError(f"{where}: nonlinear.model must be {NONLINEAR_MODEL!r}, got {data['model']!r}")
-        _check_keys(data["stress_terms_pa"], NONLINEAR_KEYS, where, "nonlinear.stress_terms_pa.")
-        _check_keys(data["stiffening_strain"], NONLINEAR_COUPLING_KEYS, where, "nonlinear.stiffening_strain.")
-        terms = {k: _json_number(data["stress_terms_pa"][k], where, f"nonlinear.stress_terms_pa.{k}")
-                 for k in NONLINEAR_KEYS}
-        terms.update({k: _json_number(data["stiffening_strain"][k], where, f"nonlinear.stiffening_strain.{k}")
-                      for k in NONLINEAR_COUPLING_KEYS})
-        if "compression_pa" in data:
-            _check_keys(data["compression_pa"], NONLINEAR_COMPRESSION_KEYS, where, "nonlinear.compression_pa.")
-            terms.update({k: _json_number(data["compression_pa"][k], where, f"nonlinear.compression_pa.{k}")
-                          for k in NONLINEAR_COMPRESSION_KEYS})
+        of an earlier yarnfit's membrane model (``green-polynomial``) is refused with what to do."""
+        if isinstance(data, Mapping) and data.get("model") == "green-polynomial":
+            raise ValueError(f"{where}: nonlinear.model 'green-polynomial' (an earlier yarnfit's strain-stiffening "
+                             f"membrane) is no longer supported: fit the fabric again (yarnfit fit), or export "
+                             f"--linear")
+        _check_keys(data, ("model", "base_pa", "ridges"), where, "nonlinear.")
+        if data["model"] != RIDGE_MODEL:
+            raise ValueError(f"{where}: nonlinear.model must be {RIDGE_MODEL!r}, got {data['model']!r}")
+        _check_keys(data["base_pa"], MEMBRANE_PARAMETERS, where, "nonlinear.base_pa.")
+        base = tuple(_json_number(data["base_pa"][k], where, f"nonlinear.base_pa.{k}") for k in MEMBRANE_PARAMETERS)
+        if not isinstance(data["ridges"], list):
+            raise ValueError(f"{where}: nonlinear.ridges must be a list, got {data['ridges']!r}")
+        ridges = []
+        for j, ridge in enumerate(data["ridges"]):
+            at = f"nonlinear.ridges[{j}]"
+            _check_keys(ridge, ("direction", "knot", "stiffness_pa"), where, f"{at}.")
+            direction = ridge["direction"]
+            if not isinstance(direction, list) or len(direction) != 3:
+                raise ValueError(f"{where}: {at}.direction must be a list of 3 numbers, got {direction!r}")
+            ridges.append(tuple(_json_number(v, where, f"{at}.direction") for v in direction)
+                          + (_json_number(ridge["knot"], where, f"{at}.knot"),
+                             _json_number(ridge["stiffness_pa"], where, f"{at}.stiffness_pa")))
         try:
-            return cls.from_keys(terms)
+            return cls(base, tuple(ridges))
         except ValueError as exc:
             raise ValueError(f"{where}: {exc}") from None
 
+
+def _tangents_along(ridges) -> dict[tuple[float, float, float], list[tuple[float, float]]]:
+    """Per ridge direction (exactly equal ``n``), ``[(knot, tangent past it), …]`` in knot order:
+    the running sum of the stiffnesses of the ridges at or below each knot."""
+    along: dict[tuple[float, float, float], dict[float, float]] = {}
+    for n0, n1, n2, knot, stiffness in ridges:
+        knots = along.setdefault((n0, n1, n2), {})
+        knots[knot] = knots.get(knot, 0.0) + stiffness
+    out = {}
+    for direction, knots in along.items():
+        tangent, steps = 0.0, []
+        for knot in sorted(knots):
+            tangent += knots[knot]
+            steps.append((knot, tangent))
+        out[direction] = steps
+    return out
+
+
+# The strain of the small pull and shear that give a RidgeMembrane's small-strain constants
+# (ShellMaterial.uniaxial_stiffness): below every positive knot the fit places (RIDGE_LEAST_KNOT in
+# yarnfit.fit, 1e-3), where ψ is exactly piecewise quadratic and the secant is the tangent, and far
+# above the pull solve's round-off (its residual is relative to the pulled strain).
+SMALL_STRAIN = 1e-6
 
 # Largest transverse or shear stress left by a uniaxial pull's solve, relative to the stress its
 # strain makes in the stiffest direction: Newton reaches ~1e-13 in a few steps; 1e-9 flags one
 # that did not converge.
 UNIAXIAL_STRESS_RTOL = 1e-9
-# Newton steps of a uniaxial pull's solve at most (a convex 2-variable problem takes 3–8), and the
-# difference step of its Jacobian as a fraction of the pulled strain.
-UNIAXIAL_NEWTON_STEPS = 50
-UNIAXIAL_FD_STEP = 1e-6
+# Newton steps of a uniaxial pull's solve at most: a convex 2-variable problem takes 3–8, a ridge
+# membrane's piecewise quadratic one a step or two per piece it crosses (tens at most).
+UNIAXIAL_NEWTON_STEPS = 100
+# The regularisation of its Newton steps, relative to the stiffest tangent: far below any stiffness
+# a free strain of a real fabric has (>= 1e-6 of the stiffest: a satin's shear), so it changes no
+# step there, but it turns a step along a flat direction of a ridge membrane (no stiffness at all
+# until a ridge engages) into a long descent step that the halving shortens; 50 halvings reach
+# UNIAXIAL_LEAST_STEP from 1 and cover the 1e12 it can overshoot by.
+UNIAXIAL_REGULARISATION = 1e-12
+UNIAXIAL_LEAST_STEP = 1e-16
 # The uniaxial pull's first guess keeps the free width's Green strain this fraction of the way above
 # −½ (zero width): a guess there is admissible, and the Newton steps move from it.
 UNIAXIAL_WIDTH_MARGIN = 0.1
@@ -413,8 +392,9 @@ class ShellMaterial:
         thickness: shell thickness h (m), > 0.
         s00, s01, s11, s22: membrane stiffnesses (Pa), entries of ``S``.
         b00, b01, b11, b22: bending stiffnesses (Pa), entries of ``B``.
-        nonlinear: the membrane's strain-stiffening terms, or ``None`` (StVK); ``S`` is the
-            small-strain tangent either way (in tension, where the terms carry a compression side).
+        nonlinear: the strain-stiffening membrane (:class:`RidgeMembrane`), which then *is* the
+            membrane (energy ``h ψ(ε)``), or ``None`` (StVK, ``(h/2) εᵀ S ε``). ``S`` is the linear
+            model either way: fitted to the same samples, what :attr:`linear` keeps.
     """
 
     thickness: float
@@ -426,19 +406,19 @@ class ShellMaterial:
     b01: float
     b11: float
     b22: float
-    nonlinear: NonlinearMembrane | None = None
+    nonlinear: RidgeMembrane | None = None
 
     def __post_init__(self) -> None:
         for name in ("thickness",) + PARAMETER_NAMES:
             object.__setattr__(self, name, finite_number(getattr(self, name), name))
         if self.thickness <= 0.0:
             raise ValueError(f"thickness must be > 0 (m), got {self.thickness!r}")
-        if self.nonlinear is not None and not isinstance(self.nonlinear, NonlinearMembrane):
-            raise ValueError(f"nonlinear must be a NonlinearMembrane or None, got {type(self.nonlinear).__name__}")
+        if self.nonlinear is not None and not isinstance(self.nonlinear, RidgeMembrane):
+            raise ValueError(f"nonlinear must be a RidgeMembrane or None, got {type(self.nonlinear).__name__}")
 
     @property
     def linear(self) -> ShellMaterial:
-        """This material without its strain-stiffening terms (the StVK of its small-strain tangent)."""
+        """This material's linear model: StVK with ``S``, without the strain-stiffening membrane."""
         return ShellMaterial(self.thickness, **self.parameters)
 
     # -- matrices and parameter views ------------------------------------------------------------
@@ -471,15 +451,13 @@ class ShellMaterial:
         return not _block_problems(self.b00, self.b01, self.b11, self.b22, BENDING_PARAMETERS)
 
     def check_positive_definite(self) -> None:
-        """Raise ValueError naming the block (membrane/bending) and the entries that fail; with
-        stiffening terms, also if they make the membrane energy non-convex at some strain."""
+        """Raise ValueError naming the block (membrane/bending) and the entries that fail. (A
+        :class:`RidgeMembrane` is convex by construction: its own checks run when it is made.)"""
         problems = []
         membrane = _block_problems(self.s00, self.s01, self.s11, self.s22, MEMBRANE_PARAMETERS)
         bending = _block_problems(self.b00, self.b01, self.b11, self.b22, BENDING_PARAMETERS)
         if membrane:
             problems.append(f"membrane block S not positive definite: {'; '.join(membrane)}")
-        elif self.nonlinear is not None:
-            problems += self.nonlinear.convexity_problems(self.s00, self.s01, self.s11, self.s22)
         if bending:
             problems.append(f"bending block B not positive definite: {'; '.join(bending)}")
         if problems:
@@ -560,27 +538,31 @@ class ShellMaterial:
     def engineering(self) -> dict[str, float]:
         """The engineering constants every material report carries (units in the key).
 
-        Stretch and shear stiffnesses are per unit width (N/m); the uniaxial ones leave the
-        transverse direction free, which a small pull compresses when ``s01 > 0``: with compression
-        terms (:attr:`NonlinearMembrane.compression`) its tangent there is ``s11 + q1`` (``s00 + q0``
-        for a warp pull), :meth:`pull_tangent`. Shear is the positive side's, ``h s22`` (a negative
-        shear meets ``h (s22 + q2)``). Bending rigidities (N·m) are ``B_dir`` with ``½ B_dir k²`` the
-        energy per area of a cylindrical bend of curvature ``k`` whose curvature direction is along
-        weft, along warp, or at 45° (bias).
+        Stretch and shear stiffnesses are per unit width (N/m) at small strain; the uniaxial ones
+        leave the transverse direction free (:meth:`uniaxial_stiffness`). For StVK the closed forms
+        of ``S``; with a :class:`RidgeMembrane` its own small-strain response (a pull and a shear to
+        :data:`SMALL_STRAIN`), whose tangent depends on the strain's direction: shear is then the
+        positive side's. Bending rigidities (N·m) are ``B_dir`` with ``½ B_dir k²`` the energy per
+        area of a cylindrical bend of curvature ``k`` whose curvature direction is along weft, along
+        warp, or at 45° (bias).
 
         Raises:
             ValueError: ``S`` or ``B`` is not positive definite.
         """
         self._require_positive_definite("engineering constants", membrane=True, bending=True)
         h = self.thickness
-        across_weft = float(self.pull_tangent(0.0)[1, 1])  # s11, or s11 + q1 where the pull compresses it
-        across_warp = float(self.pull_tangent(0.5 * math.pi)[0, 0])
+        weft, poisson_weft = self.uniaxial_stiffness(0.0)
+        warp, poisson_warp = self.uniaxial_stiffness(0.5 * math.pi)
+        if self.nonlinear is None:
+            shear = h * self.s22
+        else:
+            shear = 2.0 * h * float(self.nonlinear.energy(np.array([0.0, 0.0, SMALL_STRAIN]))) / SMALL_STRAIN**2
         return {
-            "weft_stretch_n_per_m": h * (self.s00 - self.s01**2 / across_weft),
-            "warp_stretch_n_per_m": h * (self.s11 - self.s01**2 / across_warp),
-            "poisson_weft": self.s01 / across_weft,
-            "poisson_warp": self.s01 / across_warp,
-            "shear_n_per_m": h * self.s22,
+            "weft_stretch_n_per_m": weft,
+            "warp_stretch_n_per_m": warp,
+            "poisson_weft": poisson_weft,
+            "poisson_warp": poisson_warp,
+            "shear_n_per_m": shear,
             "bending_weft_nm": h**3 * self.b00,
             "bending_warp_nm": h**3 * self.b11,
             "bending_bias_nm": h**3 * (self.b00 + self.b11 + 2.0 * self.b01 + 4.0 * self.b22) / 4.0,
@@ -589,7 +571,7 @@ class ShellMaterial:
     # -- energy ------------------------------------------------------------------------------------
 
     def energy_density(self, I: object, II: object) -> float | np.ndarray:
-        """Energy per reference area ``W = W_s + W_b`` (J/m²), with the stiffening terms if any.
+        """Energy per reference area ``W = W_s + W_b`` (J/m²), ``W_s = h`` :meth:`membrane_energy`.
 
         Args:
             I: first fundamental form, ``(2, 2)`` or ``(n, 2, 2)``.
@@ -600,44 +582,51 @@ class ShellMaterial:
         """
         eps, kap, single = self._strains(I, II)
         h = self.thickness
-        W = 0.5 * h * np.einsum("...i,ij,...j->...", eps, self.S, eps)
-        if self.nonlinear is not None:
-            W = W + h * self.nonlinear.energy(eps)
+        W = h * self.membrane_energy(eps)
         W = W + 0.5 * h**3 * np.einsum("...i,ij,...j->...", kap, self.B, kap)
         return float(W) if single else W
 
-    def pull_tangent(self, angle: float) -> np.ndarray:
-        """``(3, 3)`` (Pa): the small-strain tangent a pull at ``angle`` (rad) from weft meets, every
-        other stress free: ``S`` plus each compression term ``q_d`` whose strain that pull makes
-        negative. The law is piecewise linear at small strain (one piece per sign pattern of ε);
-        the pull's strain is the one pattern consistent with itself, which a convex membrane has
-        (its stress is a monotone function of its strain). Without compression terms, ``S``."""
-        S = self.S
-        q = np.zeros(3) if self.nonlinear is None else np.array(self.nonlinear.compression)
-        if not np.any(q):
-            return S
-        c, s = math.cos(angle), math.sin(angle)
-        load = np.array([c * c, s * s, c * s])
-        # Strains within round-off of zero may sit on either side (a pull along weft has no shear).
-        tolerance = 1e-12
-        for compressed in itertools.product((False, True), repeat=3):
-            tangent = S + np.diag(np.where(compressed, q, 0.0))
-            if not np.all(np.linalg.eigvalsh(tangent) > 0.0):
-                continue
-            eps = np.linalg.solve(tangent, load)
-            scale = tolerance * float(np.abs(eps).max())
-            if all((e <= scale) if k else (e >= -scale) for e, k in zip(eps, compressed)):
-                return tangent
-        raise ValueError(f"no small-strain state of a pull at {angle!r} rad is consistent with its compression terms "
-                         f"(a non-convex membrane?)")
+    def membrane_energy(self, eps: np.ndarray) -> np.ndarray:
+        """The membrane's energy per reference area and thickness (Pa = J/m³) at Voigt strains
+        ``eps (…, 3)``: ``ψ(ε)`` of the :class:`RidgeMembrane`, or ``½ εᵀ S ε``; shape ``(…)``."""
+        eps = np.asarray(eps, dtype=np.float64)
+        if self.nonlinear is not None:
+            return self.nonlinear.energy(eps)
+        return 0.5 * np.einsum("...i,ij,...j->...", eps, self.S, eps)
+
+    def membrane_stress(self, eps: np.ndarray) -> np.ndarray:
+        """``∂/∂ε`` of :meth:`membrane_energy` (Pa), shaped like ``eps (…, 3)``."""
+        eps = np.asarray(eps, dtype=np.float64)
+        if self.nonlinear is not None:
+            return self.nonlinear.stress(eps)
+        return eps @ self.S  # S symmetric: row-vector product = S ε
+
+    def membrane_tangent(self, eps: np.ndarray) -> np.ndarray:
+        """``∂²/∂ε²`` of :meth:`membrane_energy` ``(…, 3, 3)`` (Pa): ``S``, or the ridge membrane's
+        (piecewise constant: at a kink, the side ``n·ε > t`` excludes)."""
+        eps = np.asarray(eps, dtype=np.float64)
+        if self.nonlinear is not None:
+            return self.nonlinear.hessian(eps)
+        return np.broadcast_to(self.S, eps.shape[:-1] + (3, 3))
 
     def uniaxial_stiffness(self, angle: float) -> tuple[float, float]:
         """Small-strain uniaxial stiffness (N/m) and Poisson ratio for a pull at ``angle`` (rad)
-        from weft, the transverse direction free: the rotated compliance of ``h`` times the pull's
-        tangent (:meth:`pull_tangent`: ``S``, with the compression terms the pull engages). At 0
-        and π/2 these are ``weft_stretch_n_per_m``, ``poisson_weft`` and the warp ones."""
+        from weft, the transverse direction free. StVK: the rotated compliance of ``h S``. With a
+        :class:`RidgeMembrane`: a pull to ``1 +`` :data:`SMALL_STRAIN`'s force over ``λ e`` and
+        transverse Green strain over ``−e`` (``e`` the pulled Green strain), which are its tangent's
+        (ψ is piecewise quadratic below its least positive knot). At 0 and π/2 these are
+        ``weft_stretch_n_per_m``, ``poisson_weft`` and the warp ones."""
+        if self.nonlinear is not None:
+            # In the pull's Green strains (e along, f across), which a piecewise quadratic ψ makes
+            # exactly proportional: force = λ ∂W/∂e = λ k e and f = −ν e.
+            stretch = 1.0 + SMALL_STRAIN
+            pull = self.uniaxial_pull(angle, stretch)
+            c, s = math.cos(angle), math.sin(angle)
+            q = np.array([[c, -s], [s, c]])
+            along, across = 0.5 * (stretch**2 - 1.0), 0.5 * float((q.T @ (pull.first_form - np.eye(2)) @ q)[1, 1])
+            return pull.force_n_per_m / (stretch * along), -across / along
         c, s = math.cos(angle), math.sin(angle)
-        compliance = np.linalg.inv(self.thickness * self.pull_tangent(angle))
+        compliance = np.linalg.inv(self.thickness * self.S)
         load = np.array([c * c, s * s, c * s])
         across = np.array([s * s, c * c, -c * s])
         along = float(load @ compliance @ load)
@@ -647,9 +636,9 @@ class ShellMaterial:
         """Uniaxial tension along weft (``axis`` 0) or warp (1) with the other direction free:
         ``(I (2, 2), W)``. The free Green strain minimises W: for StVK ``E_other = −(s01/s_other) E``
         with ``E = (stretch² − 1)/2`` and ``W = (h/2) (s_axis − s01²/s_other) E²`` (J/m²), the
-        free-width stiffness of the engineering constants; with stiffening terms it is the root of
-        the transverse stress ``(S ε + Dᵀ φ'(y))_other = 0`` (increasing in E_other for a convex
-        membrane). Needs a positive-definite, convex membrane."""
+        free-width stiffness of the engineering constants; with a :class:`RidgeMembrane` it is the
+        root of the transverse stress ``(∂ψ/∂ε)_other = 0`` (non-decreasing in E_other: ψ is
+        convex). Needs a positive-definite ``S``."""
         if axis not in (0, 1):
             raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
         stretch = finite_number(stretch, "stretch")
@@ -659,13 +648,10 @@ class ShellMaterial:
         along, other = (self.s00, self.s11) if axis == 0 else (self.s11, self.s00)
         strain = 0.5 * (stretch**2 - 1.0)
         free = -self.s01 / other * strain
-        if self.nonlinear is None or self.nonlinear.is_zero:
+        if self.nonlinear is None:
             diagonal = [0.0, 0.0]
             diagonal[axis], diagonal[1 - axis] = 1.0 + 2.0 * strain, 1.0 + 2.0 * free
             return np.diag(diagonal), 0.5 * self.thickness * (along - self.s01**2 / other) * strain**2
-        problems = self.nonlinear.convexity_problems(self.s00, self.s01, self.s11, self.s22)
-        if problems:
-            raise ValueError(f"uniaxial tension states need a convex membrane: {'; '.join(problems)}")
 
         def form(free_strain: float) -> np.ndarray:
             diagonal = [0.0, 0.0]
@@ -675,7 +661,7 @@ class ShellMaterial:
         def transverse_stress(free_strain: float) -> float:
             eps = np.zeros(3)
             eps[axis], eps[1 - axis] = strain, free_strain
-            return float((self.S @ eps)[1 - axis] + self.nonlinear.stress(eps)[1 - axis])
+            return float(self.membrane_stress(eps)[1 - axis])
 
         # Bracket the root: the stress rises with the free strain (convex membrane), and the free
         # Green strain cannot fall below −½ (a vanishing transverse stretch).
@@ -715,9 +701,17 @@ class ShellMaterial:
             return q.T @ self.energy_gradient(first_form(free), flat)[0] @ q
 
         # Newton on (f, γ), whose residuals are W's derivatives (∂W/∂f = 2 g₁₁, ∂W/∂γ = 4 g₀₁), with
-        # a central-difference Jacobian and steps halved until W or the residual falls (W is convex
-        # in them for a convex membrane; near the root its changes are below W's round-off), from the
-        # small-strain Poisson contraction.
+        # W's exact Hessian h Vᵀ (∂²ψ/∂ε²) V (ε is linear in (f, γ): ε = ε(e, 0, 0) + V (f, γ)),
+        # regularised by UNIAXIAL_REGULARISATION where it is singular (a ridge membrane can be flat
+        # along a free strain), and steps halved until W or the residual falls (W is convex in them
+        # for a convex membrane; near the root its changes are below W's round-off), from the
+        # small-strain Poisson contraction. A ridge membrane's ψ is piecewise quadratic: a Newton
+        # step is exact within a piece, and the halving carries it across the kinks.
+        # (E00, E11, 2 E01) of a symmetric strain matrix is the same map as κ's of II.
+        across = _bending_voigt(q @ np.array([[0.0, 0.0], [0.0, 1.0]]) @ q.T)
+        sheared = _bending_voigt(q @ np.array([[0.0, 1.0], [1.0, 0.0]]) @ q.T)
+        V = np.stack([across, sheared], axis=1)
+
         def energy(free: np.ndarray) -> float:
             return float(self.energy_density(first_form(free), flat))
 
@@ -731,27 +725,29 @@ class ShellMaterial:
 
         # The small-strain Poisson contraction, kept inside the admissible widths: a knit's ν ≈ 1.5
         # at 40 % would ask for a negative squared width.
-        free = np.array([max(-self.uniaxial_stiffness(angle)[1] * strain, -0.5 * (1.0 - UNIAXIAL_WIDTH_MARGIN)), 0.0])
+        free = np.array([max(-self.linear.uniaxial_stiffness(angle)[1] * strain, -0.5 * (1.0 - UNIAXIAL_WIDTH_MARGIN)),
+                         0.0])
         # Residuals are judged against the stress the pulled strain makes in the stiffest
         # direction: a bias pull of a satin (s22 ~ 1e-5 s00) has a pulling stress below the
         # round-off of its weft and warp stresses.
-        scale = max(self.thickness * float(np.abs(self.S).max()) * abs(strain), 1e-300)
-        step = UNIAXIAL_FD_STEP * max(abs(strain), 1e-6)
+        stiffest = self.S if self.nonlinear is None else self.nonlinear.largest_tangent(abs(strain))
+        scale = max(self.thickness * max(float(np.abs(stiffest).max()), float(np.abs(self.S).max())) * abs(strain),
+                    1e-300)
+        regularisation = UNIAXIAL_REGULARISATION * self.thickness * max(float(np.abs(stiffest).max()),
+                                                                         float(np.abs(self.S).max()))
         for _ in range(UNIAXIAL_NEWTON_STEPS):
             g = gradient(free)
             if np.abs(g).max() <= UNIAXIAL_STRESS_RTOL * scale:
                 break
-            if not all(admissible(free + sign * step * e) for e in np.eye(2) for sign in (1.0, -1.0)):
+            if not admissible(free):
                 break  # at the edge of the admissible widths: no free width balances the pull
-            jacobian = np.column_stack([(gradient(free + step * e) - gradient(free - step * e)) / (2.0 * step)
-                                        for e in np.eye(2)])
-            direction = -np.linalg.solve(0.5 * (jacobian + jacobian.T), g)
-            if not float(g @ direction) < 0.0:
-                direction = -g  # an indefinite difference Jacobian: steepest descent instead
+            hessian = self.thickness * V.T @ self.membrane_tangent(membrane_strain(first_form(free))) @ V
+            direction = -np.linalg.solve(hessian + regularisation * np.eye(2), g)
             alpha, start, imbalance = 1.0, energy(free), float(np.abs(g).max())
-            while alpha > 1e-12 and not (admissible(free + alpha * direction)
-                                         and (energy(free + alpha * direction) < start
-                                              or float(np.abs(gradient(free + alpha * direction)).max()) < imbalance)):
+            while alpha > UNIAXIAL_LEAST_STEP and not (
+                    admissible(free + alpha * direction)
+                    and (energy(free + alpha * direction) < start
+                         or float(np.abs(gradient(free + alpha * direction)).max()) < imbalance)):
                 alpha *= 0.5
             free = free + alpha * direction
         if np.abs(gradient(free)).max() > UNIAXIAL_STRESS_RTOL * scale:
@@ -769,7 +765,7 @@ class ShellMaterial:
         """``(dW/dI, dW/dII)``: derivative of :meth:`energy_density` with respect to each matrix entry.
 
         See the module docstring for the convention: both are symmetric,
-        ``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` (J/m²) with ``σ = S ε + Dᵀ φ'(y)`` and
+        ``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` (J/m²) with ``σ`` :meth:`membrane_stress` and
         ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]`` (J/m) with ``m = B κ``.
 
         Returns:
@@ -777,9 +773,7 @@ class ShellMaterial:
         """
         eps, kap, _ = self._strains(I, II)
         shape = np.broadcast_shapes(eps.shape, kap.shape)
-        sigma = eps @ self.S  # S symmetric: row-vector product = S ε
-        if self.nonlinear is not None:
-            sigma = sigma + self.nonlinear.stress(eps)
+        sigma = self.membrane_stress(eps)
         sigma = np.broadcast_to(sigma, shape)
         moment = np.broadcast_to(kap @ self.B, shape)
         h = self.thickness
@@ -810,7 +804,8 @@ class ShellMaterial:
 
     def to_dict(self) -> dict:
         """JSON form: ``{"thickness_m": h, "membrane_pa": {s00, s01, s11, s22}, "bending_pa": {b00, ...}}``,
-        plus ``"nonlinear"`` (:meth:`NonlinearMembrane.to_dict`) when the material has stiffening terms."""
+        plus ``"nonlinear"`` (:meth:`RidgeMembrane.to_dict`) when the material has a strain-stiffening
+        membrane (``membrane_pa`` is then its linear model)."""
         data = {
             "thickness_m": self.thickness,
             "membrane_pa": {name: getattr(self, name) for name in MEMBRANE_PARAMETERS},
@@ -834,7 +829,7 @@ class ShellMaterial:
         _check_keys(data, ("thickness_m", "membrane_pa", "bending_pa"), where, "", ("nonlinear",))
         fields = {"thickness": _json_number(data["thickness_m"], where, "thickness_m")}
         if "nonlinear" in data:
-            fields["nonlinear"] = NonlinearMembrane.from_dict(data["nonlinear"], where)
+            fields["nonlinear"] = RidgeMembrane.from_dict(data["nonlinear"], where)
         for block, names in (("membrane_pa", MEMBRANE_PARAMETERS), ("bending_pa", BENDING_PARAMETERS)):
             _check_keys(data[block], names, where, f"{block}.")
             for name in names:

@@ -1,4 +1,5 @@
-// yarnfit.shell: an orthotropic StVK shell for 2D MuJoCo flexes (mjPLUGIN_PASSIVE).
+// yarnfit.shell: an orthotropic StVK shell for 2D MuJoCo flexes (mjPLUGIN_PASSIVE), with an optional
+// strain-stiffening ridge membrane.
 //
 // Energy per reference area, in the material frame (weft = first axis, turned by `angle` from the
 // flex's first reference axis), with the conventions of yarnfit's docs/design.md §3:
@@ -17,30 +18,30 @@
 // or an ill-conditioned map, it keeps the grid operator II_t = sum_e theta_e l_e / (2 A_t) n_e n_e^T
 // (what the inverse is on a regular grid). See plugins/README.md.
 //
-// Strain stiffening (optional keys s00p2 ... s22n3 in Pa, c01 and c10, default 0): each direction
-// stiffens with its stiffening strain y = D eps = (eps0 + c01 eps1, eps1 + c10 eps0, eps2) (yarnfit
-// writes c01 = s01/s00, c10 = s01/s11: the linear stress along a yarn over its stiffness). The
-// membrane energy per reference area gains h sum_d phi_d(y_d), phi_d(y) = k2 y^3/3 + k3 y^4/4 with
-// (k2, k3) from the positive-side keys (s<dd>p2, s<dd>p3) for y >= 0 and the negative-side keys
-// (s<dd>n2, s<dd>n3) for y < 0, so the stress gains h D^T phi'(y), phi' = k2 y^2 + k3 y^3. phi is C2
-// at 0: the tangent at zero strain is exactly S. No hysteresis.
+// Ridge membrane (optional key `ridges`: whitespace-separated numbers, five per ridge j, n0 n1 n2
+// t c = a unit direction n_j in Voigt strain space, a knot t_j >= 0 and a stiffness c_j in Pa;
+// absent or empty: none). The membrane energy per reference area is then
 //
-// Compression (optional keys s00c, s11c, s22c = q_d in Pa, any sign, default 0): the membrane energy
-// per reference area gains h sum_d (1/2) q_d min(eps_d, 0)^2, on eps itself (not on y): where a
-// Voigt strain is negative (weft or warp compression, negative shear) its tangent is S_dd + q_d
-// instead of S_dd, so a fabric can be softer or stiffer in compression than in tension along each
-// yarn, and in negative than in positive shear (a twill). The stress gains h q_d min(eps_d, 0).
-// The term is C1 at 0 (its tangent jumps there by q_d). init demands a convex energy in eps: the
-// least tangent S + D^T diag(min phi_d'') D + diag(min(q_d, 0)) positive definite.
+//   W_m = h [ (1/2) eps^T S eps + sum_j (1/2) c_j max(n_j . eps - t_j, 0)^2 ],
+//
+// the stress gains h sum_j c_j max(n_j . eps - t_j, 0) n_j and the tangent h sum_j c_j [n_j . eps >
+// t_j] n_j n_j^T. C1: the tangent jumps by c_j n_j n_j^T where n_j . eps crosses t_j. No hysteresis.
+// Convex: c_j >= 0, or c_j < 0 (a tangent that falls at a knot) only past positive ones along the
+// same direction, so that along every direction the tangent (the sum of c over knots <= x) stays >=
+// 0 (check_ridge_tangents); with ridges S (yarnfit writes the ridge membrane's base there) need only
+// be positive semi-definite (s00, s11, s22 >= 0, s01^2 <= s00 s11 up to 1e-12 relative round-off),
+// without it must be positive definite.
 //
 // Damping (Kelvin-Voigt, stiffness-proportional, the Rayleigh form of the tangent stiffness):
 // stresses use eps + damping * d(eps)/dt and kappa + damping * d(kappa)/dt for the quadratic
-// energy; the nonlinear terms add damping * h (D^T diag(phi''(y)) D + diag(q_d [eps_d < 0])) d(eps)/dt.
+// energy; the ridges add damping * h (sum_j c_j [n_j . eps > t_j] n_j n_j^T) d(eps)/dt.
 //
 // Split with MuJoCo's built-in elasticity: the configuration is always the full material. When
 // the flex also carries <elasticity elastic2d="stretch" young poisson thickness>, the keys
 // builtin_young, builtin_poisson, builtin_thickness repeat it; init checks them against the
-// compiled flex stiffness and the plugin adds only h S - t_b S_iso, so the total is h S. When it
+// compiled flex stiffness and the plugin adds only h S - t_b S_iso, so the total is h S (the ridges
+// are the plugin's alone, on top of that share, and explicit: yarnfit sizes the built-in share to
+// cover half the ridge membrane's largest tangent up to a strain bound). When it
 // carries built-in bending too (elastic2d="both"), MuJoCo's hinge operator is linear in the vertex
 // positions (f = -K x - beta K v per interior edge, K the 4x4 blocks of mjModel.flex_bending), so
 // the plugin adds back exactly that force: the total bending is the plugin's own, to round-off,
@@ -58,6 +59,7 @@
 // (its linearisation enters the step's matrix, not the force): yarnfit.mujoco.garment.
 // use_pattern_rest rewrites that part's rest from the pattern, so that it too pulls towards it.
 
+#include <ctype.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -86,22 +88,24 @@
 // Well-shaped triangles measure 2-20; a sliver's map is near singular.
 #define YF_OPERATOR_CONDITION 1e4
 
-// The strain-stiffening keys, per Voigt direction d (s00: eps_0, s11: eps_1, s22: eps_2) and side
-// of zero strain: the coefficient k2 of x^2 and k3 of x^3 in the stress for x >= 0, then for x < 0.
-enum { kP2, kP3, kN2, kN3, kNumStiffening };
-static const char* const kStiffeningKeys[3][kNumStiffening] = {
-  {"s00p2", "s00p3", "s00n2", "s00n3"},
-  {"s11p2", "s11p3", "s11n2", "s11n3"},
-  {"s22p2", "s22p3", "s22n2", "s22n3"},
-};
-// The compression keys q_d per Voigt direction: the tangent gains q_d where eps_d < 0.
-static const char* const kCompressionKeys[3] = {"s00c", "s11c", "s22c"};
+// Largest | |n| - 1 | accepted for a ridge direction: yarnfit writes unit vectors with repr (off
+// by ~1e-16); a direction off by more than this was not normalised by its writer. Same bound as
+// yarnfit.shell.RIDGE_UNIT_RTOL.
+#define YF_RIDGE_UNIT_TOL 1e-9
+// Round-off admitted in the ridge membrane's semi-definite base, s01^2 <= s00 s11 (1 + this): a
+// fitted base of rank one (a knit's) sits on the bound to ~1e-16. yarnfit.shell.RIDGE_BASE_RTOL.
+#define YF_RIDGE_BASE_RTOL 1e-12
+// Round-off admitted in the tangent along a ridge direction (the sum of the stiffnesses of its
+// ridges up to a knot, which must stay >= 0), relative to their largest |c|: yarnfit fits the
+// tangent per segment between knots and writes c as their differences, so a tangent fitted on its
+// bound of 0 comes back as a sum of ~1e-16 relative errors. yarnfit.shell.RIDGE_CONVEXITY_RTOL.
+#define YF_RIDGE_CONVEXITY_RTOL 1e-12
+// Numbers per ridge in the `ridges` key: n0 n1 n2 t c.
+#define YF_RIDGE_NUMBERS 5
 
 static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
-  "builtin_young", "builtin_poisson", "builtin_thickness",
-  "s00p2", "s00p3", "s00n2", "s00n3", "s11p2", "s11p3", "s11n2", "s11n3", "s22p2", "s22p3", "s22n2", "s22n3",
-  "s00c", "s11c", "s22c", "c01", "c10", "rest", "membrane",
+  "builtin_young", "builtin_poisson", "builtin_thickness", "ridges", "rest", "membrane",
 };
 enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 
@@ -109,10 +113,8 @@ enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 typedef struct {
   double s00, s01, s11, s22, b00, b01, b11, b22, thickness, angle, damping;
   double builtin_young, builtin_poisson, builtin_thickness;
-  double stiffening[3][kNumStiffening];  // k2, k3 for y >= 0, k2, k3 for y < 0, per direction (Pa)
-  double c01, c10;      // the stiffening strains' coupling: y0 = eps0 + c01 eps1, y1 = eps1 + c10 eps0
-  double compression[3];  // q_d: the tangent gains q_d where eps_d < 0, per direction (Pa)
-  int stiffens;         // any stiffening or compression key nonzero: else the membrane is exactly StVK
+  int nridge;           // ridges of the ridge membrane: 0 (key absent or empty) keeps it exactly StVK
+  double* ridge;        // (nridge x 5) n0 n1 n2 (unit, Voigt strain space), knot t, stiffness c (Pa)
   int node_membrane;    // membrane="node": strains smoothed over each vertex's third of its
                         // triangles (per panel), not constant per triangle; see plugins/README.md
   int ndomain;          // node membrane: smoothing domains (a vertex, or a vertex and panel)
@@ -207,86 +209,105 @@ static int read_choice(const mjModel* m, int instance, const char* key, const ch
   return 0;
 }
 
-// Least value over one side of zero strain of phi'' = 2 k2 x + 3 k3 x^2 (side +1: x >= 0, -1:
-// x < 0). It is 0 at x = 0 and falls only if the cubic term softens that side (k2 < 0 for x > 0,
-// k2 > 0 for x < 0), to its minimum -k2^2 / (3 k3) at x = -k2 / (3 k3), or without bound when k3 = 0
-// (returns -INFINITY).
-static double least_tangent(double k2, double k3, int side) {
-  if (side * k2 >= 0) return 0;
-  if (!(k3 > 0)) return -INFINITY;
-  return -k2 * k2 / (3 * k3);
+// The `ridges` key of instance `instance`: whitespace-separated numbers, five per ridge (n0 n1 n2 t
+// c). With out == NULL, validate each ridge on its own (every number finite, n a unit vector, t >= 0;
+// each failure an mju_error naming the key, the ridge and what is wrong) and set *count to the
+// number of ridges (0 when the key is absent, empty or blank); else store them in out (count x 5),
+// as validated by an earlier call. The signs of the stiffnesses are check_ridge_tangents' to judge.
+static int read_ridges(const mjModel* m, int instance, double* out, int* count) {
+  const char* text = mj_getPluginConfig(m, instance, "ridges");
+  int n = 0;  // numbers read
+  double ridge[YF_RIDGE_NUMBERS];
+  for (const char* p = text ? text : ""; ; ) {
+    while (*p && isspace((unsigned char)*p)) p++;
+    if (!*p) break;
+    const char* stop = p;
+    while (*stop && !isspace((unsigned char)*stop)) stop++;
+    char* end = NULL;
+    double value = strtod(p, &end);
+    int j = n / YF_RIDGE_NUMBERS;
+    if (end != stop || !isfinite(value)) {
+      mju_error(YF_NAME ": config key 'ridges': ridge %d: number %d of 5 (n0 n1 n2 t c) must be a finite number, "
+                "got '%.*s'", j, n % YF_RIDGE_NUMBERS + 1, (int)(stop - p > 40 ? 40 : stop - p), p);
+      return -1;
+    }
+    ridge[n % YF_RIDGE_NUMBERS] = value;
+    p = stop;
+    if (++n % YF_RIDGE_NUMBERS) continue;
+    if (out) {
+      memcpy(out + YF_RIDGE_NUMBERS * j, ridge, sizeof(ridge));
+      continue;
+    }
+    double norm = sqrt(ridge[0] * ridge[0] + ridge[1] * ridge[1] + ridge[2] * ridge[2]);
+    if (!(fabs(norm - 1) <= YF_RIDGE_UNIT_TOL)) {
+      mju_error(YF_NAME ": config key 'ridges': ridge %d: its direction n = (%.12g, %.12g, %.12g) must be a unit "
+                "vector (within %g), got |n| = %.12g", j, ridge[0], ridge[1], ridge[2], YF_RIDGE_UNIT_TOL, norm);
+      return -1;
+    }
+    if (ridge[3] < 0) {
+      mju_error(YF_NAME ": config key 'ridges': ridge %d: its knot t must be >= 0, got %g", j, ridge[3]);
+      return -1;
+    }
+  }
+  if (n % YF_RIDGE_NUMBERS) {
+    mju_error(YF_NAME ": config key 'ridges' must hold five numbers per ridge (n0 n1 n2 t c), got %d numbers: "
+              "ridge %d has %d", n, n / YF_RIDGE_NUMBERS, n % YF_RIDGE_NUMBERS);
+    return -1;
+  }
+  *count = n / YF_RIDGE_NUMBERS;
+  return 0;
 }
 
-// The strain-stiffening and compression keys: every x^3 coefficient >= 0 (a negative one softens at
-// large strain without bound), a softening x^2 term only with a positive x^3 term, and an energy
-// convex in eps: its Hessian S + D^T diag(phi_d''(y_d)) D + diag(q_d [eps_d < 0]) is at least
-// S + D^T diag(m) D + diag(min(q_d, 0)) with m_d the least phi_d'' over both sides, which must be
-// positive definite. Convexity keeps the stress a monotone function of the strain (no snap-through
-// in the material law itself) and the tangent used by damping dissipative.
-static int check_stiffening(const Shell* s) {
-  static const int kSide[2] = {+1, -1};  // kP2, kP3 are the positive side; kN2, kN3 the negative
-  double least[3];
-  int least_side[3];
-  for (int d = 0; d < 3; d++) {
-    least[d] = 0;
-    least_side[d] = 0;
-    for (int side = 0; side < 2; side++) {
-      const char* key2 = kStiffeningKeys[d][2 * side];
-      const char* key3 = kStiffeningKeys[d][2 * side + 1];
-      double k2 = s->stiffening[d][2 * side], k3 = s->stiffening[d][2 * side + 1];
-      if (k3 < 0) {
-        mju_error(YF_NAME ": config key '%s' must be >= 0 (Pa), got %g: a negative x^3 stress term softens "
-                  "without bound", key3, k3);
-        return -1;
+static int same_direction(const double* a, const double* b) {
+  return a[0] == b[0] && a[1] == b[1] && a[2] == b[2];
+}
+
+// Convexity of the ridges (nridge x 5, freed here whatever the outcome: mju_error does not return).
+// The ridges along one direction n (the same three numbers) add g(n . eps) to the energy,
+// g(x) = sum_j (1/2) c_j max(x - t_j, 0)^2, convex iff its tangent g'' = sum_{t_j < x} c_j is >= 0 at
+// every x, i.e. just past each of their knots (within YF_RIDGE_CONVEXITY_RTOL of their largest |c|).
+// So a stiffness c >= 0 always passes, and a negative one (a tangent that falls at its knot: yarnfit
+// writes c as the differences of the tangents it fits between knots) only past positive ones of
+// smaller knots along the same direction. A convex g of a linear map of eps is convex in eps, so the
+// ridge membrane is convex for a positive semi-definite S, and its tangent (damping's) is positive
+// semi-definite.
+static int check_ridge_tangents(double* ridge, int nridge) {
+  for (int j = 0; j < nridge; j++) {
+    const double* n = ridge + YF_RIDGE_NUMBERS * j;
+    int seen = 0;
+    for (int i = 0; i < j && !seen; i++) seen = same_direction(ridge + YF_RIDGE_NUMBERS * i, n);
+    if (seen) continue;  // its direction was checked with the first ridge along it
+    double scale = 0;
+    for (int i = j; i < nridge; i++) {
+      if (same_direction(ridge + YF_RIDGE_NUMBERS * i, n)) scale = fmax(scale, fabs(ridge[YF_RIDGE_NUMBERS * i + 4]));
+    }
+    int bad = -1;  // the ridge of least knot past which the tangent is negative
+    double bad_tangent = 0;
+    for (int i = j; i < nridge; i++) {
+      const double* r = ridge + YF_RIDGE_NUMBERS * i;
+      if (!same_direction(r, n) || (bad >= 0 && !(r[3] < ridge[YF_RIDGE_NUMBERS * bad + 3]))) continue;
+      double tangent = 0;
+      for (int l = j; l < nridge; l++) {
+        const double* q = ridge + YF_RIDGE_NUMBERS * l;
+        if (same_direction(q, n) && q[3] <= r[3]) tangent += q[4];
       }
-      double m = least_tangent(k2, k3, kSide[side]);
-      if (m == -INFINITY) {
-        mju_error(YF_NAME ": config key '%s' = %g softens the %s strain side without bound because '%s' = 0: "
-                  "a softening x^2 stress term needs a positive x^3 term", key2, k2,
-                  side == 0 ? "positive" : "negative", key3);
-        return -1;
+      if (tangent < -YF_RIDGE_CONVEXITY_RTOL * scale) {
+        bad = i;
+        bad_tangent = tangent;
       }
-      if (m < least[d]) {
-        least[d] = m;
-        least_side[d] = side;
-      }
+    }
+    if (bad >= 0) {
+      const double* r = ridge + YF_RIDGE_NUMBERS * bad;
+      double n0 = r[0], n1 = r[1], n2 = r[2], t = r[3], c = r[4];
+      free(ridge);
+      mju_error(YF_NAME ": config key 'ridges': ridge %d (stiffness c = %g Pa, knot t = %g) makes the energy "
+                "concave: past that knot the ridges along n = (%.12g, %.12g, %.12g) have a tangent of %g Pa < 0 "
+                "(the sum of their c with knots <= t must stay >= 0)", bad, c, t, n0, n1, n2, bad_tangent);
+      return -1;
     }
   }
-  // The least tangent S + D^T diag(m) D + diag(softest) (m, softest <= 0), D = [[1, c01], [c10, 1]]
-  // on the normal block; softest_d = min(q_d, 0), the compression term's least tangent.
-  double softest[3];
-  for (int d = 0; d < 3; d++) softest[d] = s->compression[d] < 0 ? s->compression[d] : 0;
-  double a = s->s00 + least[0] + s->c10 * s->c10 * least[1] + softest[0];
-  double b = s->s11 + s->c01 * s->c01 * least[0] + least[1] + softest[1];
-  double off = s->s01 + s->c01 * least[0] + s->c10 * least[1];
-  double c = s->s22 + least[2] + softest[2];
-  double det = a * b - off * off;
-  int bad[3] = {!(a > 0) || !(det > 0), !(b > 0) || !(det > 0), !(c > 0)};
-  if (!bad[0] && !bad[1] && !bad[2]) return 0;
-  // S alone is positive definite (checked before), so a failing direction has a softening side or
-  // a negative compression key.
-  char culprits[600] = "";
-  for (int d = 0; d < 3; d++) {
-    if (!bad[d]) continue;
-    size_t used = strlen(culprits);
-    if (least[d] < 0) {
-      const char* const* keys = kStiffeningKeys[d] + 2 * least_side[d];
-      snprintf(culprits + used, sizeof(culprits) - used, "%s'%s' = %g and '%s' = %g give m%d = %g", used ? "; " : "",
-               keys[0], s->stiffening[d][2 * least_side[d]], keys[1], s->stiffening[d][2 * least_side[d] + 1], d,
-               least[d]);
-      used = strlen(culprits);
-    }
-    if (softest[d] < 0) {
-      snprintf(culprits + used, sizeof(culprits) - used, "%s'%s' = %g", used ? "; " : "", kCompressionKeys[d],
-               s->compression[d]);
-    }
-  }
-  // Kept short: the compiler cuts its error message at ~500 characters, and the keys come first.
-  mju_error(YF_NAME ": non-convex membrane energy: S + D^T diag(m) D + diag(min(q, 0)) must be positive "
-            "definite, m_d the least phi_d'', q_d the s<dd>c keys (Pa), D from c01 = %g, c10 = %g; %s; then its "
-            "00 entry = %g, 11 entry = %g, determinant of the normal block = %g, 22 entry = %g",
-            s->c01, s->c10, culprits, a, b, det, c);
-  return -1;
+  free(ridge);
+  return 0;
 }
 
 // Every attribute validated here, in one place.
@@ -301,27 +322,42 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
   for (size_t k = 0; k < sizeof(keys) / sizeof(keys[0]); k++) {
     if (read_number(m, instance, keys[k].key, keys[k].fallback, keys[k].required, keys[k].value)) return -1;
   }
-  if (read_number(m, instance, "c01", 0, 0, &s->c01) || read_number(m, instance, "c10", 0, 0, &s->c10)) return -1;
   if (read_choice(m, instance, "membrane", "triangle", "node", &s->node_membrane) ||
       read_choice(m, instance, "rest", "qpos0", "texcoord", &s->rest_texcoord)) return -1;
-  s->stiffens = 0;
-  for (int d = 0; d < 3; d++) {
-    for (int k = 0; k < kNumStiffening; k++) {
-      if (read_number(m, instance, kStiffeningKeys[d][k], 0, 0, &s->stiffening[d][k])) return -1;
-      if (s->stiffening[d][k] != 0) s->stiffens = 1;
+  if (read_ridges(m, instance, NULL, &s->nridge)) return -1;
+  if (s->nridge > 0) {
+    double* ridge = malloc(sizeof(double) * YF_RIDGE_NUMBERS * s->nridge);
+    if (!ridge) {
+      mju_error(YF_NAME ": out of memory reading config key 'ridges' (%d ridges)", s->nridge);
+      return -1;
     }
-    if (read_number(m, instance, kCompressionKeys[d], 0, 0, &s->compression[d])) return -1;
-    if (s->compression[d] != 0) s->stiffens = 1;
+    read_ridges(m, instance, ridge, &s->nridge);
+    if (check_ridge_tangents(ridge, s->nridge)) return -1;  // frees ridge
   }
+  s->ridge = NULL;  // stored by init, once nothing can fail
+  // Without ridges S is the StVK membrane and must be positive definite; with ridges it is the
+  // ridge membrane's base, positive semi-definite (the ridges are convex on their own).
   const char* positive[] = {"s00", "s11", "s22", "b00", "b11", "b22", "thickness"};
   const double values[] = {s->s00, s->s11, s->s22, s->b00, s->b11, s->b22, s->thickness};
   for (int k = 0; k < 7; k++) {
-    if (!(values[k] > 0)) {
+    if (s->nridge > 0 && k < 3) {
+      if (!(values[k] >= 0)) {
+        mju_error(YF_NAME ": config key '%s' must be >= 0 with ridges (the ridge membrane's base S is positive "
+                  "semi-definite), got %g", positive[k], values[k]);
+        return -1;
+      }
+    } else if (!(values[k] > 0)) {
       mju_error(YF_NAME ": config key '%s' must be positive, got %g", positive[k], values[k]);
       return -1;
     }
   }
-  if (s->s01 * s->s01 >= s->s00 * s->s11) {
+  if (s->nridge > 0) {
+    if (s->s01 * s->s01 > s->s00 * s->s11 * (1 + YF_RIDGE_BASE_RTOL)) {
+      mju_error(YF_NAME ": membrane matrix S (the ridge membrane's base) is not positive semi-definite: s01^2 = "
+                "%.17g > s00*s11 = %.17g", s->s01 * s->s01, s->s00 * s->s11);
+      return -1;
+    }
+  } else if (s->s01 * s->s01 >= s->s00 * s->s11) {
     mju_error(YF_NAME ": membrane matrix S is not positive definite: s01^2 = %g >= s00*s11 = %g",
                 s->s01 * s->s01, s->s00 * s->s11);
     return -1;
@@ -355,7 +391,7 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
     mju_error(YF_NAME ": config key 'builtin_poisson' must lie in [0, 0.5), got %g", s->builtin_poisson);
     return -1;
   }
-  return check_stiffening(s);
+  return 0;
 }
 
 // World position of body b at qpos0, composed from the model's body frames.
@@ -385,6 +421,7 @@ static int find_flex(const mjModel* m, int instance) {
 
 static void shell_free(Shell* s) {
   if (!s) return;
+  free(s->ridge);
   free(s->tri);
   free(s->rest_inv);
   free(s->area);
@@ -819,15 +856,17 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
   s->tri_source = malloc(sizeof(int) * s->ntri);
   s->vert_dof = malloc(sizeof(int) * s->nvert);
   s->slide_only = malloc(s->nvert);
+  s->ridge = malloc(sizeof(double) * YF_RIDGE_NUMBERS * (s->nridge > 0 ? s->nridge : 1));
   double* x0 = malloc(sizeof(double) * 3 * s->nvert);
   double* rest2d = malloc(sizeof(double) * 6 * s->ntri);
   int* tri_edge_local = malloc(sizeof(int) * 3 * s->ntri);
   if (!s->tri || !s->rest_inv || !s->area || !s->tri_hinge || !s->tri_weight || !s->tri_source || !s->vert_dof ||
-      !s->slide_only || !x0 || !rest2d || !tri_edge_local) {
+      !s->slide_only || !s->ridge || !x0 || !rest2d || !tri_edge_local) {
     free(x0); free(rest2d); free(tri_edge_local);
     shell_free(s);
     return -1;
   }
+  read_ridges(m, instance, s->ridge, &s->nridge);  // validated by read_config: cannot fail
 
   // Membrane stiffness the plugin carries: h S minus the built-in isotropic t_b S_iso.
   {
@@ -969,26 +1008,16 @@ static void shell_destroy(mjData* d, int instance) {
   d->plugin_data[instance] = 0;
 }
 
-// Stress (N/m, Voigt) of the strain-stiffening and compression terms at elastic strain eps and
-// strain rate rate: h D^T (phi'(y) + damping phi''(y) D rate), y = D eps, phi' = k2 y^2 + k3 y^3,
-// phi'' = 2 k2 y + 3 k3 y^2, (k2, k3) of the side of zero y_d lies on; plus, where eps_d < 0,
-// h q_d (eps_d + damping rate_d).
-static void stiffening_stress(const Shell* s, const double eps[3], const double rate[3], double stress[3]) {
-  double y[3] = {eps[0] + s->c01 * eps[1], eps[1] + s->c10 * eps[0], eps[2]};
-  double yrate[3] = {rate[0] + s->c01 * rate[1], rate[1] + s->c10 * rate[0], rate[2]};
-  double along[3];  // the stress on each stiffening strain
-  for (int d = 0; d < 3; d++) {
-    double x = y[d];
-    const double* k = s->stiffening[d] + (x >= 0 ? kP2 : kN2);
-    double slope = x * x * (k[0] + k[1] * x);          // phi'
-    double tangent = x * (2 * k[0] + 3 * k[1] * x);    // phi''
-    along[d] = s->thickness * (slope + s->damping * tangent * yrate[d]);
-  }
-  stress[0] = along[0] + s->c10 * along[1];  // D^T along
-  stress[1] = s->c01 * along[0] + along[1];
-  stress[2] = along[2];
-  for (int d = 0; d < 3; d++) {  // on eps itself, not y
-    if (eps[d] < 0) stress[d] += s->thickness * s->compression[d] * (eps[d] + s->damping * rate[d]);
+// Stress (N/m, Voigt) of the ridges at elastic strain eps and strain rate rate:
+// h sum_j c_j [n_j . eps > t_j] (n_j . eps - t_j + damping n_j . rate) n_j, i.e. the ridges' stress
+// plus their tangent times damping * rate.
+static void ridge_stress(const Shell* s, const double eps[3], const double rate[3], double stress[3]) {
+  mju_zero3(stress);
+  for (int j = 0; j < s->nridge; j++) {
+    const double* r = s->ridge + YF_RIDGE_NUMBERS * j;  // n0 n1 n2 t c
+    double excess = mju_dot3(r, eps) - r[3];
+    if (!(excess > 0)) continue;
+    mju_addToScl3(stress, r, s->thickness * r[4] * (excess + s->damping * mju_dot3(r, rate)));
   }
 }
 
@@ -1020,10 +1049,9 @@ static void green_strain(const double F[12], int damped, double eps[6]) {
 }
 
 // Membrane stress of a reference area `area` (m^2) at strain eps (6, with its rate): sig (3) =
-// area dW/deps for W = (1/2) eps^T C eps (plus the stiffening and compression terms
-// h sum_d [phi_d(y_d) + (1/2) q_d min(eps_d, 0)^2]), with the damping stress of the rate added:
-// C times it (so the quadratic part's stress is evaluated at eps + damping * rate) and the
-// nonlinear terms' tangent times it.
+// area dW/deps for W = (1/2) eps^T C eps (plus the ridges h sum_j (1/2) c_j max(n_j . eps - t_j, 0)^2),
+// with the damping stress of the rate added: C times it (so the quadratic part's stress is
+// evaluated at eps + damping * rate) and the ridges' tangent times it.
 static void membrane_stress(const Shell* s, double area, const double eps[6], double sig[3]) {
   const double* c = s->membrane;
   // The quadratic part with its damping, as StVK: C (eps + damping * rate).
@@ -1032,9 +1060,9 @@ static void membrane_stress(const Shell* s, double area, const double eps[6], do
   sig[0] = area * (c[0] * eps0 + c[1] * eps1);
   sig[1] = area * (c[1] * eps0 + c[2] * eps1);
   sig[2] = area * c[3] * eps2;
-  if (s->stiffens) {  // skipped without the keys: the membrane is then StVK to the last bit
+  if (s->nridge > 0) {  // skipped without ridges: the membrane is then StVK to the last bit
     double extra[3];
-    stiffening_stress(s, eps, eps + 3, extra);
+    ridge_stress(s, eps, eps + 3, extra);
     mju_addToScl3(sig, extra, area);
   }
 }

@@ -378,7 +378,8 @@ def _header(built: BuiltScene) -> str:
         paragraphs += [f'The cloth is the 2D flex "{flex.name}", driven by the MuJoCo engine plugin {PLUGIN_NAME} '
                        f'(instance "{spec.plugins[0].name}", configured in <extension>): the fitted orthotropic '
                        "shell, membrane s00 s01 s11 s22 and bending b00 b01 b11 b22 (Pa), thickness (m)"
-                       + (", the strain-stiffening keys s00p2 ... c10" if "c01" in config else "")
+                       + (" (with ridges: the strain-stiffening membrane's base, and its ridges n0 n1 n2 knot stiffness)"
+                          if "ridges" in config else "")
                        + ", the weft angle (rad from world x), a damping time (s) and membrane strains "
                        + ('smoothed over each vertex (membrane="node")' if membrane == "node"
                           else f'constant per triangle (membrane="{membrane}")')
@@ -709,8 +710,8 @@ def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damp
     spec.activate_plugin(PLUGIN_NAME)
     plugin = spec.add_plugin(name=name, plugin_name=PLUGIN_NAME, active=True)
     config = {name: repr(value) for name, value in shell.parameters.items()}
-    if shell.nonlinear is not None:  # the strain-stiffening terms and their coupling (plugins/README.md)
-        config.update({name: repr(value) for name, value in shell.nonlinear.keys.items()})
+    if shell.nonlinear is not None:  # the ridge membrane: its base as s00 ... s22, and its ridges (plugins/README.md)
+        config.update(shell.nonlinear.plugin_keys)
     config["thickness"] = repr(shell.thickness)
     config["angle"] = repr(float(angle))
     config["damping"] = repr(float(damping))

@@ -136,14 +136,13 @@ def isotropic_stiffness(young_pa: float, poisson: float) -> np.ndarray:
 
 def membrane_to_cover(material: ShellMaterial, stiffening_bound: float = 0.0) -> np.ndarray:
     """``(3, 3)`` (Pa): the membrane tangent the built-in part must cover half of: ``S``, or with a
-    strain-stiffening membrane and ``stiffening_bound > 0`` the largest tangent it reaches while
-    every stiffening strain stays within ``±stiffening_bound``
-    (:meth:`~yarnfit.shell.NonlinearMembrane.largest_tangent`): the stiffening forces are
-    explicit, so the implicit share must grow with them for the step to stay stable."""
-    if material.nonlinear is None or stiffening_bound == 0.0:
+    strain-stiffening membrane the largest tangent it reaches while every Voigt strain stays within
+    ``±stiffening_bound`` (:meth:`~yarnfit.shell.RidgeMembrane.largest_tangent`; at 0, its tangent
+    at zero strain, the one-sided ridges included): the ridges' forces are explicit, so the implicit
+    share must grow with them for the step to stay stable."""
+    if material.nonlinear is None:
         return material.S
-    return material.nonlinear.largest_tangent(material.s00, material.s01, material.s11, material.s22,
-                                              stiffening_bound)
+    return material.nonlinear.largest_tangent(stiffening_bound)
 
 
 def builtin_isotropic(material: ShellMaterial, stiffening_bound: float = 0.0) -> IsotropicPart:
