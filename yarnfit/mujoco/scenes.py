@@ -235,7 +235,7 @@ def build_scene(
             implicitly; the plugin removes it and bends with the material); ``False``: the plugin
             carries all the bending explicitly (``elastic2d="stretch"``, as before issue 15).
         stiffening_bound: the built-in membrane share also covers half the strain-stiffening
-            membrane's tangent up to this stiffening strain (:func:`~yarnfit.mujoco.split.builtin_elasticity`).
+            membrane's tangent up to this strain (:func:`~yarnfit.mujoco.split.builtin_elasticity`).
         membrane: the plugin's membrane strains, one of :data:`MEMBRANES`: ``"node"`` (smoothed over
             each vertex's third of its triangles: no locking on any triangulation) or ``"triangle"``
             (constant per triangle: locks on one-diagonal and unstructured cells); plugins/README.md.

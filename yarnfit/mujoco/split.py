@@ -62,11 +62,13 @@ MUJOCO_POISSON_MAX = 0.5
 # ratio λ*/μ = 2ν/(1 − ν) = 1.92 at 0.49 is already close to its limit of 2 at 0.5, so a larger
 # bound would change the split's trace by well under a percent.
 POISSON_LIMIT = 0.49
-# Stiffening strain (dimensionless) up to which the built-in membrane share covers half the strain-
-# stiffening membrane's tangent (builtin_elasticity). Measured on the hanging 0.5 m cloth (40 × 40,
-# two corners pinned, discrete): polyester jersey's explicit stiffening diverged at 1 and 4 ms with
-# no cover and ran 2 s stably at both with 1 % (so did wool and cotton jersey); 2 % doubles that
-# margin. A larger cover costs drag in the material's soft modes (plugins/README.md, the split's
+# Strain (dimensionless, every Voigt component within ±) up to which the built-in membrane share
+# covers half the strain-stiffening membrane's largest tangent (builtin_elasticity). Measured on the
+# hanging 0.5 m cloth (40 × 40, two corners pinned, discrete) with the earlier polynomial membrane:
+# polyester jersey's explicit stiffening diverged at 1 and 4 ms with no cover and ran 2 s stably at
+# both with 1 % (so did wool and cotton jersey); 2 % doubles that margin. With a ridge membrane
+# (session 35, validation/bench.py plugin_nonlinear_stable_step, 2 cm cells): 16 ms stable with this
+# cover, 2.8 ms without. A larger cover costs drag in the material's soft modes (plugins/README.md, the split's
 # trade-off): on the sphere at 16 ms steps a cotton jersey's centre of mass still stood 1.6, 1.9
 # and 2.5 cm above its 1 ms rest after 2 s with 2, 5 and 10 % cover.
 DEFAULT_STIFFENING_BOUND = 0.02
@@ -212,7 +214,7 @@ def builtin_elasticity(material: ShellMaterial, digits: int = MJCF_DIGITS, *, be
     between ``−K_hinge`` and ``+K_hinge``, and the two discrete operators differ by up to 1.8× on
     some meshes (plugins/README.md), which a full share covers and a half share does not.
 
-    ``stiffening_bound`` (dimensionless stiffening strain, :data:`DEFAULT_STIFFENING_BOUND`): the
+    ``stiffening_bound`` (dimensionless Voigt strain, :data:`DEFAULT_STIFFENING_BOUND`): the
     membrane share covers half the strain-stiffening membrane's tangent up to that strain
     (:func:`membrane_to_cover`; 0: half of S only, as for a linear material).
     """
