@@ -109,8 +109,9 @@ RIDGE_LEAST_KNOT = 2.0e-3
 RIDGE_KNOTS = 6
 # Weight of the rows that ask a ray's tangent not to jump between segments, nor to differ from the
 # opposite ray's at zero (_fit_ridge_membrane), squared, against the samples' relative energy
-# errors, with the jump measured in units of the linear fit's stiffest tangent: a jump of that size costs what a 1e-3 relative error of one sample
-# does, so the data decide wherever they can and the rows only choose among equal fits.
+# errors, with the jump measured in units of the linear fit's stiffest tangent: a jump of that size
+# costs what a 1e-3 relative error of one sample does, so the data decide wherever they can and the
+# rows only choose among equal fits.
 RIDGE_SMOOTHING = 1e-6
 # Iteration limit of the non-negative least squares (an active-set method over a few hundred
 # unknowns: each iteration frees or binds one, so a few times their number; scipy's default is 3x).
@@ -740,7 +741,7 @@ def _fit_ridge_membrane(
     # Likewise a ray's first tangent and its opposite ray's: the tangent at zero strain should not
     # depend on the strain's sign unless the samples say so (a StVK material's compression, which
     # only the uniaxial samples see, came back 50 % soft along some combinations).
-    same = np.flatnonzero(np.all(directions[1:] == directions[:-1], axis=1))
+    same = np.flatnonzero(_same_ray(directions))
     first = np.flatnonzero(knots == 0.0)
     opposite = [(i, j) for i in first for j in first if j > i and np.array_equal(directions[j], -directions[i])]
     pairs = [(k + 1, k) for k in same] + opposite
@@ -800,6 +801,12 @@ def ridge_candidates(eps: np.ndarray, linear: ShellMaterial) -> tuple[np.ndarray
     return np.array(directions), np.array(knots)
 
 
+def _same_ray(directions: np.ndarray) -> np.ndarray:
+    """``(k − 1,)`` bool: candidate ``j + 1`` lies on candidate ``j``'s ray (the next knot along it;
+    :func:`ridge_candidates` keeps a ray's candidates contiguous)."""
+    return np.all(directions[1:] == directions[:-1], axis=1)
+
+
 def _ridge_columns(eps: np.ndarray, directions: np.ndarray, knots: np.ndarray, h: float,
                    axis: int | None = None) -> np.ndarray:
     """``(n, k)``: the energy per reference area (J/m²) of each candidate's *segment* with unit
@@ -811,7 +818,7 @@ def _ridge_columns(eps: np.ndarray, directions: np.ndarray, knots: np.ndarray, h
     ridge stiffnesses are ``c_k = s_k − s_{k−1}``. Candidates of one ray are contiguous, their knots
     increasing (:func:`ridge_candidates`)."""
     following = np.full(len(knots), np.inf)
-    same = np.all(directions[1:] == directions[:-1], axis=1)
+    same = _same_ray(directions)
     following[:-1][same] = knots[1:][same]
     x = eps @ directions.T
     start, end = np.maximum(x - knots, 0.0), np.maximum(x - following, 0.0)
@@ -826,7 +833,7 @@ def _ridge_membrane(directions: np.ndarray, knots: np.ndarray, tangents: np.ndar
     :data:`NEGLIGIBLE_RIDGE_REL` of the stiffest tangent dropped (round-off of segments the data
     left equal)."""
     previous = np.zeros(len(knots))
-    same = np.all(directions[1:] == directions[:-1], axis=1)
+    same = _same_ray(directions)
     previous[1:][same] = tangents[:-1][same]
     stiffness = tangents - previous
     keep = np.abs(stiffness) > NEGLIGIBLE_RIDGE_REL * max(float(np.max(tangents, initial=0.0)), 1e-300)

@@ -24,8 +24,9 @@ Matrix arguments. ``I`` and ``II`` are given as full 2×2 matrices, one ``(2, 2)
 ``2 E_tp = (I_01 + I_10)/2`` and ``2 II_tp = II_01 + II_10``. :meth:`ShellMaterial.energy_gradient`
 returns the derivative with respect to each entry on its own, which is therefore symmetric:
 ``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` with ``σ = S ε`` (``∂ψ/∂ε`` with a ridge membrane) and
-``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]`` with ``m = B κ``. A symmetric variation that changes both ``I_01`` and ``I_10`` by ``d`` changes
-``W`` by ``2 d (dW/dI)_01``, i.e. the usual Frobenius pairing ``⟨dW/dI, dI⟩``.
+``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]`` with ``m = B κ``. A symmetric variation that changes both
+``I_01`` and ``I_10`` by ``d`` changes ``W`` by ``2 d (dW/dI)_01``, i.e. the usual Frobenius pairing
+``⟨dW/dI, dI⟩``.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -233,20 +235,23 @@ class RidgeMembrane:
         q00, q01, q11, q22 = self.base
         return np.array([[q00, q01, 0.0], [q01, q11, 0.0], [0.0, 0.0, q22]])
 
-    @property
+    # The ridges as arrays, built once per membrane (energy, stress and Hessian read them at every
+    # call, a uniaxial pull's Newton steps hundreds of times) and read-only, since they are shared.
+
+    @cached_property
     def directions(self) -> np.ndarray:
-        """``(k, 3)`` unit ridge directions."""
-        return np.array([r[:3] for r in self.ridges], dtype=np.float64).reshape(-1, 3)
+        """``(k, 3)`` unit ridge directions (read-only)."""
+        return _read_only(np.array([r[:3] for r in self.ridges], dtype=np.float64).reshape(-1, 3))
 
-    @property
+    @cached_property
     def knots(self) -> np.ndarray:
-        """``(k,)`` ridge knots."""
-        return np.array([r[3] for r in self.ridges], dtype=np.float64)
+        """``(k,)`` ridge knots (read-only)."""
+        return _read_only(np.array([r[3] for r in self.ridges], dtype=np.float64))
 
-    @property
+    @cached_property
     def stiffness(self) -> np.ndarray:
-        """``(k,)`` ridge stiffnesses (Pa)."""
-        return np.array([r[4] for r in self.ridges], dtype=np.float64)
+        """``(k,)`` ridge stiffnesses (Pa, read-only)."""
+        return _read_only(np.array([r[4] for r in self.ridges], dtype=np.float64))
 
     def _excess(self, eps: np.ndarray) -> np.ndarray:
         """``max(n_j·ε − t_j, 0)`` ``(…, k)``."""
@@ -330,6 +335,11 @@ class RidgeMembrane:
             raise ValueError(f"{where}: {exc}") from None
 
 
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
+
+
 def _tangents_along(ridges) -> dict[tuple[float, float, float], list[tuple[float, float]]]:
     """Per ridge direction (exactly equal ``n``), ``[(knot, tangent past it), …]`` in knot order:
     the running sum of the stiffnesses of the ridges at or below each knot."""
@@ -349,7 +359,7 @@ def _tangents_along(ridges) -> dict[tuple[float, float, float], list[tuple[float
 
 # The strain of the small pull and shear that give a RidgeMembrane's small-strain constants
 # (ShellMaterial.uniaxial_stiffness): below every positive knot the fit places (RIDGE_LEAST_KNOT in
-# yarnfit.fit, 1e-3), where ψ is exactly piecewise quadratic and the secant is the tangent, and far
+# yarnfit.fit, 2e-3), where ψ is exactly piecewise quadratic and the secant is the tangent, and far
 # above the pull solve's round-off (its residual is relative to the pulled strain).
 SMALL_STRAIN = 1e-6
 
@@ -731,10 +741,9 @@ class ShellMaterial:
         # direction: a bias pull of a satin (s22 ~ 1e-5 s00) has a pulling stress below the
         # round-off of its weft and warp stresses.
         stiffest = self.S if self.nonlinear is None else self.nonlinear.largest_tangent(abs(strain))
-        scale = max(self.thickness * max(float(np.abs(stiffest).max()), float(np.abs(self.S).max())) * abs(strain),
-                    1e-300)
-        regularisation = UNIAXIAL_REGULARISATION * self.thickness * max(float(np.abs(stiffest).max()),
-                                                                         float(np.abs(self.S).max()))
+        stiffness = self.thickness * max(float(np.abs(stiffest).max()), float(np.abs(self.S).max()))  # N/m
+        scale = max(stiffness * abs(strain), 1e-300)
+        regularisation = UNIAXIAL_REGULARISATION * stiffness
         for _ in range(UNIAXIAL_NEWTON_STEPS):
             g = gradient(free)
             if np.abs(g).max() <= UNIAXIAL_STRESS_RTOL * scale:

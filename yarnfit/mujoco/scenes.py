@@ -378,8 +378,8 @@ def _header(built: BuiltScene) -> str:
         paragraphs += [f'The cloth is the 2D flex "{flex.name}", driven by the MuJoCo engine plugin {PLUGIN_NAME} '
                        f'(instance "{spec.plugins[0].name}", configured in <extension>): the fitted orthotropic '
                        "shell, membrane s00 s01 s11 s22 and bending b00 b01 b11 b22 (Pa), thickness (m)"
-                       + (" (with ridges: the strain-stiffening membrane's base, and its ridges n0 n1 n2 knot stiffness)"
-                          if "ridges" in config else "")
+                       + (" (with ridges: the strain-stiffening membrane's base, and its ridges n0 n1 n2 "
+                          "knot stiffness)" if "ridges" in config else "")
                        + ", the weft angle (rad from world x), a damping time (s) and membrane strains "
                        + ('smoothed over each vertex (membrane="node")' if membrane == "node"
                           else f'constant per triangle (membrane="{membrane}")')
