@@ -437,6 +437,8 @@ def test_a_periodic_pull_is_the_slope_of_the_uniaxial_samples_energy():
     assert pull.converged and 0.9 < pull.width_ratio < 1.0
     sample = solve_sample(relaxed, SampleSpec.at(Family.WEFT_UNIAXIAL, 0.03))
     assert pull.width_ratio == pytest.approx(math.sqrt(sample.spec.I[1, 1]), rel=1e-12)
+    # The sample keeps the slope the fit's pull rows read: the pull's force over its stretch.
+    assert sample.pull_slope == pytest.approx(pull.force_n_per_m / 1.03, rel=1e-12)
     above, below = (solve_sample(relaxed, SampleSpec.at(Family.WEFT_UNIAXIAL, 0.03 + d)).energy_density
                     for d in (PULL_SPAN, -PULL_SPAN))
     assert pull.force_n_per_m == pytest.approx((above - below) / (2.0 * PULL_SPAN), rel=PULL_RTOL)

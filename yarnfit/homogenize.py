@@ -672,22 +672,31 @@ def _search_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiSta
 
 
 def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:
-    """A uniaxial-tension sample (:func:`_search_uniaxial`): its spec carries the free strain found."""
+    """A uniaxial-tension sample (:func:`_search_uniaxial`): its spec carries the free strain found,
+    and its ``pull_slope`` the derivative of Ū in the pull's Green strain at that width
+    (:func:`_strain_slope`; the free strain is at Ū's minimum, so its own change adds nothing)."""
     search = _search_uniaxial(relaxed, spec, options)
     result, area = search.result, search.tiled.area
     if search.failure is not None:
         warnings.warn(f"uniaxial sample {spec.family} {spec.parameter:+.3g} did not converge: {search.failure} "
                       f"(E⊥ = {search.free:.4g}, {search.iterations} iterations)"
                       + ("" if result is None else f": {result.residual}"), ConvergenceWarning, stacklevel=3)
+    converged = search.failure is None
+    form = SampleSpec(spec.family, search.form, spec.II, spec.parameter)
+    slope = math.nan
+    if result is not None:
+        axis = spec.family.uniaxial_axis
+        slope = _strain_slope(search.tiled.model, result, axis, 0.5 * (form.I[axis, axis] - 1.0), area)
     return SampleResult(
-        spec=SampleSpec(spec.family, search.form, spec.II, spec.parameter),
+        spec=form,
         energy_density=result.energy.internal / area if result is not None else math.nan,
-        converged=search.failure is None,
+        converged=converged,
         residual=result.residual if result is not None else Residual(math.nan, math.nan, math.nan, math.nan),
         iterations=search.iterations,
         seconds=time.perf_counter() - start,
         position=result.state.node_position if result is not None else None,
         stretch_share=stretch_share(result.energy) if result is not None else math.nan,
+        pull_slope=slope,
     )
 
 
@@ -721,32 +730,21 @@ def periodic_pull(relaxed: RelaxedRepeat, axis: int, strain: float,
                   options: QuasiStaticOptions | None = None) -> PeriodicPull:
     """The infinite fabric of ``relaxed`` pulled to the engineering ``strain`` (λ − 1) along
     ``axis`` (0 weft, 1 warp) with the other direction free: the uniaxial-tension sample
-    (:func:`_search_uniaxial`) and its force per reference width ``dŪ/dλ = λ dŪ/dE`` (N/m), ``E``
-    the Green strain along the pull, from the derivative of the potential the solve balanced
-    (:func:`_strain_slope`; the free strain is at Ū's minimum, so its own change adds nothing).
-    The yarn-level reference a cut strip converges to as it widens, and that the fitted shell's
-    :meth:`~yarnfit.shell.ShellMaterial.uniaxial_pull` should follow. Warns
-    :class:`~yarnfit.engine.ConvergenceWarning` when the sample does not converge."""
+    (:func:`_solve_uniaxial`) and its force per reference width ``dŪ/dλ = λ dŪ/dE`` (N/m), ``λ``
+    times the sample's ``pull_slope``. The yarn-level reference a cut strip converges to as it
+    widens, and that the fitted shell's :meth:`~yarnfit.shell.ShellMaterial.uniaxial_pull` should
+    follow. Warns :class:`~yarnfit.engine.ConvergenceWarning` when the sample does not converge."""
     if axis not in (0, 1):
         raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
     strain = positive_number(strain, "strain")
     start = time.perf_counter()
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
     family = next(f for f in UNIAXIAL_FAMILIES if f.uniaxial_axis == axis)
-    search = _search_uniaxial(relaxed, SampleSpec.at(family, strain), options)
-    result, tiled = search.result, search.tiled
-    if search.failure is not None:
-        warnings.warn(f"periodic pull along {family} at {strain:.3g} did not converge: {search.failure}"
-                      + ("" if result is None else f": {result.residual}"), ConvergenceWarning, stacklevel=2)
-    if result is None:
-        return PeriodicPull(axis, strain, math.nan, math.nan, False,
-                            Residual(math.nan, math.nan, math.nan, math.nan), search.iterations,
-                            time.perf_counter() - start)
-    stretch = 1.0 + strain
-    slope = _strain_slope(tiled.model, result, axis, 0.5 * (stretch**2 - 1.0), tiled.area)
-    return PeriodicPull(axis, strain, stretch * slope, math.sqrt(1.0 + 2.0 * search.free),
-                        search.failure is None and result.converged, result.residual, search.iterations,
-                        time.perf_counter() - start)
+    sample = _solve_uniaxial(relaxed, SampleSpec.at(family, strain), options, start)
+    across = 1 - axis
+    width = math.sqrt(sample.I[across, across]) if math.isfinite(sample.pull_slope) else math.nan
+    return PeriodicPull(axis, strain, (1.0 + strain) * sample.pull_slope, width, sample.converged, sample.residual,
+                        sample.iterations, time.perf_counter() - start)
 
 
 # -- sample ranges --------------------------------------------------------------------------------

@@ -241,6 +241,9 @@ class SampleResult:
     and twist; NaN when unknown: no state, a zero Ū, or a file written before it was kept). A
     knit's or a woven's structure gives way by bending its yarns; a share near 1 at a small strain
     says the structure is jammed and the yarn itself is pulled (``docs/design.md`` §4).
+    ``pull_slope`` (N/m = J/m²), uniaxial samples only: ``dŪ/dE`` along the pull at the free
+    width found, ``E`` the pull's Green strain; the force per reference width is ``λ`` times it
+    (NaN for other families, a sample with no state, or a file written before it was kept).
 
     Non-converged samples are reported and never fitted. ValueError names the field at fault."""
 
@@ -252,6 +255,7 @@ class SampleResult:
     seconds: float = 0.0
     position: np.ndarray | None = None
     stretch_share: float = math.nan
+    pull_slope: float = math.nan
 
     def __post_init__(self) -> None:
         if not isinstance(self.spec, SampleSpec):
@@ -276,6 +280,11 @@ class SampleResult:
         object.__setattr__(self, "converged", converged)
         object.__setattr__(self, "energy_density", energy)
         object.__setattr__(self, "stretch_share", share)
+        slope = real_number(self.pull_slope, "SampleResult.pull_slope")
+        if not math.isnan(slope) and self.spec.family.uniaxial_axis is None:
+            raise ValueError(f"SampleResult.pull_slope is only defined for a uniaxial family, got {slope!r} "
+                             f"for {self.spec.family}")
+        object.__setattr__(self, "pull_slope", slope)
 
     # The spec's fields, read through (the fit and the recording work with results).
     @property
@@ -320,6 +329,7 @@ class SampleResult:
             "iterations": self.iterations,
             "seconds": self.seconds,
             "stretch_share": finite_or_none(self.stretch_share),
+            "pull_slope_n_per_m": finite_or_none(self.pull_slope),
         }
 
     @classmethod
@@ -346,7 +356,8 @@ class SampleResult:
                        Residual(*(number(residual.get(key), f"residual.{key}")
                                   for key in ("force", "torque", "energy_change", "penetration"))),
                        int(data.get("iterations", 0)), float(data.get("seconds", 0.0)),
-                       stretch_share=number(data.get("stretch_share"), "stretch_share"))
+                       stretch_share=number(data.get("stretch_share"), "stretch_share"),
+                       pull_slope=number(data.get("pull_slope_n_per_m"), "pull_slope_n_per_m"))
         except (TypeError, ValueError) as exc:
             message = str(exc)
             raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None
