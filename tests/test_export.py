@@ -199,6 +199,20 @@ def test_fallback_says_when_it_limits_the_poisson_ratio(s01, expected):
     assert any("Poisson ratio limited" in note for note in fallback.notes)
 
 
+def test_fallback_of_ratios_of_opposite_signs_is_zero_and_says_so():
+    # A ridge membrane whose weft pull widens it and whose warp pull narrows it (a knit's courses
+    # and wales can): ridge A along (1, -1)/√2 couples negatively once the weft leads, ridge B along
+    # (1, 1)/√2 positively in both pulls, A the stiffer.
+    diagonal = 1.0 / math.sqrt(2.0)
+    ridges = ((diagonal, -diagonal, 0.0, 0.0, 0.6 * FABRIC.s00), (diagonal, diagonal, 0.0, 0.0, 0.2 * FABRIC.s00))
+    material = dataclasses.replace(FABRIC, nonlinear=RidgeMembrane((FABRIC.s00, 0.0, FABRIC.s11, FABRIC.s22), ridges))
+    eng = material.engineering()
+    assert eng["poisson_weft"] < 0.0 < eng["poisson_warp"]
+    fallback = isotropic_fallback(material)
+    assert fallback.poisson == 0.0
+    assert any("opposite signs" in note for note in fallback.notes)
+
+
 # -- scenes ------------------------------------------------------------------------------------
 
 

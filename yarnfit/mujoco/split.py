@@ -240,8 +240,9 @@ def isotropic_fallback(material: ShellMaterial) -> IsotropicFallback:
       stiffness with free width is ``E h``);
     * bending: ``E h³/(12(1 − ν²)) = √(bending_weft · bending_warp)`` (N·m; MuJoCo stores
       ``D κ²/2`` per area for a cylindrical bend, ours ``½ bending κ²``);
-    * ``ν = √(poisson_weft · poisson_warp)``, limited to ``[0, POISSON_LIMIT]``: a limited ratio
-      is said so in ``notes``, never silently.
+    * ``ν = √(poisson_weft · poisson_warp)``, limited to ``[0, POISSON_LIMIT]`` (0 when the two
+      have opposite signs, as a ridge membrane's can): a limited ratio is said so in ``notes``,
+      never silently.
 
     Hence ``h = √(12 (1 − ν²) D / (E h))`` and ``E = (E h)/h``. An isotropic material whose
     bending is Kirchhoff's (``b00 = b11 = E/(12(1 − ν²))``) returns itself.
@@ -253,12 +254,21 @@ def isotropic_fallback(material: ShellMaterial) -> IsotropicFallback:
     stretch = math.sqrt(eng["weft_stretch_n_per_m"] * eng["warp_stretch_n_per_m"])
     bending = math.sqrt(eng["bending_weft_nm"] * eng["bending_warp_nm"])
     notes = []
-    product = eng["poisson_weft"] * eng["poisson_warp"]  # = s01²/(s00 s11) ≥ 0; s01 < 0 flips both
-    requested = math.copysign(math.sqrt(product), material.s01)
-    poisson = min(max(requested, 0.0), POISSON_LIMIT)
-    if poisson != requested:
-        notes.append(f"Poisson ratio limited: the material's geometric mean √(ν_weft ν_warp) = {requested:.4g} "
-                     f"is outside [0, {POISSON_LIMIT}] (MuJoCo accepts [0, {MUJOCO_POISSON_MAX})); used {poisson:g}")
+    # For StVK the product is s01²/(s00 s11) >= 0 and s01 < 0 flips both ratios. A ridge membrane's
+    # small-strain ratios come from a pull in each direction (one-sided ridges at zero), and a knit
+    # can contract across a course-wise pull and widen across a wale-wise one: no isotropic ratio
+    # has both, so the fallback takes 0 and says so.
+    poisson_weft, poisson_warp = eng["poisson_weft"], eng["poisson_warp"]
+    if poisson_weft * poisson_warp < 0.0:
+        poisson = 0.0
+        notes.append(f"Poisson ratio limited: the material's ν_weft = {poisson_weft:.4g} and ν_warp = "
+                     f"{poisson_warp:.4g} have opposite signs, which no isotropic material has; used 0")
+    else:
+        requested = math.copysign(math.sqrt(poisson_weft * poisson_warp), poisson_weft + poisson_warp)
+        poisson = min(max(requested, 0.0), POISSON_LIMIT)
+        if poisson != requested:
+            notes.append(f"Poisson ratio limited: the material's geometric mean √(ν_weft ν_warp) = {requested:.4g} "
+                         f"is outside [0, {POISSON_LIMIT}] (MuJoCo accepts [0, {MUJOCO_POISSON_MAX})); used {poisson:g}")
     thickness = math.sqrt(12.0 * (1.0 - poisson**2) * bending / stretch)
     young = stretch / thickness
     ratios = {
