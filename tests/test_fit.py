@@ -623,15 +623,18 @@ def test_the_stretch_share_reads_back_and_bad_ones_are_refused(share):
             dataclasses.replace(result, stretch_share=bad)
 
 
-def test_a_uniaxial_samples_pull_slope_reads_back_and_other_families_have_none():
+def test_a_uniaxial_samples_slopes_read_back_and_other_families_have_none():
     I, II = forms("weft_uniaxial", 0.05)
     result = SampleResult(SampleSpec("weft_uniaxial", I, II, 0.05), 1.0, True,
-                          Residual(1e-10, 0.0, 0.0, 0.0), pull_slope=42.5)
+                          Residual(1e-10, 0.0, 0.0, 0.0), pull_slope=42.5, across_slope=-1.5)
     data = json.loads(json.dumps(result.to_dict()))
-    assert SampleResult.from_dict(data).pull_slope == 42.5
-    del data["pull_slope_n_per_m"]  # a file written before the slope was kept
+    back = SampleResult.from_dict(data)
+    assert (back.pull_slope, back.across_slope) == (42.5, -1.5)
+    del data["pull_slope_n_per_m"], data["across_slope_n_per_m"]  # a file written before they were kept
     assert math.isnan(SampleResult.from_dict(data).pull_slope)
+    assert math.isnan(SampleResult.from_dict(data).across_slope)
     I, II = forms("weft_stretch", 0.05)
-    with pytest.raises(ValueError, match="pull_slope is only defined for a uniaxial family"):
-        SampleResult(SampleSpec("weft_stretch", I, II, 0.05), 1.0, True, Residual(1e-10, 0.0, 0.0, 0.0),
-                     pull_slope=1.0)
+    for name in ("pull_slope", "across_slope"):
+        with pytest.raises(ValueError, match=f"{name} is only defined for a uniaxial family"):
+            SampleResult(SampleSpec("weft_stretch", I, II, 0.05), 1.0, True, Residual(1e-10, 0.0, 0.0, 0.0),
+                         **{name: 1.0})

@@ -23,10 +23,12 @@ from yarnfit.fabric import Fabric
 from yarnfit.fit import fit_shell
 from yarnfit.homogenize import (
     CONTINUATION_HALVINGS,
+    FREE_SLOPE_RTOL,
     SurfaceMap,
     _FreeStrainPoint,
     _next_free_strain,
     _solve_with_continuation,
+    _transverse_slope,
     default_ranges,
     periodic_pull,
     solve_sample,
@@ -437,8 +439,15 @@ def test_a_periodic_pull_is_the_slope_of_the_uniaxial_samples_energy():
     assert pull.converged and 0.9 < pull.width_ratio < 1.0
     sample = solve_sample(relaxed, SampleSpec.at(Family.WEFT_UNIAXIAL, 0.03))
     assert pull.width_ratio == pytest.approx(math.sqrt(sample.spec.I[1, 1]), rel=1e-12)
-    # The sample keeps the slope the fit's pull rows read: the pull's force over its stretch.
+    # The sample keeps the slope the fit's pull rows read: the pull's force over its stretch; and
+    # across the pull its search's slope at the free width, which a minimum inside the interval
+    # holds below FREE_SLOPE_RTOL of the pure stretch's (the slope at E⊥ = 0).
     assert sample.pull_slope == pytest.approx(pull.force_n_per_m / 1.03, rel=1e-12)
+    pure = SampleSpec.at(Family.WEFT_STRETCH, 0.03)
+    tiled, result, _ = _solve_with_continuation(relaxed, pure.I, pure.II, QuasiStaticOptions(max_iterations=600))
+    across_pure = _transverse_slope(tiled.model, result, 0, 0.0, tiled.area)
+    assert across_pure > 0.0  # it contracts
+    assert abs(sample.across_slope) <= FREE_SLOPE_RTOL * across_pure
     above, below = (solve_sample(relaxed, SampleSpec.at(Family.WEFT_UNIAXIAL, 0.03 + d)).energy_density
                     for d in (PULL_SPAN, -PULL_SPAN))
     assert pull.force_n_per_m == pytest.approx((above - below) / (2.0 * PULL_SPAN), rel=PULL_RTOL)

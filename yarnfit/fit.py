@@ -37,8 +37,9 @@ a :class:`~yarnfit.shell.RidgeMembrane`: a sum of one-sided quadratic ridges alo
 strain directions (:func:`ridge_candidates`), whose energy is linear in each ray's tangent
 stiffness between consecutive knots. Those tangents, each ``>= 0`` (convex by construction), are
 fitted to the *relative* energy error of every membrane sample (weight ``1/Ū²``, so a sample at
-0.1 % strain counts as much as one at the range), to each uniaxial sample's zero transverse
-stress and to its stress along the pull (the sample's ``pull_slope``, where known), by
+0.1 % strain counts as much as one at the range), to each uniaxial sample's transverse stress
+(zero at a free width; the sample's ``across_slope`` where known) and to its stress along the
+pull (its ``pull_slope``, where known), by
 non-negative least squares, with weak rows that choose among equal fits the one with
 the fewest kinks (:data:`RIDGE_SMOOTHING`). The material's ``S`` stays the linear fit; the
 bending group is the linear fit's in both models.
@@ -738,8 +739,12 @@ def _fit_ridge_membrane(
                                [float(RESIDUAL_STRESS_NAMES["membrane"].index(n) == axis) for n in stress_names]]) \
             * abs(eps[i, pulled]) / scale[i]
 
+    # Where the search stopped at an end of its interval (a knit that would widen under a
+    # wale-wise pull stops at E⊥ = 0), the stress across is the sample's across_slope, not 0.
     uniaxial = [i for i, s in enumerate(samples) if s.family.uniaxial_axis is not None]
-    stresses = [(stress_row(i, 1 - samples[i].family.uniaxial_axis), 0.0) for i in uniaxial]
+    stresses = [(stress_row(i, 1 - samples[i].family.uniaxial_axis),
+                 (samples[i].across_slope if math.isfinite(samples[i].across_slope) else 0.0)
+                 * abs(eps[i, samples[i].family.uniaxial_axis]) / scale[i]) for i in uniaxial]
     stresses += [(stress_row(i, samples[i].family.uniaxial_axis),
                   samples[i].pull_slope * abs(eps[i, samples[i].family.uniaxial_axis]) / scale[i])
                  for i in uniaxial if math.isfinite(samples[i].pull_slope)]

@@ -554,7 +554,9 @@ def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: fl
 class _UniaxialSearch:
     """Outcome of :func:`_search_uniaxial`: the free Green strain E⊥ chosen, the solve there (its
     quasi-static result, ``None`` if none was usable) on ``tiled``, the Newton iterations of every
-    trial, and why it did not converge (``None`` if it did)."""
+    trial, why it did not converge (``None`` if it did), and Ū's slope dŪ/dE⊥ at the E⊥ chosen
+    (J/m²; ~0 at a minimum, the slope where the search stopped at an end of its interval; NaN
+    without a converged solve there)."""
 
     free: float
     form: np.ndarray
@@ -562,6 +564,7 @@ class _UniaxialSearch:
     tiled: TiledRepeat
     iterations: int
     failure: str | None
+    free_slope: float = math.nan
 
 
 def _search_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions) -> _UniaxialSearch:
@@ -668,13 +671,16 @@ def _search_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiSta
         "lower end": "the free strain reached the search interval's end with Ū still falling",
         "out of solves": "the search ran out of solves",
         "failed": "the solves near the best free strain did not converge"}[verdict]
-    return _UniaxialSearch(free, form(free), result, tiled, iterations, failure)
+    point = solved[free][2]
+    return _UniaxialSearch(free, form(free), result, tiled, iterations, failure,
+                           point.slope if point is not None else math.nan)
 
 
 def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:
     """A uniaxial-tension sample (:func:`_search_uniaxial`): its spec carries the free strain found,
-    and its ``pull_slope`` the derivative of Ū in the pull's Green strain at that width
-    (:func:`_strain_slope`; the free strain is at Ū's minimum, so its own change adds nothing)."""
+    its ``pull_slope`` the derivative of Ū in the pull's Green strain at that width
+    (:func:`_strain_slope`; the free strain is at Ū's minimum, so its own change adds nothing) and
+    its ``across_slope`` the search's slope across the pull there."""
     search = _search_uniaxial(relaxed, spec, options)
     result, area = search.result, search.tiled.area
     if search.failure is not None:
@@ -697,6 +703,7 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
         position=result.state.node_position if result is not None else None,
         stretch_share=stretch_share(result.energy) if result is not None else math.nan,
         pull_slope=slope,
+        across_slope=search.free_slope,
     )
 
 

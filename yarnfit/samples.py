@@ -244,6 +244,9 @@ class SampleResult:
     ``pull_slope`` (N/m = J/m²), uniaxial samples only: ``dŪ/dE`` along the pull at the free
     width found, ``E`` the pull's Green strain; the force per reference width is ``λ`` times it
     (NaN for other families, a sample with no state, or a file written before it was kept).
+    ``across_slope`` (N/m), uniaxial samples only: ``dŪ/dE⊥`` across the pull at that width, ~0
+    where the search found Ū's minimum, and not where it stopped at an end of its interval (a
+    fabric that would widen stops at E⊥ = 0 with a negative slope); NaN as ``pull_slope``.
 
     Non-converged samples are reported and never fitted. ValueError names the field at fault."""
 
@@ -256,6 +259,7 @@ class SampleResult:
     position: np.ndarray | None = None
     stretch_share: float = math.nan
     pull_slope: float = math.nan
+    across_slope: float = math.nan
 
     def __post_init__(self) -> None:
         if not isinstance(self.spec, SampleSpec):
@@ -280,11 +284,12 @@ class SampleResult:
         object.__setattr__(self, "converged", converged)
         object.__setattr__(self, "energy_density", energy)
         object.__setattr__(self, "stretch_share", share)
-        slope = real_number(self.pull_slope, "SampleResult.pull_slope")
-        if not math.isnan(slope) and self.spec.family.uniaxial_axis is None:
-            raise ValueError(f"SampleResult.pull_slope is only defined for a uniaxial family, got {slope!r} "
-                             f"for {self.spec.family}")
-        object.__setattr__(self, "pull_slope", slope)
+        for name in ("pull_slope", "across_slope"):
+            slope = real_number(getattr(self, name), f"SampleResult.{name}")
+            if not math.isnan(slope) and self.spec.family.uniaxial_axis is None:
+                raise ValueError(f"SampleResult.{name} is only defined for a uniaxial family, got {slope!r} "
+                                 f"for {self.spec.family}")
+            object.__setattr__(self, name, slope)
 
     # The spec's fields, read through (the fit and the recording work with results).
     @property
@@ -330,6 +335,7 @@ class SampleResult:
             "seconds": self.seconds,
             "stretch_share": finite_or_none(self.stretch_share),
             "pull_slope_n_per_m": finite_or_none(self.pull_slope),
+            "across_slope_n_per_m": finite_or_none(self.across_slope),
         }
 
     @classmethod
@@ -357,7 +363,8 @@ class SampleResult:
                                   for key in ("force", "torque", "energy_change", "penetration"))),
                        int(data.get("iterations", 0)), float(data.get("seconds", 0.0)),
                        stretch_share=number(data.get("stretch_share"), "stretch_share"),
-                       pull_slope=number(data.get("pull_slope_n_per_m"), "pull_slope_n_per_m"))
+                       pull_slope=number(data.get("pull_slope_n_per_m"), "pull_slope_n_per_m"),
+                       across_slope=number(data.get("across_slope_n_per_m"), "across_slope_n_per_m"))
         except (TypeError, ValueError) as exc:
             message = str(exc)
             raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None
