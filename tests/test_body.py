@@ -61,6 +61,11 @@ def test_scene_compiles_with_the_patterns_rest_and_motion_is_smooth():
         rest = model.flexedge_length0[model.flex_edgeadr[f]:model.flex_edgeadr[f] + model.flex_edgenum[f]]
         assert rest.max() <= body.QUICK_SPACING * (1 + 1e-6)  # the pattern's cells, not the flat panels' seam gap
         assert start.max() > 2 * rest.max()
+    # Garment–body contacts at the body's time constant: MuJoCo mixes a contact's solref from both
+    # sides, so the flexes carry the capsules' own.
+    capsules = model.geom_solref[model.geom_type == mujoco.mjtGeom.mjGEOM_CAPSULE]
+    assert len(capsules) and np.all(capsules == capsules[0])
+    np.testing.assert_array_equal(model.flex_solref, np.tile(capsules[0], (model.nflex, 1)))
     assert motion_targets(0.0) == {} or all(v == 0 for v in motion_targets(0.0).values())
     # Keyframes are reached exactly, and the script is continuous.
     assert abs(motion_targets(2.0)["l_shoulder"] + np.radians(60)) < 1e-12

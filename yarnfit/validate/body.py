@@ -97,6 +97,13 @@ FRAME_S = 1.0 / 30  # s between recorded frames
 # Rerun's Capsules3D run along +z; each capsule is turned from it onto its geom's axis.
 UP = np.array([0.0, 0.0, 1.0])
 PENETRATION_TARGET = 0.005  # m: no vertex more than 5 mm inside a body geom (issue 15)
+# The garments' contact time constant and damping ratio: the humanoid's capsules' (mjcf/humanoid.xml,
+# 5 ms). MuJoCo mixes a contact's solref from both sides (solmix 1 each: the mean), so with the
+# flex's default 20 ms the contacts ran at 12.5 ms, not the body's 5. Measured on the cotton twill
+# with its ridge membrane (session 36): penetration 7.86 mm at 12.5 ms against 1.25 mm at 5 ms; at
+# 12.5 ms it grew with the split's built-in stiffness (E t 37, 72, 106, 160 kN/m: 4.05, 5.14, 6.35,
+# 7.86 mm; under the discrete integrator the contacts are solved in the metric M + h² K).
+GARMENT_CONTACT_SOLREF = (0.005, 1.0)
 DISTANCE_TARGET = 0.15  # m
 # Creases: a hinge away from the seams folded beyond this (degrees) between its two triangles. A
 # garment lying smooth on the body folds its hinges by a few degrees per cell; a crease or a
@@ -245,6 +252,7 @@ def build_body_scene(material_shirt: ClothMaterial, material_pants: ClothMateria
         flex = add_cloth_flex(spec, kind, points, garment.triangles, material, damping=damping,
                               friction=DEFAULT_FRICTION, contype=1, conaffinity=0, rest_uv=garment.corner_uv,
                               fallback=native)
+        flex.solref = list(GARMENT_CONTACT_SOLREF)
         if kind == "pants" and belt:
             top = garment.points[:, 2].max()  # the flat panels' waistband (z is the pattern's)
             waist = np.flatnonzero((garment.points[:, 2] > top - 1e-9)
