@@ -43,7 +43,7 @@ from .engine.contact_lagrangian import contact_potential
 from .engine.energy import internal_forces
 from .engine.model import aligned_frames
 from .engine.rotations import rotate_frames
-from .engine.tiling import CurvedTiling, retile, scale_images
+from .engine.tiling import CurvedTiling, retile, transform_images
 from .relax import RelaxedRepeat, yarn_centroid_constraints
 from .samples import UNIAXIAL_FAMILIES, SampleRanges, SampleResult, SampleSpec, stretch_share
 from .shell import as_first_fundamental_form, as_second_fundamental_form
@@ -420,7 +420,7 @@ FREE_STRAIN_PROBE = 10.0 * FREE_STRAIN_TOLERANCE
 # fit can use.
 PLATEAU_RTOL = 1e-3
 # Step of a Green strain for the slope of Ū along it (dŪ/dE⊥ across a uniaxial sample, dŪ/dE
-# along its pull: central differences along the affine path, see :func:`_strain_slope`): nodes
+# along its pull: central differences along the affine path, see :func:`_green_slope`): nodes
 # move ~1e-7 of the repeat (~1e-10 m), inside the contact smoothing band (1.6e-8 m for an 80 µm
 # yarn) so the difference stays on one smooth branch, and the energy's round-off (~1e-13
 # relative) costs ~1e-6 of the slope. Measured on HYLC's
@@ -437,31 +437,50 @@ class _FreeStrainPoint:
     slope: float
 
 
-def _strain_slope(model: RodModel, result, axis: int, green: float, area: float) -> float:
-    """dŪ/dE_aa (J/m²) at ``result``, the equilibrium on ``model`` (a flat sample's tiling) whose
-    Green strain along ``axis`` (0 weft, 1 warp) is ``green``. By the envelope theorem it is the
-    derivative of the potential the solve balanced (rods, plus the contacts' augmented Lagrangian
-    with the multipliers and penalties it ended with) along any path of configurations that keeps
-    C_RVE; here the affine one, every node and image scaled along ``axis`` by
-    λ(E ± h) / λ(E) (:func:`~yarnfit.engine.tiling.scale_images`,
-    :meth:`~yarnfit.engine.contact.ContactPairs.scaled`). Frames stay as they are: they are
+def _green_slope(model: RodModel, result, form: np.ndarray, change: np.ndarray, area: float) -> float:
+    """dŪ/dh (J/m²) at ``result``, the equilibrium on ``model`` (a flat sample's tiling, first form
+    ``form`` ``(2, 2)``), along the Green strain ``E + h change`` (``change`` ``(2, 2)``
+    symmetric: ``e_a e_aᵀ`` gives dŪ/dE_aa, the off-diagonal ``½ (e_0 e_1ᵀ + e_1 e_0ᵀ)`` dŪ/d(2 E01)).
+    By the envelope theorem it is the derivative of the potential the solve balanced (rods, plus
+    the contacts' augmented Lagrangian with the multipliers and penalties it ended with) along any
+    path of configurations that keeps C_RVE; here the affine one, every node and image mapped by
+    ``√(I + 2 h change) √I⁻¹`` in the plane (the flat surface's own map is ``√I``:
+    :func:`~yarnfit.engine.tiling.transform_images`,
+    :meth:`~yarnfit.engine.contact.ContactPairs.transformed`). Frames stay as they are: they are
     balanced, so turning them changes the potential only to second order."""
+    form = np.asarray(form, dtype=np.float64)
+    inverse = np.linalg.inv(_spd_sqrt(form))
     values = []
     for step in (STRAIN_SLOPE_STEP, -STRAIN_SLOPE_STEP):
-        scale = np.ones(3)
-        scale[axis] = math.sqrt((1.0 + 2.0 * (green + step)) / (1.0 + 2.0 * green))
-        scaled = scale_images(model, scale)
-        position = result.state.node_position * scale
-        contacts = replace(result.contacts, pairs=result.contacts.pairs.scaled(scale))
-        rods = sum(internal_forces(scaled, position, result.state.edge_quaternion).terms)
-        values.append(rods + contact_potential(scaled, position, contacts))
+        matrix = np.eye(3)
+        matrix[:2, :2] = _spd_sqrt(form + 2.0 * step * np.asarray(change, dtype=np.float64)) @ inverse
+        mapped = transform_images(model, matrix)
+        position = result.state.node_position @ matrix.T
+        contacts = replace(result.contacts, pairs=result.contacts.pairs.transformed(matrix))
+        rods = sum(internal_forces(mapped, position, result.state.edge_quaternion).terms)
+        values.append(rods + contact_potential(mapped, position, contacts))
     return (values[0] - values[1]) / (2.0 * STRAIN_SLOPE_STEP * area)
+
+
+def _spd_sqrt(matrix: np.ndarray) -> np.ndarray:
+    """The symmetric square root of a symmetric positive-definite ``(2, 2)`` matrix."""
+    w, v = np.linalg.eigh(matrix)
+    return (v * np.sqrt(w)) @ v.T
+
+
+def _axis_change(axis: int) -> np.ndarray:
+    """``e_a e_aᵀ``: the Green strain direction of E_aa (:func:`_green_slope`)."""
+    change = np.zeros((2, 2))
+    change[axis, axis] = 1.0
+    return change
 
 
 def _transverse_slope(model: RodModel, result, axis: int, free: float, area: float) -> float:
     """dŪ/dE⊥ (J/m²) of a sample pulled along ``axis`` at the free Green strain E⊥ = ``free``
-    (:func:`_strain_slope` across the pull)."""
-    return _strain_slope(model, result, 1 - axis, free, area)
+    (:func:`_green_slope` across the pull; the form's pulled entry does not enter: it is diagonal)."""
+    form = np.eye(2)
+    form[1 - axis, 1 - axis] = 1.0 + 2.0 * free
+    return _green_slope(model, result, form, _axis_change(1 - axis), area)
 
 
 def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: float) -> tuple[float | None, str]:
@@ -679,7 +698,7 @@ def _search_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiSta
 def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:
     """A uniaxial-tension sample (:func:`_search_uniaxial`): its spec carries the free strain found,
     its ``pull_slope`` the derivative of Ū in the pull's Green strain at that width
-    (:func:`_strain_slope`; the free strain is at Ū's minimum, so its own change adds nothing) and
+    (:func:`_green_slope`; the free strain is at Ū's minimum, so its own change adds nothing) and
     its ``across_slope`` the search's slope across the pull there."""
     search = _search_uniaxial(relaxed, spec, options)
     result, area = search.result, search.tiled.area
@@ -692,7 +711,7 @@ def _solve_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStat
     slope = math.nan
     if result is not None:
         axis = spec.family.uniaxial_axis
-        slope = _strain_slope(search.tiled.model, result, axis, 0.5 * (form.I[axis, axis] - 1.0), area)
+        slope = _green_slope(search.tiled.model, result, form.I, _axis_change(axis), area)
     return SampleResult(
         spec=form,
         energy_density=result.energy.internal / area if result is not None else math.nan,

@@ -57,11 +57,12 @@ class ContactPairs:
         return ContactPairs(*_contact_kernels.gather_pairs(index, self.pairs, self.images, self.rotation,
                                                            self.translation))
 
-    def scaled(self, scale: np.ndarray) -> "ContactPairs":
-        """The pairs with their maps where they are when the whole tiled configuration is scaled by
-        ``diag(scale)`` (``(3,)``): the translations scale, the rotations stay. Only for maps
-        that turn nothing (a flat tiling's), as :func:`~yarnfit.engine.tiling.scale_images`."""
-        return ContactPairs(self.pairs, self.images, self.rotation, self.translation * np.asarray(scale))
+    def transformed(self, matrix: np.ndarray) -> "ContactPairs":
+        """The pairs with their maps where they are when the whole tiled configuration is mapped by
+        the linear ``matrix`` (``(3, 3)``): the translations map, the rotations stay. Only for maps
+        that turn nothing (a flat tiling's), as :func:`~yarnfit.engine.tiling.transform_images`."""
+        return ContactPairs(self.pairs, self.images, self.rotation,
+                            np.ascontiguousarray(self.translation @ np.asarray(matrix, dtype=np.float64).T))
 
     def kernel_args(self) -> tuple:
         """``(pairs, rotation, translation)`` as the contact kernels take them."""

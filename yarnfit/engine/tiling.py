@@ -122,18 +122,21 @@ def retile(model: RodModel, tiling: CurvedTiling, lattice: np.ndarray) -> RodMod
                    joint_frame_rotation=as_frames(Rotation.from_matrix(joint_rotation)))
 
 
-def scale_images(model: RodModel, scale: np.ndarray) -> RodModel:
+def transform_images(model: RodModel, matrix: np.ndarray) -> RodModel:
     """``model`` with its periodic images where they are when the whole tiled configuration is
-    scaled by ``diag(scale)`` (``(3,)``): an image's translation, every ghost edge's end offset
-    and the lattice scale with it. Only for tilings of translations (flat samples, whose maps turn
-    nothing): a turning map does not commute with the scaling."""
-    scale = np.asarray(scale, dtype=np.float64)
+    mapped by the linear ``matrix`` (``(3, 3)``, positions ``x -> matrix x``: a stretch, a shear):
+    an image's translation, every ghost edge's end offset and the lattice map with it. Only for
+    tilings of translations (flat samples, whose maps turn nothing): a turning map does not commute
+    with the map."""
+    matrix = np.asarray(matrix, dtype=np.float64)
+    if matrix.shape != (3, 3):
+        raise ValueError(f"matrix must be (3, 3), got {matrix.shape}")
     if model.tiling is not None:
         if np.abs(model.tiling.rotation - np.eye(3)).max(initial=0.0) > FLAT_TURN_TOLERANCE:
-            raise ValueError("scale_images needs a tiling of translations (its maps turn the images)")
+            raise ValueError("transform_images needs a tiling of translations (its maps turn the images)")
         model = replace(model, tiling=CurvedTiling(model.tiling.images, model.tiling.rotation,
-                                                   model.tiling.translation * scale))
-    return replace(model, lattice=model.lattice * scale, edge_offset=np.ascontiguousarray(model.edge_offset * scale))
+                                                   np.ascontiguousarray(model.tiling.translation @ matrix.T)))
+    return replace(model, lattice=model.lattice @ matrix.T, edge_offset=np.ascontiguousarray(model.edge_offset @ matrix.T))
 
 
 def yarn_strips(model: RodModel, position: np.ndarray, tile=(0, 0)) -> list[np.ndarray]:
