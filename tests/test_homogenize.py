@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pytest
+import scipy.optimize
 
 from yarnfit.engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticSolver
 from yarnfit.engine.energy import internal_forces
@@ -28,10 +29,12 @@ from yarnfit.homogenize import (
     _FreeStrainPoint,
     _next_free_strain,
     _green_slope,
+    _search_bias,
     _solve_with_continuation,
     _spd_sqrt,
     _transverse_slope,
     default_ranges,
+    periodic_bias_pull,
     periodic_pull,
     solve_sample,
     solve_samples,
@@ -90,6 +93,18 @@ PULL_SPAN = 1e-3
 # difference's truncation and the re-solved samples' contact configurations: 0.74 % measured on the
 # plain weave at 2 E01 = 0.02.
 SHEAR_SLOPE_RTOL = 0.01
+# A bias pull's force against the central difference of the least Ū its searches find at λ ±
+# PULL_SPAN: 1.3 % at 1 % and 3.1 % at 3 % measured on the plain weave (the difference's
+# truncation, and searches that each stop within their step tolerance on a woven whose bias force
+# is small against its coupling to the free strains).
+BIAS_PULL_RTOL = 0.05
+# The search's least Ū against Nelder–Mead's on solves from scratch: 0.5 % and 0.7 % above it
+# measured (warm-started solves follow a branch of the woven's contact configurations a little
+# above the one solves from the affine start find).
+BIAS_ENERGY_RTOL = 0.01
+# Straight yarns on the bias: force over the weft pull's, 1e-12 and 3e-7 measured (round-off of a
+# flat energy); anything the yarns resisted would be O(1).
+BIAS_FREE_RATIO = 1e-5
 # A square plain weave: weft and warp constants "equal within 5 %".
 SYMMETRY_RTOL = 0.05
 # The undeformed sample against a 1 % weft stretch: touching contacts without multipliers push with
@@ -441,18 +456,25 @@ def test_straight_parallel_yarns_give_the_closed_form_stiffness(model, breaking_
     assert any("weft_uniaxial sample" in note for note in fit_shell(results, shell_thickness(relaxed)).notes)
 
 
-def test_a_periodic_pull_of_straight_yarns_is_their_tensile_rigidity():
-    # Straight weft yarns, spacing d = 3r, not touching: pulled along them the sheet's force per
-    # width is EA ε / d exactly (the rod's energy is quadratic in its engineering strain) and
-    # nothing holds the width, which stays as it is; across them nothing resists at all.
-    r, d, E = 1e-4, 3e-4, 2e9
+@functools.lru_cache(maxsize=None)
+def straight_yarns(E=2e9, r=1e-4, d=3e-4):
+    """Straight weft yarns of a linear fibre (Young's modulus E), radius r, spacing d, not
+    touching, relaxed as solid rods."""
     fiber = Fiber(name="linear", density_kg_m3=1000.0, young_min_pa=E, young_max_pa=E, breaking_strain=0.1,
                   poisson=0.3, friction=0.2, fineness_dtex=2.0, flexural_rigidity_nm2_per_tex2=0.5e-9,
                   torsional_rigidity_nm2_per_tex2=0.2e-9)
     x = np.linspace(0.0, 2e-3, 16, endpoint=False)
     points = np.column_stack([x, np.full_like(x, 0.5 * d), np.zeros_like(x)])
     pattern = YarnPattern.from_yarns("parallel", "woven", (2e-3, d), r, [(points, (1, 0))])
-    relaxed = relax_pattern(pattern, fiber, shrink=1.0, yarn=YarnConstruction(model="solid"))
+    return relax_pattern(pattern, fiber, shrink=1.0, yarn=YarnConstruction(model="solid"))
+
+
+def test_a_periodic_pull_of_straight_yarns_is_their_tensile_rigidity():
+    # Straight weft yarns, spacing d = 3r, not touching: pulled along them the sheet's force per
+    # width is EA ε / d exactly (the rod's energy is quadratic in its engineering strain) and
+    # nothing holds the width, which stays as it is; across them nothing resists at all.
+    r, d, E = 1e-4, 3e-4, 2e9
+    relaxed = straight_yarns(E, r, d)
     for strain in (0.01, 0.05):
         pull = periodic_pull(relaxed, 0, strain)
         assert pull.converged
@@ -481,6 +503,45 @@ def test_a_periodic_pull_is_the_slope_of_the_uniaxial_samples_energy():
     above, below = (solve_sample(relaxed, SampleSpec.at(Family.WEFT_UNIAXIAL, 0.03 + d)).energy_density
                     for d in (PULL_SPAN, -PULL_SPAN))
     assert pull.force_n_per_m == pytest.approx((above - below) / (2.0 * PULL_SPAN), rel=PULL_RTOL)
+
+
+def test_a_periodic_bias_pull_of_straight_yarns_meets_no_resistance():
+    # Straight weft yarns alone: pulled on the bias with the width and the pull frame's shear free,
+    # the sheet turns its yarns out of the way (a line of minima at Ū = 0), so the force is nil
+    # against the weft pull's E A ε / d.
+    relaxed = straight_yarns()
+    for strain in (0.01, 0.05):
+        pull = periodic_bias_pull(relaxed, strain)
+        assert pull.converged and pull.direction == "bias"
+        assert abs(pull.force_n_per_m) <= BIAS_FREE_RATIO * periodic_pull(relaxed, 0, strain).force_n_per_m
+
+
+def test_a_periodic_bias_pull_is_the_slope_of_its_searches_energy():
+    # Independent of the envelope argument: the least Ū of searches on either side, and of the
+    # search's result against another minimiser of the same two free strains (Nelder–Mead on
+    # solves from scratch, started where the search ended).
+    relaxed = fitted().relaxed
+    options = QuasiStaticOptions(max_iterations=600)
+    turn = np.full((2, 2), math.sqrt(0.5)) * np.array([[1.0, -1.0], [1.0, 1.0]])  # 45°
+    for strain in (0.01, 0.03):
+        pull = periodic_bias_pull(relaxed, strain)
+        assert pull.converged and 0.9 < pull.width_ratio < 1.0
+        ends = [_search_bias(relaxed, strain + d, options) for d in (PULL_SPAN, -PULL_SPAN)]
+        least = [end.result.energy.internal / end.tiled.area for end in ends]
+        assert pull.force_n_per_m == pytest.approx((least[0] - least[1]) / (2.0 * PULL_SPAN), rel=BIAS_PULL_RTOL)
+        search = _search_bias(relaxed, strain, options)
+        pulled = 0.5 * ((1.0 + strain) ** 2 - 1.0)
+
+        def energy(free):
+            green = np.array([[pulled, free[1]], [free[1], free[0]]])
+            first = np.eye(2) + 2.0 * turn @ green @ turn.T
+            sample = solve_sample(relaxed, SampleSpec("shear", first, np.zeros((2, 2)), 0.0))
+            return sample.energy_density if sample.converged else math.inf
+
+        other = scipy.optimize.minimize(energy, search.free, method="Nelder-Mead",
+                                        options={"xatol": 1e-6, "fatol": 1e-12, "maxfev": 200})
+        ours = search.result.energy.internal / search.tiled.area
+        assert ours <= other.fun * (1.0 + BIAS_ENERGY_RTOL)
 
 
 def test_a_periodic_pull_refuses_bad_input():

@@ -44,7 +44,7 @@ import numba
 
 from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
-from yarnfit.homogenize import periodic_pull
+from yarnfit.homogenize import periodic_bias_pull, periodic_pull
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, stretch_swatch
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
@@ -116,15 +116,17 @@ def _micrometres(value) -> str:
 
 
 def periodic_pulls(relaxed, directions) -> dict:
-    """``{(direction, strain): PeriodicPull}``: the periodic repeat pulled along weft and warp at
-    each of STRAINS (:func:`yarnfit.homogenize.periodic_pull`), the limit a strip tends to as it
-    widens and the reference the shell was fitted towards. (A bias pull of the periodic repeat
-    would need a sheared free strain: not sampled.)"""
+    """``{(direction, strain): PeriodicPull}``: the periodic repeat pulled along weft, warp and the
+    bias at each of STRAINS (:func:`yarnfit.homogenize.periodic_pull`,
+    :func:`~yarnfit.homogenize.periodic_bias_pull`), the limit a strip tends to as it widens and
+    the reference the shell was fitted towards (weft and warp; the fit has no bias pulls yet)."""
     pulls = {}
     for direction in directions:
-        if direction in ("weft", "warp"):
-            for strain in STRAINS:
+        for strain in STRAINS:
+            if direction in ("weft", "warp"):
                 pulls[direction, strain] = periodic_pull(relaxed, 0 if direction == "weft" else 1, strain)
+            elif direction == "bias":
+                pulls[direction, strain] = periodic_bias_pull(relaxed, strain)
     return pulls
 
 
