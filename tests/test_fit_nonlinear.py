@@ -35,9 +35,11 @@ PULL_REL = 1e-6
 # inside, so its optimum's cost is a little above the exact one: ours must not be worse by more.
 COST_REL = 1e-6
 # A softening yarn's first tangent against its secant to the smallest sample: the smoothing rows
-# (RIDGE_SMOOTHING) lean it towards the next segment's, by 2.4e-4 measured (the design's uniaxial
-# samples from 0.1 % share the first segments); the acceptance asks 1 %.
-SOFTENING_REL = 5e-4
+# (RIDGE_SMOOTHING) lean it towards the next segment's, by 2.4e-4 measured with weft and warp pulls
+# (the design's uniaxial samples from 0.1 % share the first segments) and 5.1e-4 with the bias
+# pulls too (slack for a straight yarn: six more rows at zero energy for the smoothing to balance);
+# the acceptance asks 1 %.
+SOFTENING_REL = 1e-3
 # A pull between samples: the segments interpolate the energy between them, and the force is its
 # slope, a piecewise-linear stress that follows the curve to ~(knot spacing)² of its second
 # derivative. Measured on the 40 % range at 5 %, between the uniaxial samples at 4 and 10 % and
@@ -46,9 +48,9 @@ SOFTENING_REL = 5e-4
 # bridge a stress that bends; the best linear interpolant alone is 1.3 % off there); 0.03 % on
 # the 10 % range.
 INTERPOLATED_REL = 0.05
-# A free-width pull at a uniaxial sample of a material outside the span, fitted with the samples'
-# pull slopes: 3.1 % worst measured (its kinks lie between the candidates' knots, so energies and
-# slopes cannot all be met); from the energies alone, 26 %.
+# A free-width pull at a uniaxial sample (weft, warp, bias) of a material outside the span,
+# fitted with the samples' pull slopes: 2.4 % worst measured (its kinks lie between the
+# candidates' knots, so energies and slopes cannot all be met); from the energies alone, 19 %.
 PULL_AT_SAMPLES_REL = 0.04
 # The ranges of the synthetic designs: a woven's (20 % and 200 /m), five magnitudes per family.
 RANGES = SampleRanges(stretch=0.2, curvature=200.0)
@@ -70,9 +72,32 @@ def samples_of(material, rest_energy=0.0, residual=None, specs=None, noise=0.0):
     rng = np.random.default_rng(11)
     out = []
     for spec in specs or design():
-        axis = spec.family.uniaxial_axis
-        slope = math.nan
-        if axis is not None:
+        axis, angle = spec.family.uniaxial_axis, spec.family.uniaxial_angle
+        slope = across = math.nan
+        if angle is not None and axis is None:
+            # A bias pull: the material's own free strains, its stresses along and across.
+            u, t = np.array([math.cos(angle), math.sin(angle)]), np.array([-math.sin(angle), math.cos(angle)])
+
+            def voigt(a, b):
+                return np.array([a[0] * b[0], a[1] * b[1], a[0] * b[1] + a[1] * b[0]])
+
+            pulled = 0.5 * ((1.0 + spec.parameter) ** 2 - 1.0)
+            if residual:  # StVK's closed form: W + n·ε least over the free strains (f, g)
+                assert material.nonlinear is None
+                n = np.array([residual.get(f"n{k}", 0.0) for k in range(3)])
+                free = np.stack([voigt(t, t), voigt(u, t) + voigt(t, u)], axis=1)
+                stiffness = material.thickness * material.S
+                x = -np.linalg.solve(free.T @ stiffness @ free, free.T @ (stiffness @ (pulled * voigt(u, u)) + n))
+                eps = pulled * voigt(u, u) + free @ x
+                I = np.eye(2) + 2.0 * np.array([[eps[0], 0.5 * eps[2]], [0.5 * eps[2], eps[1]]])
+                stress = stiffness @ eps + n
+                slope, across = float(stress @ voigt(u, u)), float(stress @ voigt(t, t))
+            else:
+                I = material.uniaxial_pull(angle, 1.0 + spec.parameter).first_form
+                gradient = material.energy_gradient(I, spec.II)[0]  # dW/dI; dW/dE = 2 dW/dI
+                slope, across = 2.0 * float(u @ gradient @ u), 2.0 * float(t @ gradient @ t)
+            spec = dataclasses.replace(spec, I=I)
+        elif axis is not None:
             I, _ = material.uniaxial_tension(axis, 1.0 + spec.parameter)
             if residual:  # the free width balances the residual stress too: StVK's closed form
                 assert material.nonlinear is None
@@ -88,7 +113,7 @@ def samples_of(material, rest_energy=0.0, residual=None, specs=None, noise=0.0):
         factor = 1.0 + noise * rng.uniform(-1.0, 1.0)
         energy = float(material.energy_density(spec.I, spec.II)) * factor
         out.append(SampleResult(spec, energy + rest_energy + linear, True, Residual(1e-10, 1e-10, 0.0, 0.0),
-                                pull_slope=slope * factor))
+                                pull_slope=slope * factor, across_slope=across * factor))
     return out
 
 
@@ -114,6 +139,30 @@ def in_span() -> RidgeMembrane:
 TRUE = dataclasses.replace(FABRIC, nonlinear=in_span())
 
 
+def stress_residuals(membrane: RidgeMembrane, sample, energy: float) -> list[float]:
+    """A uniaxial sample's stress rows of the fit, written out here: in the pull's frame (angle θ,
+    along u, across t) the shell's stress across against the sample's across_slope (0 if
+    unknown), on the bias its stress in the frame's shear against 0, and along the pull against
+    its pull_slope (where known), each times the pull's Green strain over the sample's energy."""
+    angle = sample.family.uniaxial_angle
+    if angle is None:
+        return []
+    u, t = np.array([math.cos(angle), math.sin(angle)]), np.array([-math.sin(angle), math.cos(angle)])
+
+    def voigt(a, b):
+        return np.array([a[0] * b[0], a[1] * b[1], a[0] * b[1] + a[1] * b[0]])
+
+    stress = H * membrane.stress(membrane_strain(sample.I))
+    weight = abs(0.5 * ((1.0 + sample.parameter) ** 2 - 1.0)) / energy
+    across = sample.across_slope if math.isfinite(sample.across_slope) else 0.0
+    rows = [(stress @ voigt(t, t) - across) * weight]
+    if sample.family.uniaxial_axis is None:
+        rows.append(stress @ (voigt(u, t) + voigt(t, u)) * weight)
+    if math.isfinite(sample.pull_slope):
+        rows.append((stress @ voigt(u, u) - sample.pull_slope) * weight)
+    return rows
+
+
 def objective(membrane: RidgeMembrane, samples, fit) -> float:
     """The strain-stiffening fit's objective (fit._fit_ridge_membrane), written out here on a
     :class:`RidgeMembrane`: each membrane sample's relative energy error (no sample here is
@@ -129,15 +178,7 @@ def objective(membrane: RidgeMembrane, samples, fit) -> float:
     U = np.array([s.energy_density for s in rows]) - fit.reference_energy
     r = list((W - U) / U)
     for s, u in zip(rows, U):
-        axis = s.family.uniaxial_axis
-        if axis is not None:
-            eps = membrane_strain(s.I)
-            r.append(H * membrane.stress(eps)[1 - axis] * abs(eps[axis]) / u)
-    for s, u in zip(rows, U):
-        axis = s.family.uniaxial_axis
-        if axis is not None and math.isfinite(s.pull_slope):
-            eps = membrane_strain(s.I)
-            r.append((H * membrane.stress(eps)[axis] - s.pull_slope) * abs(eps[axis]) / u)
+        r += stress_residuals(membrane, s, u)
     reference = max(fit.linear.s00, fit.linear.s11, fit.linear.s22)
     first = {tuple(n): c for *n, t, c in membrane.ridges if t == 0.0}
     jumps = [c for *_, t, c in membrane.ridges if t > 0.0]
@@ -237,11 +278,21 @@ def test_a_yarns_green_strain_softening_keeps_its_small_strain_tangent():
     for largest in (0.1, 0.4):
         samples = []
         for spec in sample_design(SampleRanges(stretch=largest, curvature=200.0), LEVELS):
+            across = math.nan
+            if spec.family == "bias_uniaxial":
+                # On the bias the sheet turns its yarns out of the way: at the free strains f = −e,
+                # g = 0 of the pull's frame the weft is not stretched (I = 1 + 2 e [[0, 1], [1, 0]]).
+                pulled = 0.5 * ((1.0 + spec.parameter) ** 2 - 1.0)
+                spec = dataclasses.replace(spec, I=np.array([[1.0, 2.0 * pulled], [2.0 * pulled, 1.0]]))
+                slope = across = 0.0
             e = math.sqrt(spec.I[0, 0]) - 1.0
             energy = 0.5 * k * e * e + float(FABRIC.linear.energy_density(np.eye(2), spec.II))
             # A weft pull's slope dŪ/dE = k e / λ (dE/dλ = λ); a warp pull stretches nothing.
-            slope = {0: k * e / (1.0 + e), 1: 0.0, None: math.nan}[spec.family.uniaxial_axis]
-            samples.append(SampleResult(spec, energy, True, Residual(1e-10, 1e-10, 0.0, 0.0), pull_slope=slope))
+            if spec.family != "bias_uniaxial":
+                slope = {0: k * e / (1.0 + e), 1: 0.0, None: math.nan}[spec.family.uniaxial_axis]
+                across = 0.0 if spec.family.uniaxial_axis is not None else math.nan
+            samples.append(SampleResult(spec, energy, True, Residual(1e-10, 1e-10, 0.0, 0.0), pull_slope=slope,
+                                        across_slope=across))
         fit = fit_shell(samples, H, model="paper")
         smallest = min(membrane_strain(s.I)[0] for s in samples if s.family.value == "weft_stretch"
                        and s.parameter > 0)
@@ -267,15 +318,15 @@ def test_the_pulls_follow_the_uniaxial_samples_slopes():
                (0.0, 1.0, 0.0, 0.03, 20.0 * FABRIC.s11)]
     material = dataclasses.replace(FABRIC, nonlinear=RidgeMembrane((0.0, 0.0, 0.0, 0.0), tuple(ridges)))
     samples = samples_of(material)
-    uniaxial = [s for s in samples if s.family.uniaxial_axis is not None]
+    uniaxial = [s for s in samples if s.family.uniaxial_angle is not None]
 
     def worst(fit) -> float:
-        return max(abs(fit.material.uniaxial_pull(s.family.uniaxial_axis * math.pi / 2, 1.0 + s.parameter).force_n_per_m
+        return max(abs(fit.material.uniaxial_pull(s.family.uniaxial_angle, 1.0 + s.parameter).force_n_per_m
                        / ((1.0 + s.parameter) * s.pull_slope) - 1.0) for s in uniaxial)
 
     assert worst(fit_shell(samples, H)) <= PULL_AT_SAMPLES_REL
     energies_only = [dataclasses.replace(s, pull_slope=math.nan) for s in samples]
-    assert worst(fit_shell(energies_only, H)) > 5.0 * PULL_AT_SAMPLES_REL
+    assert worst(fit_shell(energies_only, H)) > 4.0 * PULL_AT_SAMPLES_REL
 
 
 def test_a_sample_stopped_at_the_end_of_its_search_gives_its_stress_across():
@@ -344,14 +395,8 @@ def test_no_feasible_membrane_fits_better_than_the_fit():
         material = dataclasses.replace(FABRIC, nonlinear=membrane)
         W = material.energy_density(np.stack([s.I for s in rows]), np.zeros((len(rows), 2, 2)))
         r = list((W - U) / U)
-        for s, e, u in zip(rows, eps, U):
-            if s.family.uniaxial_axis is not None:
-                across = 1 - s.family.uniaxial_axis
-                r.append(H * membrane.stress(e)[across] * abs(e[1 - across]) / u)
-        for s, e, u in zip(rows, eps, U):
-            axis = s.family.uniaxial_axis
-            if axis is not None:
-                r.append((H * membrane.stress(e)[axis] - s.pull_slope) * abs(e[axis]) / u)
+        for s, u in zip(rows, U):
+            r += stress_residuals(membrane, s, u)
         jumps = [tangents[k + 1] - tangents[k] for k in same] + [tangents[i] - tangents[j] for i, j in opposite]
         return np.concatenate([r, math.sqrt(RIDGE_SMOOTHING) * np.array(jumps) / reference])
 

@@ -119,7 +119,7 @@ def plain(gsm=200.0, counts=(2500.0, 2500.0)):
 
 @functools.lru_cache(maxsize=None)
 def fitted(gsm=200.0):
-    return fit_fabric(plain(gsm), samples=26, workers=1)
+    return fit_fabric(plain(gsm), samples=32, workers=1)
 
 
 # -- the mid-surface -------------------------------------------------------------------------------
@@ -221,7 +221,7 @@ def test_images_on_a_cylinder_are_rotations_about_its_axis():
 def test_the_design_samples_every_family_in_tension_and_compression_only_on_request():
     ranges = SampleRanges(stretch=0.2, curvature=100.0)
     design = sample_design(ranges, 3)
-    assert len(design) == design_size(3) == 1 + 3 * 13 + 12
+    assert len(design) == design_size(3) == 1 + 3 * 13 + 18
     assert {s.family for s in design} == set(FAMILIES)
     # First the undeformed sample, the energy reference of the others.
     assert design[0].family == "weft_stretch" and design[0].parameter == 0.0
@@ -236,6 +236,11 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
     assert [s.parameter for s in uniaxial] == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.1, 6))
     assert np.allclose(uniaxial[0].I, np.diag([1.0, (1.0 + SMALLEST_STRAIN) ** 2]))
     assert uniaxial_strains(0.05) == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.05, 6))  # a range below 10 %
+    # On the bias at the same strains, starting from the pure stretch along 45°.
+    bias = [s for s in design if s.family == "bias_uniaxial"]
+    assert [s.parameter for s in bias] == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.1, 6))
+    stretch = (1.0 + SMALLEST_STRAIN) ** 2 - 1.0
+    assert np.allclose(bias[0].I, np.eye(2) + 0.5 * stretch * np.ones((2, 2)))
     for family, largest, values in (("shear", 0.2, strains), ("weft_bend", 100.0, curvatures),
                                     ("bias_bend", 100.0, curvatures), ("saddle_bend", 100.0, curvatures)):
         assert sorted(s.parameter for s in design if s.family == family) == pytest.approx(
@@ -248,9 +253,9 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
     assert magnitudes(5e-4, SMALLEST_STRAIN, 2) == pytest.approx([2.5e-4, 5e-4])
     with pytest.raises(ValueError, match="compression"):
         SampleRanges(stretch=0.2, curvature=100.0, compression=-0.1)
-    with pytest.raises(ValueError, match="at least 26"):
+    with pytest.raises(ValueError, match="at least 32"):
         levels_for(25)
-    assert [levels_for(n) for n in (26, 39, 52, 65)] == [1, 2, 3, 4]
+    assert [levels_for(n) for n in (32, 45, 58, 71)] == [1, 2, 3, 4]
     assert levels_for(DEFAULT_SAMPLES) == DEFAULT_LEVELS
 
 

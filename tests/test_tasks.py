@@ -174,17 +174,17 @@ def test_sigint_stops_a_fit_during_its_samples(tmp_path):
     """The issue's check: SIGINT to `yarnfit fit` while it solves samples exits 130 within 2 s,
     one line and no traceback, no output file, no worker process left."""
     # A polyester satin: its samples take ~0.5 s each on one core, the slowest several seconds, so
-    # two workers are still solving at the first progress line (a plain weave's 52 samples had all
+    # two workers are still solving at the first progress line (a plain weave's 58 samples had all
     # finished by then once the solver was fast enough).
     command = [sys.executable, "-m", "yarnfit.cli", "fit", "--fiber", "polyester", "--pattern", "satin-5", "--gsm",
-               "100", "--counts", "60x35", "--samples", "52", "--workers", "2", "-o", str(tmp_path / "satin.json"),
+               "100", "--counts", "60x35", "--samples", "58", "--workers", "2", "-o", str(tmp_path / "satin.json"),
                "--rerun", str(tmp_path / "satin.rrd")]
     fit = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=checkout_env(),
                            preexec_fn=default_sigint)
     seen = []
     for line in fit.stderr:
         seen.append(line)
-        # Off a terminal progress comes every 2 s: the 52 samples outlast that, so the first line
+        # Off a terminal progress comes every 2 s: the 58 samples outlast that, so the first line
         # lands while workers are still solving (16 samples could all finish before it).
         done = re.match(r"samples (\d+)/(\d+)", line)
         if done:

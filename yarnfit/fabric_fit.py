@@ -26,10 +26,10 @@ from .samples import SampleRanges, SampleResult, SampleSpec, design_size, levels
 from .shell import ShellMaterial
 from .tasks import Backend
 
-# Four magnitudes per family and sign, from 0.1 % (1 /m) to the range, uniaxial tension at six
-# strains from 0.1 to 10 % (samples.uniaxial_strains), and the undeformed sample (65 in all): each
-# stretch and shear curve from four points and each free-width pull from six, at about a second
-# per small-strain sample.
+# Four magnitudes per family and sign, from 0.1 % (1 /m) to the range, free-width pulls along weft,
+# warp and the bias at six strains from 0.1 to 10 % (samples.uniaxial_strains), and the undeformed
+# sample (71 in all): each stretch and shear curve from four points and each free-width pull from
+# six, at about a second per small-strain sample.
 DEFAULT_LEVELS = 4
 DEFAULT_SAMPLES = design_size(DEFAULT_LEVELS)
 

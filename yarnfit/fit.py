@@ -95,6 +95,11 @@ MIN_RESIDUAL_SAMPLES = 3
 # sample gives at its strain. A slack sample (Ū ≈ 0: a knit's wales under compression) would
 # otherwise get an unbounded weight; a thousandth keeps its say at a 0.1 % relative error of that law.
 RELATIVE_WEIGHT_FLOOR = 1.0e-3
+# A uniaxial sample whose Ū is below this fraction of the same quadratic law is slack (zero to its
+# solve's accuracy; straight yarns on the bias: ~1e-10 of it) and gets no stress rows. The presets'
+# bias pulls: the knits' ~5e-4 of it, the twill's 1e-5 … 2e-4, the satin's 4e-7 … 5e-6 (its shear
+# is 1e-5 of its weft stiffness: near a mechanism, and below 0.1 % treated as one).
+SLACK_ENERGY_REL = 1.0e-6
 # The strain-stiffening membrane's candidate ridges (ridge_candidates). A fan of directions in the
 # normal-strain plane every 15°: with 7.5° the five presets' periodic free-width pulls at 2/5/10 %
 # were met no better (24 of 30 within 20 % against 27; session 35's trials on the same samples), and
@@ -716,38 +721,51 @@ def _fit_ridge_membrane(
     A = np.hstack([columns, residual_columns])
 
     # Relative weights: the residual is divided by Ū, floored at RELATIVE_WEIGHT_FLOOR of the
-    # quadratic law through the largest sample.
+    # quadratic law through the sample of largest Ū (not of largest strain: a bias pull of straight
+    # yarns strains the sheet most and stores nothing).
     magnitude = np.linalg.norm(eps, axis=1)
-    largest = int(np.argmax(magnitude))
+    largest = int(np.argmax(target))
     quadratic = max(target[largest], 0.0) * (magnitude / magnitude[largest]) ** 2
     scale = np.maximum(np.abs(target), RELATIVE_WEIGHT_FLOOR * quadratic)
     if not np.all(scale > 0.0):
         raise ValueError("the membrane samples carry no energy: they cannot determine a membrane stiffness")
     rows, b = A / scale[:, None], target / scale
-    # A uniaxial sample's free direction is where the yarn-level energy is least, so the shell's
-    # stress across the pull vanishes there too; and its stress along the pull is the yarn-level
-    # one, the sample's pull_slope (dŪ/dE at the free width). One row each, in energy units (the
-    # stress times the pull's own strain, so a stress across is judged against the pulling stress,
-    # which puts ~2 Ū in that unit) and weighted as the sample's energy row. Times the transverse
-    # strain instead, a material that does not contract (Poisson 0) had no say on its stress
-    # across. Energies alone fix the force only on average between two samples: a knit's pull
-    # stiffening 18x from 2 to 10 % came back 25-68 % off at 5 %, between the samples at 4 and
-    # 10 %, with every energy exact.
-    def stress_row(i: int, axis: int) -> np.ndarray:
-        pulled = samples[i].family.uniaxial_axis
-        return np.concatenate([_ridge_columns(eps[i:i + 1], directions, knots, h, axis=axis)[0],
-                               [float(RESIDUAL_STRESS_NAMES["membrane"].index(n) == axis) for n in stress_names]]) \
-            * abs(eps[i, pulled]) / scale[i]
+    # A uniaxial sample's free strains are where the yarn-level energy is least, so the shell's
+    # stress across the pull (and, on the bias, in the pull frame's shear) vanishes there too;
+    # where the search stopped at an end of its interval (a knit that would widen under a
+    # wale-wise pull stops at E⊥ = 0), the stress across is the sample's across_slope instead. Its
+    # stress along the pull is the yarn-level one, the sample's pull_slope (dŪ/de at the free
+    # strains). One row each, in energy units (the stress times the pull's own Green strain e, so a
+    # stress across is judged against the pulling stress, which puts ~2 Ū in that unit) and
+    # weighted as the sample's energy row. Times the transverse strain instead, a material that
+    # does not contract (Poisson 0) had no say on its stress across. Energies alone fix the force
+    # only on average between two samples: a knit's pull stiffening 18x from 2 to 10 % came back
+    # 25-68 % off at 5 %, between the samples at 4 and 10 %, with every energy exact.
+    def stress_row(i: int, change: np.ndarray) -> np.ndarray:
+        """d(energy)/dh along the Green strain change (Voigt ``(3,)``), times e over the scale."""
+        columns = sum(change[k] * _ridge_columns(eps[i:i + 1], directions, knots, h, axis=k)[0] for k in range(3))
+        stresses = [float(change[RESIDUAL_STRESS_NAMES["membrane"].index(n)]) for n in stress_names]
+        pulled = 0.5 * ((1.0 + samples[i].parameter) ** 2 - 1.0)
+        return np.concatenate([columns, stresses]) * abs(pulled) / scale[i]
 
-    # Where the search stopped at an end of its interval (a knit that would widen under a
-    # wale-wise pull stops at E⊥ = 0), the stress across is the sample's across_slope, not 0.
-    uniaxial = [i for i, s in enumerate(samples) if s.family.uniaxial_axis is not None]
-    stresses = [(stress_row(i, 1 - samples[i].family.uniaxial_axis),
-                 (samples[i].across_slope if math.isfinite(samples[i].across_slope) else 0.0)
-                 * abs(eps[i, samples[i].family.uniaxial_axis]) / scale[i]) for i in uniaxial]
-    stresses += [(stress_row(i, samples[i].family.uniaxial_axis),
-                  samples[i].pull_slope * abs(eps[i, samples[i].family.uniaxial_axis]) / scale[i])
-                 for i in uniaxial if math.isfinite(samples[i].pull_slope)]
+    # A slack sample (straight yarns pulled on the bias turn out of the way: Ū 1e-13 … 1e-10 J/m²)
+    # carries stresses at its solve's noise, which the floor's weight would enforce (they put the
+    # straight yarns' weft stretch 1.0 % low): its energy row alone says it is slack.
+    taut = np.abs(target) > SLACK_ENERGY_REL * quadratic
+    stresses = []
+    for i, sample in enumerate(samples):
+        angle = sample.family.uniaxial_angle
+        if angle is None or not taut[i]:
+            continue
+        along, across = np.array([math.cos(angle), math.sin(angle)]), np.array([-math.sin(angle), math.cos(angle)])
+        pulled = 0.5 * ((1.0 + sample.parameter) ** 2 - 1.0)
+        weight = abs(pulled) / scale[i]
+        slope = sample.across_slope if math.isfinite(sample.across_slope) else 0.0
+        stresses.append((stress_row(i, _voigt_change(across, across)), slope * weight))
+        if sample.family.uniaxial_axis is None:  # on the bias the pull frame's shear is free too
+            stresses.append((stress_row(i, _voigt_change(along, across) + _voigt_change(across, along)), 0.0))
+        if math.isfinite(sample.pull_slope):
+            stresses.append((stress_row(i, _voigt_change(along, along)), sample.pull_slope * weight))
     if stresses:
         rows = np.vstack([rows] + [row for row, _ in stresses])
         b = np.concatenate([b, [value for _, value in stresses]])
@@ -789,6 +807,12 @@ def _fit_ridge_membrane(
     membrane = _ridge_membrane(directions, knots, tangents)
     notes.append(f"strain-stiffening membrane: {len(membrane.ridges)} ridges of {len(knots)} candidates")
     return membrane, notes, strain_range, stress
+
+
+def _voigt_change(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The Green strain change ``a bᵀ`` (``a``, ``b`` ``(2,)``) in Voigt form ``(E00, E11, 2 E01)``
+    of its symmetric part."""
+    return np.array([a[0] * b[0], a[1] * b[1], a[0] * b[1] + a[1] * b[0]])
 
 
 def ridge_candidates(eps: np.ndarray, linear: ShellMaterial) -> tuple[np.ndarray, np.ndarray]:

@@ -444,12 +444,18 @@ def shell_curve(material, family: Family, parameters) -> tuple[np.ndarray, np.nd
     apart = np.abs(grid[:, None] - parameters[None, :]).min(axis=1) > CURVE_MERGE_REL * (high - low)
     p = np.union1d(grid[apart], parameters)
     family = Family.named(family)
-    if family.uniaxial_axis is not None:
-        # The shell's own free width: the Schur complement, not the yarn-level sample's μ.
+    if family.uniaxial_angle is not None:
+        # The shell's own free strains: the Schur complement along a yarn axis, its own free pull
+        # on the bias; not the yarn-level sample's.
         energy = []
+        flat = np.zeros((2, 2))
         for value in p:
             try:
-                energy.append(material.uniaxial_tension(family.uniaxial_axis, 1.0 + value)[1])
+                if family.uniaxial_axis is not None:
+                    energy.append(material.uniaxial_tension(family.uniaxial_axis, 1.0 + value)[1])
+                else:
+                    pull = material.uniaxial_pull(family.uniaxial_angle, 1.0 + value)
+                    energy.append(float(material.energy_density(pull.first_form, flat)))
             except ValueError:
                 # Beyond here no free width balances the pull (the width collapses: polyester
                 # satin's weft at 26 %, as its yarn-level sample at 40 % contracted past half its

@@ -82,6 +82,14 @@ def _stretched(axis: int | None):
     return deformation
 
 
+def _pulled(angle: float):
+    """The pure stretch along ``angle`` (rad from weft): ``I = 1 + 2 q diag(E, 0) qᵀ``."""
+    def deformation(e: float) -> tuple[np.ndarray, np.ndarray]:
+        direction = np.array([math.cos(angle), math.sin(angle)])
+        return np.eye(2) + ((1.0 + e) ** 2 - 1.0) * np.outer(direction, direction), np.zeros((2, 2))
+    return deformation
+
+
 def _sheared(e: float) -> tuple[np.ndarray, np.ndarray]:
     return np.array([[1.0, e], [e, 1.0]]), np.zeros((2, 2))
 
@@ -101,21 +109,25 @@ class Family(StrEnum):
       ``I12`` for shear, the curvature κ in 1/m for bends);
     - ``determines``: the shell parameter whose diagonal or coupling the family pins (``None`` for
       the uniaxial families, which add a tensile test's free width);
-    - ``uniaxial_axis``: 0 (weft) or 1 (warp) for uniaxial tension with the other direction free
-      (the solve finds its stretch μ; the spec holds μ = 1 as the search's start), else ``None``;
+    - ``uniaxial_angle``: the direction (rad from weft) of a uniaxial tension with every other
+      stress free (weft 0, warp π/2, bias π/4; the solve finds the free strains, the spec holds the
+      pure stretch along the pull as the search's start), else ``None``; ``uniaxial_axis``: 0
+      (weft) or 1 (warp) for those along a yarn axis (one free strain, the transverse stretch μ),
+      else ``None``;
     - ``optional``: the fit does without it (the pure families determine every parameter);
     - ``layout``: which parameter values the design samples;
     - :meth:`deformation`: ``(I, II)`` at a parameter value.
     """
 
-    def __new__(cls, name, group, quantity, unit, determines, uniaxial_axis, optional, layout, deformation):
+    def __new__(cls, name, group, quantity, unit, determines, uniaxial_angle, optional, layout, deformation):
         member = str.__new__(cls, name)
         member._value_ = name
         member.group = group
         member.quantity = quantity
         member.unit = unit
         member.determines = determines
-        member.uniaxial_axis = uniaxial_axis
+        member.uniaxial_angle = uniaxial_angle
+        member.uniaxial_axis = {0.0: 0, 0.5 * math.pi: 1}.get(uniaxial_angle)
         member.optional = optional
         member.layout = layout
         member._deformation = deformation
@@ -127,9 +139,12 @@ class Family(StrEnum):
                     _stretched(1))
     BIAXIAL_STRETCH = ("biaxial_stretch", Group.MEMBRANE, "λ − 1", "", "s01", None, False, _TENSION, _stretched(None))
     SHEAR = ("shear", Group.MEMBRANE, "I12", "", "s22", None, False, _BOTH_SIGNS, _sheared)
-    # The transverse stretch is found by the solve; the deformation is where its search starts.
-    WEFT_UNIAXIAL = ("weft_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0, True, _UNIAXIAL_TENSION, _stretched(0))
-    WARP_UNIAXIAL = ("warp_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 1, True, _UNIAXIAL_TENSION, _stretched(1))
+    # The free strains are found by the solve; the deformation is where its search starts.
+    WEFT_UNIAXIAL = ("weft_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0.0, True, _UNIAXIAL_TENSION, _stretched(0))
+    WARP_UNIAXIAL = ("warp_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0.5 * math.pi, True, _UNIAXIAL_TENSION,
+                     _stretched(1))
+    BIAS_UNIAXIAL = ("bias_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0.25 * math.pi, True, _UNIAXIAL_TENSION,
+                     _pulled(0.25 * math.pi))
     WEFT_BEND = ("weft_bend", Group.BENDING, "curvature", "1/m", "b00", None, False, _BOTH_SIGNS,
                  _bent(lambda e: np.diag([e, 0.0])))
     WARP_BEND = ("warp_bend", Group.BENDING, "curvature", "1/m", "b11", None, False, _BOTH_SIGNS,
@@ -162,7 +177,7 @@ FAMILIES = tuple(Family)
 MEMBRANE_FAMILIES = tuple(f for f in Family if f.group is Group.MEMBRANE)
 BENDING_FAMILIES = tuple(f for f in Family if f.group is Group.BENDING)
 OPTIONAL_FAMILIES = tuple(f for f in Family if f.optional)
-UNIAXIAL_FAMILIES = tuple(f for f in Family if f.uniaxial_axis is not None)
+UNIAXIAL_FAMILIES = tuple(f for f in Family if f.uniaxial_angle is not None)
 
 
 def family_deformation(family: str, parameter: float) -> tuple[np.ndarray, np.ndarray]:
@@ -286,7 +301,7 @@ class SampleResult:
         object.__setattr__(self, "stretch_share", share)
         for name in ("pull_slope", "across_slope"):
             slope = real_number(getattr(self, name), f"SampleResult.{name}")
-            if not math.isnan(slope) and self.spec.family.uniaxial_axis is None:
+            if not math.isnan(slope) and self.spec.family.uniaxial_angle is None:
                 raise ValueError(f"SampleResult.{name} is only defined for a uniaxial family, got {slope!r} "
                                  f"for {self.spec.family}")
             object.__setattr__(self, name, slope)
@@ -373,7 +388,7 @@ class SampleResult:
 # -- sample design --------------------------------------------------------------------------------
 
 # Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
-# four bend families of both signs; plus weft and warp uniaxial tension at UNIAXIAL_LEVELS strains
+# four bend families of both signs; plus weft, warp and bias uniaxial tension at UNIAXIAL_LEVELS strains
 # each (uniaxial_strains).
 SAMPLES_PER_LEVEL = 13
 # Uniaxial tension (the transverse direction free) per direction: log-spaced from SMALLEST_STRAIN
@@ -391,7 +406,7 @@ SAMPLES_PER_LEVEL = 13
 # since the transverse strain became an unknown of it (session 33; cotton jersey at 0.1 %: 0.4 s).
 UNIAXIAL_LEVELS = 6
 UNIAXIAL_LARGEST_STRAIN = 0.10
-UNIAXIAL_SAMPLES = 2 * UNIAXIAL_LEVELS
+UNIAXIAL_SAMPLES = 3 * UNIAXIAL_LEVELS  # weft, warp, bias
 # Smallest sampled strain (λ − 1, and I12 for shear): the design's levels are spaced
 # logarithmically from here up to the range, so the small-strain stiffness that a drape, a low-load
 # tensile test or a robot's grasp sees is measured, not extrapolated from a few per cent. 0.1 %
@@ -445,6 +460,9 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
     - shear: ``I = [[1, s], [s, 1]]``, ``s = ±`` the stretch magnitudes;
     - weft, warp uniaxial tension: λ − 1 at :func:`uniaxial_strains`, the other direction free
       (its stretch μ minimises Ū; the spec holds μ = 1, the result the μ found);
+    - bias uniaxial tension: the same strains along 45°, the transverse strain and the pull
+      frame's shear free (the spec holds the pure stretch along the pull, the result the form
+      found): a shear with the normal strains relaxed, which no other family samples;
     - weft, warp bends: ``II = diag(κ, 0)`` / ``diag(0, κ)``, ``κ = ±`` the curvature magnitudes;
     - bias bends: cylinders at ±45°, ``II = κ/2 [[1, ±1], [±1, 1]]``;
     - saddles: ``II = ±κ diag(1, −1)`` (the only samples that separate b01 from b22).
