@@ -97,9 +97,11 @@ REST_CHECK_STEPS = 10
 # (neither the Kelvin–Voigt damping nor a larger step helps: drag-bound, a mode needs a fixed number
 # of steps). Measured on the cotton twill (session 36, hold 5 s): the 2 × 5 weft strip at rest
 # after 2.02 / 1.21 / 1.04 / 0.68 s at 0.2 / 0.5 / 1 / 2 %, the 8 × 5 after 1.64 / 1.16 / 0.94 /
-# 0.74 s; its force at 0.2 % 0.3 % above the rested one after 1 s. Every other strip rests within
-# 1 s. 3 s leaves half again the slowest.
-MAX_HOLD_SECONDS = 3.0
+# 0.74 s; its force at 0.2 % 0.3 % above the rested one after 1 s. Refitted with the bias samples
+# (its built-in part 10 % stiffer, its weft at 0.2 % 10 % softer) the two strips rest at 0.2 %
+# after 3.48 and 3.68 s (8 s hold), and 3 s left them unsettled there. Every other strip rests
+# within 1 s; the hold is a budget, only the slow levels spend it. 5 s leaves a third to spare.
+MAX_HOLD_SECONDS = 5.0
 
 
 @dataclass(frozen=True)
