@@ -451,12 +451,16 @@ def _green_slope(model: RodModel, result, form: np.ndarray, change: np.ndarray, 
     :func:`~yarnfit.engine.tiling.transform_images`,
     :meth:`~yarnfit.engine.contact.ContactPairs.transformed`). Frames stay as they are: they are
     balanced, so turning them changes the potential only to second order."""
-    form = np.asarray(form, dtype=np.float64)
+    form, change = np.asarray(form, dtype=np.float64), np.asarray(change, dtype=np.float64)
     inverse = np.linalg.inv(_spd_sqrt(form))
     values = []
     for step in (STRAIN_SLOPE_STEP, -STRAIN_SLOPE_STEP):
         matrix = np.eye(3)
-        matrix[:2, :2] = _spd_sqrt(form + 2.0 * step * np.asarray(change, dtype=np.float64)) @ inverse
+        if form[0, 1] == 0.0 and change[0, 1] == 0.0:
+            # Axis-aligned: the stretch ratio per axis, exactly (as _solve_from maps warm starts).
+            matrix[[0, 1], [0, 1]] = np.sqrt(np.diag(form + 2.0 * step * change) / np.diag(form))
+        else:
+            matrix[:2, :2] = _spd_sqrt(form + 2.0 * step * change) @ inverse
         mapped = transform_images(model, matrix)
         position = result.state.node_position @ matrix.T
         contacts = replace(result.contacts, pairs=result.contacts.pairs.transformed(matrix))
@@ -572,6 +576,34 @@ def _next_free_strain(points: Sequence[_FreeStrainPoint], low: float, strain: fl
     return min(max(outer.free + step, low), 0.0), "search"
 
 
+def _solve_from(relaxed: RelaxedRepeat, form: np.ndarray, II: np.ndarray, options: QuasiStaticOptions,
+                previous: tuple | None = None) -> tuple[TiledRepeat, QuasiStaticResult]:
+    """``relaxed`` tiled at ``(form, II)`` (a flat sample's) and solved, warnings of a solve that
+    does not converge silenced (a search's trial: its caller judges it), from the affine start or,
+    with ``previous = (state, its form)``, from that equilibrium mapped by ``√form √form_prev⁻¹`` in
+    the plane (exact for its affine part, and it keeps C_RVE's values, which are linear in the
+    positions). Raises :class:`TilingReachError` when the steps leave the tiles mapped."""
+    tiled = tile_repeat(relaxed, form, II)
+    state = tiled.state
+    if previous is not None:
+        prior, prior_form = previous
+        form, prior_form = np.asarray(form, dtype=np.float64), np.asarray(prior_form, dtype=np.float64)
+        matrix = np.eye(3)
+        if form[0, 1] == 0.0 and prior_form[0, 1] == 0.0:
+            # Axis-aligned: the stretch ratio per axis, exactly (an unchanged axis maps by 1.0; a
+            # jersey's warp search at 10 % lands in another of its equilibria from a start that
+            # differs by round-off).
+            matrix[[0, 1], [0, 1]] = np.sqrt(np.diag(form) / np.diag(prior_form))
+        else:
+            matrix[:2, :2] = _spd_sqrt(form) @ np.linalg.inv(_spd_sqrt(prior_form))
+        state.node_position[:] = prior.node_position @ matrix.T
+        state.edge_quaternion[:] = aligned_frames(tiled.model, state.node_position, prior.edge_quaternion)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        result = QuasiStaticSolver(tiled.model, options).solve(state, constraints=tiled.constraints)
+    return tiled, result
+
+
 @dataclass(frozen=True)
 class _UniaxialSearch:
     """Outcome of :func:`_search_uniaxial`: the free Green strain E⊥ chosen, the solve there (its
@@ -617,20 +649,12 @@ def _search_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiSta
 
     def solve_at(free: float) -> tuple:
         nonlocal iterations
-        tiled = tile_repeat(relaxed, form(free), spec.II)
-        state = tiled.state
         nearest = nearest_usable(free)
-        if nearest is not None:
-            previous = solved[nearest][0].state
-            state.node_position[:] = previous.node_position
-            state.node_position[:, 1 - axis] *= math.sqrt((1.0 + 2.0 * free) / (1.0 + 2.0 * nearest))
-            state.edge_quaternion[:] = aligned_frames(tiled.model, state.node_position, previous.edge_quaternion)
+        previous = None if nearest is None else (solved[nearest][0].state, form(nearest))
         try:
-            with warnings.catch_warnings():
-                # A trial E⊥ that does not converge is a point the search does without (or
-                # approaches by halves); the warning below gives the sample's verdict.
-                warnings.simplefilter("ignore", ConvergenceWarning)
-                result = QuasiStaticSolver(tiled.model, options).solve(state, constraints=tiled.constraints)
+            # A trial E⊥ that does not converge is a point the search does without (or approaches
+            # by halves); the warning below gives the sample's verdict.
+            tiled, result = _solve_from(relaxed, form(free), spec.II, options, previous)
             iterations += result.iterations
         except TilingReachError:
             # The solver's steps ran beyond the tiles mapped (a strongly squeezed width): this
@@ -638,7 +662,7 @@ def _search_uniaxial(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiSta
             # first, fails as any pure sample would.)
             if not solved:
                 raise
-            result = None
+            tiled, result = tile_repeat(relaxed, form(free), spec.II), None
         point = None
         if result is not None and result.converged:
             point = _FreeStrainPoint(free, result.energy.internal / tiled.area,
@@ -796,19 +820,11 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
             iterations += count
         else:
             nearest = min(solved, key=lambda point: float(np.abs(point[0] - free).max()))
-            tiled = tile_repeat(relaxed, first, flat)
-            matrix = np.eye(3)
-            matrix[:2, :2] = _spd_sqrt(first) @ np.linalg.inv(_spd_sqrt(form(nearest[0])))
-            state = tiled.state
-            state.node_position[:] = nearest[1].state.node_position @ matrix.T
-            state.edge_quaternion[:] = aligned_frames(tiled.model, state.node_position, nearest[1].state.edge_quaternion)
             try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", ConvergenceWarning)
-                    result = QuasiStaticSolver(tiled.model, options).solve(state, constraints=tiled.constraints)
+                tiled, result = _solve_from(relaxed, first, flat, options, (nearest[1].state, form(nearest[0])))
                 iterations += result.iterations
             except TilingReachError:
-                result = None
+                return None
         if result is None or not result.converged:
             return None
         slopes = np.array([_green_slope(tiled.model, result, first, change, tiled.area) for change in changes])
