@@ -742,11 +742,11 @@ def _fit_ridge_membrane(
     # only on average between two samples: a knit's pull stiffening 18x from 2 to 10 % came back
     # 25-68 % off at 5 %, between the samples at 4 and 10 %, with every energy exact.
     def stress_row(i: int, change: np.ndarray) -> np.ndarray:
-        """d(energy)/dh along the Green strain change (Voigt ``(3,)``), times e over the scale."""
-        columns = sum(change[k] * _ridge_columns(eps[i:i + 1], directions, knots, h, axis=k)[0] for k in range(3))
-        stresses = [float(change[RESIDUAL_STRESS_NAMES["membrane"].index(n)]) for n in stress_names]
-        pulled = 0.5 * ((1.0 + samples[i].parameter) ** 2 - 1.0)
-        return np.concatenate([columns, stresses]) * abs(pulled) / scale[i]
+        """The derivative of sample ``i``'s energy along the symmetric Green strain change
+        ``change`` ``(2, 2)``: the ridges' columns and the residual stresses'."""
+        voigt = bending_strain(change)  # (E00, E11, 2 E01): the same map as κ's of II
+        stresses = [float(voigt[RESIDUAL_STRESS_NAMES["membrane"].index(n)]) for n in stress_names]
+        return np.concatenate([_ridge_columns(eps[i:i + 1], directions, knots, h, voigt)[0], stresses])
 
     # A slack sample (straight yarns pulled on the bias turn out of the way: Ū 1e-13 … 1e-10 J/m²)
     # carries stresses at its solve's noise, which the floor's weight would enforce (they put the
@@ -758,14 +758,14 @@ def _fit_ridge_membrane(
         if angle is None or not taut[i]:
             continue
         along, across = np.array([math.cos(angle), math.sin(angle)]), np.array([-math.sin(angle), math.cos(angle)])
-        pulled = 0.5 * ((1.0 + sample.parameter) ** 2 - 1.0)
-        weight = abs(pulled) / scale[i]
+        weight = abs(0.5 * ((1.0 + sample.parameter) ** 2 - 1.0)) / scale[i]  # the pull's e over the scale
         slope = sample.across_slope if math.isfinite(sample.across_slope) else 0.0
-        stresses.append((stress_row(i, _voigt_change(across, across)), slope * weight))
+        wanted = [(np.outer(across, across), slope)]
         if sample.family.uniaxial_axis is None:  # on the bias the pull frame's shear is free too
-            stresses.append((stress_row(i, _voigt_change(along, across) + _voigt_change(across, along)), 0.0))
+            wanted.append((np.outer(along, across) + np.outer(across, along), 0.0))
         if math.isfinite(sample.pull_slope):
-            stresses.append((stress_row(i, _voigt_change(along, along)), sample.pull_slope * weight))
+            wanted.append((np.outer(along, along), sample.pull_slope))
+        stresses += [(stress_row(i, change) * weight, value * weight) for change, value in wanted]
     if stresses:
         rows = np.vstack([rows] + [row for row, _ in stresses])
         b = np.concatenate([b, [value for _, value in stresses]])
@@ -809,12 +809,6 @@ def _fit_ridge_membrane(
     return membrane, notes, strain_range, stress
 
 
-def _voigt_change(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The Green strain change ``a bᵀ`` (``a``, ``b`` ``(2,)``) in Voigt form ``(E00, E11, 2 E01)``
-    of its symmetric part."""
-    return np.array([a[0] * b[0], a[1] * b[1], a[0] * b[1] + a[1] * b[0]])
-
-
 def ridge_candidates(eps: np.ndarray, linear: ShellMaterial) -> tuple[np.ndarray, np.ndarray]:
     """The candidate ridges of the strain-stiffening fit for membrane strains ``eps (n, 3)``:
     ``(directions (k, 3), knots (k,))``.
@@ -850,9 +844,10 @@ def _same_ray(directions: np.ndarray) -> np.ndarray:
 
 
 def _ridge_columns(eps: np.ndarray, directions: np.ndarray, knots: np.ndarray, h: float,
-                   axis: int | None = None) -> np.ndarray:
+                   change: np.ndarray | None = None) -> np.ndarray:
     """``(n, k)``: the energy per reference area (J/m²) of each candidate's *segment* with unit
-    tangent stiffness at Voigt strains ``eps (n, 3)``; with ``axis``, its derivative in ``ε_axis``.
+    tangent stiffness at Voigt strains ``eps (n, 3)``; with ``change`` (Voigt ``(3,)``), its
+    derivative along that strain direction.
 
     Along a ray ``n`` with knots ``t_0 < t_1 < …`` the membrane's tangent is ``s_k`` on ``[t_k,
     t_{k+1})``; segment k's energy is ``½ h (max(x − t_k, 0)² − max(x − t_{k+1}, 0)²)`` in ``x = n·ε``
@@ -864,9 +859,9 @@ def _ridge_columns(eps: np.ndarray, directions: np.ndarray, knots: np.ndarray, h
     following[:-1][same] = knots[1:][same]
     x = eps @ directions.T
     start, end = np.maximum(x - knots, 0.0), np.maximum(x - following, 0.0)
-    if axis is None:
+    if change is None:
         return 0.5 * h * (start**2 - end**2)
-    return h * (start - end) * directions[:, axis]
+    return h * (start - end) * (directions @ np.asarray(change, dtype=np.float64))
 
 
 def _ridge_membrane(directions: np.ndarray, knots: np.ndarray, tangents: np.ndarray) -> RidgeMembrane:

@@ -59,6 +59,26 @@ MAX_ITERATIONS = 600
 EXTRA_TILES = 2
 
 
+def _spd_sqrt(matrix: np.ndarray) -> np.ndarray:
+    """The symmetric square root of a symmetric positive-definite ``(2, 2)`` matrix."""
+    w, v = np.linalg.eigh(matrix)
+    return (v * np.sqrt(w)) @ v.T
+
+
+def _form_map(target: np.ndarray, source: np.ndarray) -> np.ndarray:
+    """``(3, 3)``: the linear map taking a flat tiling at first form ``source`` to one at
+    ``target`` (both ``(2, 2)``), ``√target √source⁻¹`` in the plane. Axis-aligned forms map by
+    the exact stretch ratio per axis (an unchanged axis by 1.0): through the general square roots,
+    round-off alone sent cotton jersey's 10 % warp pull to another of its equilibria."""
+    target, source = np.asarray(target, dtype=np.float64), np.asarray(source, dtype=np.float64)
+    matrix = np.eye(3)
+    if target[0, 1] == 0.0 and source[0, 1] == 0.0:
+        matrix[[0, 1], [0, 1]] = np.sqrt(np.diag(target) / np.diag(source))
+    else:
+        matrix[:2, :2] = _spd_sqrt(target) @ np.linalg.inv(_spd_sqrt(source))
+    return matrix
+
+
 @dataclass(frozen=True, eq=False)
 class SurfaceMap:
     """The deformed mid-surface of one sample: ``φ`` with ``I`` and ``II`` at ``X = 0``."""
@@ -77,8 +97,7 @@ class SurfaceMap:
     @property
     def stretch(self) -> np.ndarray:
         """``S = I^{1/2}`` (2×2 SPD)."""
-        w, v = np.linalg.eigh(self.I)
-        return (v * np.sqrt(w)) @ v.T
+        return _spd_sqrt(self.I)
 
     @property
     def bend(self) -> np.ndarray:
@@ -447,32 +466,20 @@ def _green_slope(model: RodModel, result, form: np.ndarray, change: np.ndarray, 
     By the envelope theorem it is the derivative of the potential the solve balanced (rods, plus
     the contacts' augmented Lagrangian with the multipliers and penalties it ended with) along any
     path of configurations that keeps C_RVE; here the affine one, every node and image mapped by
-    ``√(I + 2 h change) √I⁻¹`` in the plane (the flat surface's own map is ``√I``:
+    ``√(I + 2 h change) √I⁻¹`` in the plane (the flat surface's own map is ``√I``: :func:`_form_map`,
     :func:`~yarnfit.engine.tiling.transform_images`,
     :meth:`~yarnfit.engine.contact.ContactPairs.transformed`). Frames stay as they are: they are
     balanced, so turning them changes the potential only to second order."""
     form, change = np.asarray(form, dtype=np.float64), np.asarray(change, dtype=np.float64)
-    inverse = np.linalg.inv(_spd_sqrt(form))
     values = []
     for step in (STRAIN_SLOPE_STEP, -STRAIN_SLOPE_STEP):
-        matrix = np.eye(3)
-        if form[0, 1] == 0.0 and change[0, 1] == 0.0:
-            # Axis-aligned: the stretch ratio per axis, exactly (as _solve_from maps warm starts).
-            matrix[[0, 1], [0, 1]] = np.sqrt(np.diag(form + 2.0 * step * change) / np.diag(form))
-        else:
-            matrix[:2, :2] = _spd_sqrt(form + 2.0 * step * change) @ inverse
+        matrix = _form_map(form + 2.0 * step * change, form)
         mapped = transform_images(model, matrix)
         position = result.state.node_position @ matrix.T
         contacts = replace(result.contacts, pairs=result.contacts.pairs.transformed(matrix))
         rods = sum(internal_forces(mapped, position, result.state.edge_quaternion).terms)
         values.append(rods + contact_potential(mapped, position, contacts))
     return (values[0] - values[1]) / (2.0 * STRAIN_SLOPE_STEP * area)
-
-
-def _spd_sqrt(matrix: np.ndarray) -> np.ndarray:
-    """The symmetric square root of a symmetric positive-definite ``(2, 2)`` matrix."""
-    w, v = np.linalg.eigh(matrix)
-    return (v * np.sqrt(w)) @ v.T
 
 
 def _axis_change(axis: int) -> np.ndarray:
@@ -580,22 +587,14 @@ def _solve_from(relaxed: RelaxedRepeat, form: np.ndarray, II: np.ndarray, option
                 previous: tuple | None = None) -> tuple[TiledRepeat, QuasiStaticResult]:
     """``relaxed`` tiled at ``(form, II)`` (a flat sample's) and solved, warnings of a solve that
     does not converge silenced (a search's trial: its caller judges it), from the affine start or,
-    with ``previous = (state, its form)``, from that equilibrium mapped by ``√form √form_prev⁻¹`` in
-    the plane (exact for its affine part, and it keeps C_RVE's values, which are linear in the
+    with ``previous = (state, its form)``, from that equilibrium mapped by :func:`_form_map` (exact
+    for its affine part, and it keeps C_RVE's values, which are linear in the
     positions). Raises :class:`TilingReachError` when the steps leave the tiles mapped."""
     tiled = tile_repeat(relaxed, form, II)
     state = tiled.state
     if previous is not None:
         prior, prior_form = previous
-        form, prior_form = np.asarray(form, dtype=np.float64), np.asarray(prior_form, dtype=np.float64)
-        matrix = np.eye(3)
-        if form[0, 1] == 0.0 and prior_form[0, 1] == 0.0:
-            # Axis-aligned: the stretch ratio per axis, exactly (an unchanged axis maps by 1.0; a
-            # jersey's warp search at 10 % lands in another of its equilibria from a start that
-            # differs by round-off).
-            matrix[[0, 1], [0, 1]] = np.sqrt(np.diag(form) / np.diag(prior_form))
-        else:
-            matrix[:2, :2] = _spd_sqrt(form) @ np.linalg.inv(_spd_sqrt(prior_form))
+        matrix = _form_map(form, prior_form)
         state.node_position[:] = prior.node_position @ matrix.T
         state.edge_quaternion[:] = aligned_frames(tiled.model, state.node_position, prior.edge_quaternion)
     with warnings.catch_warnings():
@@ -851,6 +850,7 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
             current = point
     hessian = 0.5 * (hessian + hessian.T)
     failure = "the search ran out of solves"
+
     def balanced(point, w, v) -> bool:
         """Both slopes below FREE_SLOPE_RTOL of the pure stretch's, and the decrease of Ū they
         still promise (½ sᵀ H⁻¹ s) below SEARCH_ENERGY_RTOL of Ū, as the axis search asks: a
@@ -939,15 +939,27 @@ def periodic_pull(relaxed: RelaxedRepeat, axis: int, strain: float,
     follow. Warns :class:`~yarnfit.engine.ConvergenceWarning` when the sample does not converge."""
     if axis not in (0, 1):
         raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
+    family = next(f for f in UNIAXIAL_FAMILIES if f.uniaxial_axis == axis)
+    return _periodic_pull(relaxed, family, ("weft", "warp")[axis], strain, options)
+
+
+def _periodic_pull(relaxed: RelaxedRepeat, family: Family, direction: str, strain: float,
+                   options: QuasiStaticOptions | None) -> PeriodicPull:
+    """:class:`PeriodicPull` ``direction`` of the uniaxial ``family``'s sample at ``strain``
+    (:func:`solve_sample`): force ``λ`` times its ``pull_slope``; width the free transverse
+    stretch along a yarn axis, ``√det I / λ`` off it."""
     strain = positive_number(strain, "strain")
     start = time.perf_counter()
-    options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
-    family = next(f for f in UNIAXIAL_FAMILIES if f.uniaxial_axis == axis)
-    sample = _solve_uniaxial(relaxed, SampleSpec.at(family, strain), options, start)
-    across = 1 - axis
-    width = math.sqrt(sample.I[across, across]) if math.isfinite(sample.pull_slope) else math.nan
-    return PeriodicPull(("weft", "warp")[axis], strain, (1.0 + strain) * sample.pull_slope, width, sample.converged,
-                        sample.residual, sample.iterations, time.perf_counter() - start)
+    sample = solve_sample(relaxed, SampleSpec.at(family, strain), options)
+    stretch = 1.0 + strain
+    if not math.isfinite(sample.pull_slope):
+        width = math.nan
+    elif family.uniaxial_axis is not None:
+        width = math.sqrt(sample.I[1 - family.uniaxial_axis, 1 - family.uniaxial_axis])
+    else:
+        width = math.sqrt(float(np.linalg.det(sample.I))) / stretch
+    return PeriodicPull(direction, strain, stretch * sample.pull_slope, width, sample.converged, sample.residual,
+                        sample.iterations, time.perf_counter() - start)
 
 
 def _solve_bias(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:
@@ -990,14 +1002,7 @@ def periodic_bias_pull(relaxed: RelaxedRepeat, strain: float,
     ``λ dŪ/de`` (N/m), ``e`` the pull's Green strain, ``λ`` times the sample's ``pull_slope``. The
     reference a cut bias strip converges to as it widens. Warns
     :class:`~yarnfit.engine.ConvergenceWarning` when the search does not converge."""
-    strain = positive_number(strain, "strain")
-    start = time.perf_counter()
-    options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
-    sample = _solve_bias(relaxed, SampleSpec.at(Family.BIAS_UNIAXIAL, strain), options, start)
-    stretch = 1.0 + strain
-    width = math.sqrt(float(np.linalg.det(sample.I))) / stretch if math.isfinite(sample.pull_slope) else math.nan
-    return PeriodicPull("bias", strain, stretch * sample.pull_slope, width, sample.converged, sample.residual,
-                        sample.iterations, time.perf_counter() - start)
+    return _periodic_pull(relaxed, Family.BIAS_UNIAXIAL, "bias", strain, options)
 
 
 # -- sample ranges --------------------------------------------------------------------------------

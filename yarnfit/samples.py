@@ -406,7 +406,7 @@ SAMPLES_PER_LEVEL = 13
 # since the transverse strain became an unknown of it (session 33; cotton jersey at 0.1 %: 0.4 s).
 UNIAXIAL_LEVELS = 6
 UNIAXIAL_LARGEST_STRAIN = 0.10
-UNIAXIAL_SAMPLES = 3 * UNIAXIAL_LEVELS  # weft, warp, bias
+UNIAXIAL_SAMPLES = len(UNIAXIAL_FAMILIES) * UNIAXIAL_LEVELS  # weft, warp, bias
 # Smallest sampled strain (λ − 1, and I12 for shear): the design's levels are spaced
 # logarithmically from here up to the range, so the small-strain stiffness that a drape, a low-load
 # tensile test or a robot's grasp sees is measured, not extrapolated from a few per cent. 0.1 %
