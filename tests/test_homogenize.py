@@ -374,6 +374,13 @@ def test_mapped_images_are_those_of_the_mapped_sample(start, end):
     assert sum(got.terms) == pytest.approx(sum(want.terms), rel=SCALED_ENERGY_RTOL)
     assert np.allclose(mapped.tiling.translation, other.model.tiling.translation, rtol=0.0,
                        atol=SCALED_TRANSLATION_ATOL)
+    # The mapped tiling shares the checked images and rotations (no second check of them) and
+    # finds its images as the original does.
+    assert mapped.tiling.rotation is tiled.model.tiling.rotation
+    tiles = mapped.tiling.images[::7]
+    assert np.array_equal(mapped.tiling.image_index(tiles), tiled.model.tiling.image_index(tiles))
+    with pytest.raises(ValueError, match="finite"):
+        transform_images(tiled.model, np.full((3, 3), np.nan))
     bent = tile_repeat(relaxed, np.eye(2), np.diag([50.0, 0.0]))
     with pytest.raises(ValueError, match="translations"):
         transform_images(bent.model, matrix)
