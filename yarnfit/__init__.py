@@ -5,4 +5,4 @@ the yarn engine (:mod:`yarnfit.engine`) → homogenization → orthotropic StVK 
 export → validation scenes. See ``README.md``.
 """
 
-__version__ = "0.1.1"
+__version__ = "0.1.2"
