@@ -15,7 +15,7 @@ import pytest
 import scipy.optimize
 
 from yarnfit.engine import Residual
-from yarnfit.fit import _ridge_columns, fit_shell, ridge_candidates
+from yarnfit.fit import fit_shell, ridge_candidates
 from yarnfit.samples import SampleRanges, SampleResult, sample_design
 from yarnfit.shell import RidgeMembrane, bending_strain, membrane_strain
 

@@ -18,21 +18,14 @@ import scipy.optimize
 from yarnfit.engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticSolver
 from yarnfit.engine.energy import internal_forces
 from yarnfit.engine.model import aligned_frames
-from yarnfit import homogenize as homogenize_module
+from yarnfit.homogenize import equilibrium as equilibrium_module
+from yarnfit.homogenize import uniaxial as uniaxial_module
 from yarnfit.engine.tiling import transform_images, yarn_strips
 from yarnfit.fabric import Fabric
 from yarnfit.fit import fit_shell
 from yarnfit.homogenize import (
-    CONTINUATION_HALVINGS,
-    FREE_SLOPE_RTOL,
+    MAX_ITERATIONS,
     SurfaceMap,
-    _FreeStrainPoint,
-    _next_free_strain,
-    _green_slope,
-    _search_bias,
-    _solve_with_continuation,
-    _spd_sqrt,
-    _transverse_slope,
     default_ranges,
     periodic_bias_pull,
     periodic_pull,
@@ -41,6 +34,10 @@ from yarnfit.homogenize import (
     tile_repeat,
     transfer_fluctuation,
 )
+from yarnfit.homogenize.bias import _search_bias
+from yarnfit.homogenize.equilibrium import CONTINUATION_HALVINGS, _green_slope, _solve_with_continuation
+from yarnfit.homogenize.surface import _spd_sqrt
+from yarnfit.homogenize.uniaxial import FREE_SLOPE_RTOL, _FreeStrainPoint, _next_free_strain, _transverse_slope
 from yarnfit.fabric_fit import DEFAULT_LEVELS, DEFAULT_SAMPLES, FabricFit, fit_fabric, shell_thickness
 from yarnfit.material_file import MaterialFile
 from yarnfit.fibers import Fiber, get_fiber
@@ -275,7 +272,7 @@ def test_uniaxial_tension_finds_the_free_width_minimum():
     assert result.energy_density < pure.energy_density
 
 
-def _free_strain_search(energy, slope, low, strain, solves=homogenize_module.FREE_STRAIN_SOLVES):
+def _free_strain_search(energy, slope, low, strain, solves=uniaxial_module.FREE_STRAIN_SOLVES):
     """Drive :func:`_next_free_strain` over an analytic Ū(E⊥): ``(points solved, verdict)``."""
     points = [_FreeStrainPoint(0.0, energy(0.0), slope(0.0))]
     for _ in range(solves):
@@ -308,9 +305,9 @@ def test_the_free_strain_search_finds_the_least_energy_from_slopes(case):
     assert found == verdict
     best = min(points, key=lambda p: p.energy)
     # Within what the search promises: Ū at most SEARCH_ENERGY_RTOL above the least in the interval.
-    assert best.energy <= energy(where) * (1.0 + homogenize_module.SEARCH_ENERGY_RTOL)
+    assert best.energy <= energy(where) * (1.0 + uniaxial_module.SEARCH_ENERGY_RTOL)
     if found == "minimum":  # the slope's root to the search's tolerance on E⊥
-        assert min(abs(p.free - where) for p in points) <= homogenize_module.FREE_STRAIN_TOLERANCE
+        assert min(abs(p.free - where) for p in points) <= uniaxial_module.FREE_STRAIN_TOLERANCE
     # Secants on exact slopes: a quadratic's root in one step after the guess; the kink in a few.
     assert len(points) <= {"quadratic": 3, "auxetic": 1}.get(case, 12)
 
@@ -335,7 +332,7 @@ SCALED_TRANSLATION_ATOL = 1e-15
 @pytest.mark.parametrize("free", [0.0, -0.01])
 def test_the_transverse_slope_is_the_derivative_of_the_equilibrium_energy(free):
     relaxed = fitted().relaxed
-    options = QuasiStaticOptions(max_iterations=homogenize_module.MAX_ITERATIONS)
+    options = QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
 
     def solve(e, warm=None):
         tiled = tile_repeat(relaxed, np.diag([1.05**2, 1.0 + 2.0 * e]), np.zeros((2, 2)))
@@ -349,7 +346,7 @@ def test_the_transverse_slope_is_the_derivative_of_the_equilibrium_energy(free):
         return tiled, result
 
     tiled, result = solve(free)
-    slope = homogenize_module._transverse_slope(tiled.model, result, 0, free, tiled.area)
+    slope = _transverse_slope(tiled.model, result, 0, free, tiled.area)
     above, below = (solve(free + d, result)[1].energy.internal for d in (SLOPE_SPAN, -SLOPE_SPAN))
     assert slope == pytest.approx((above - below) / (2.0 * SLOPE_SPAN * tiled.area), rel=SLOPE_RTOL)
 
@@ -678,8 +675,8 @@ class _FailingSolves:
 @pytest.fixture
 def failing_solves(monkeypatch):
     def install(fail=None):
-        spy = _FailingSolves(homogenize_module.QuasiStaticSolver, fail)
-        monkeypatch.setattr(homogenize_module, "QuasiStaticSolver", spy)
+        spy = _FailingSolves(equilibrium_module.QuasiStaticSolver, fail)
+        monkeypatch.setattr(equilibrium_module, "QuasiStaticSolver", spy)
         return spy
     return install
 

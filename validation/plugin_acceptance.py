@@ -32,7 +32,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from fabric_shell import FABRIC  # noqa: E402
 import test_plugin_mechanics as mechanics  # noqa: E402
 from test_plugin_mechanics import MESH_KINDS, strip_mesh  # noqa: E402
 from yarnfit.validate.stretch import clamped_strip_stiffness  # noqa: E402

@@ -507,7 +507,6 @@ def fit_shell(
     undeformed = np.array([_is_undeformed(s) for s in used], dtype=bool)
     reference_energy = float(np.mean(target[undeformed])) if np.any(undeformed) else 0.0
     relative = target - reference_energy
-    fitted_rows = used if not np.any(undeformed) else [s for s, u in zip(used, undeformed) if not u]
     weights, widths = sample_weights(used, h, weight_width)
     D = design_matrix(used, h)
     linear_terms = _residual_stress_columns(used)

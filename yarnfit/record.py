@@ -375,7 +375,7 @@ class FitRecording(Recording):
         Args:
             index: the sample's index in ``FabricFit.samples`` (design order).
             relaxed: the :class:`yarnfit.relax.RelaxedRepeat` the sample was solved on.
-            result: the :class:`yarnfit.homogenize.SampleResult`.
+            result: the :class:`yarnfit.samples.SampleResult`.
         """
         if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 0:
             raise ValueError(f"a sample index must be a non-negative integer, got {index!r}")
@@ -550,7 +550,7 @@ def _matrix(m) -> str:
 
 
 def sample_summary(index: int, result) -> str:
-    """Markdown summary of sample ``index`` (a :class:`yarnfit.homogenize.SampleResult`):
+    """Markdown summary of sample ``index`` (a :class:`yarnfit.samples.SampleResult`):
     parameter in its family's unit, II in 1/m, Ū in J/m²."""
     spec, r = result.spec, result.residual
     rows = [

@@ -66,10 +66,14 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING
 
 from .checks import finite_number, positive_or_none
 from .fibers import SPINNING_SYSTEMS, Fiber
 from .jsonfile import read_json
+
+if TYPE_CHECKING:  # the engine compiles Numba kernels: imported only when a rod is built
+    from .engine import RodSection
 
 __all__ = ["SPINNING_DEFAULTS", "YARN_MODELS", "Yarn", "YarnConstruction", "load_yarn_file"]
 

@@ -1,0 +1,52 @@
+"""Homogenization (paper §4.5, phase 2): the relaxed repeat tiled over a deformed mid-surface.
+
+A sample is a pair of constant fundamental forms ``(I, II)`` (``I`` 2×2 SPD, ``II`` 2×2 symmetric,
+1/m; the rest surface is flat with ``I = Id``). Every node of the relaxed repeat has reference
+coordinates ``X`` in the fabric plane (measured from the repeat's centre) and a height ``h`` above
+its mid-plane; it is placed at ``x = φ(X) + h n(X) + ũ`` on a mid-surface ``φ`` whose fundamental
+forms at ``X = 0`` are ``(I, II)``, with ``R(X) = [∂φ polar rotation | n]`` the surface frame:
+
+- ``φ(X) = β(S X)``, ``S = I^{1/2}`` (symmetric: a pure membrane sample turns nothing), and ``β``
+  the bent plane with second fundamental form ``II' = S⁻¹ II S⁻¹``: a **circular cylinder** when
+  ``II'`` is singular (single, bias and any other developable bend: exact, its metric is ``I``
+  everywhere), otherwise a quadric ``(Y, ½ Yᵀ II' Y)`` with cubic corrections in the plane. A
+  saddle's Gauss curvature K cannot live on a flat metric: the corrections cancel the quadric's
+  own metric strain (``κ² Y²``) and leave the Gauss defect ``K Y² / 4`` per axis, which the saddle
+  curvatures keep small (see :func:`sample_design`).
+- Periodicity (``C_RVE_Γ``): the image of node i in tile T is where its co-rotated fluctuation
+  ``Rᵀ ũ`` is the same at ``X_i + T``: ``Q x + c`` with ``Q = R(X_i + T) R(X_i)ᵀ``. These per-node
+  rigid maps (:class:`~yarnfit.engine.tiling.CurvedTiling`) carry ghost-edge ends, frames across
+  tile borders (so the twist across a border is the twist of a real joint: the paper's matching
+  end twist, and no net twist can build up from tile to tile) and contacts with every image.
+- ``C_RVE``: per yarn, ``Σ_j R_jᵀ ũ_j = 0`` — linear in the positions since ``R_j`` is fixed.
+
+The quasi-static solver then minimises the yarn energy; ``Ū = U / (p_x p_y)`` (J/m² of reference
+area) with its residual is the sample's result. Samples are independent and run in parallel.
+
+Modules, in the order data flows through them: :mod:`.surface` (the repeat on the mid-surface),
+:mod:`.equilibrium` (one solve, its continuation and warm starts, Ū's slope along a strain),
+:mod:`.uniaxial` and :mod:`.bias` (the free-strain searches of the uniaxial samples),
+:mod:`.sample` (any sample, the default ranges, many samples in parallel) and :mod:`.pull` (the
+periodic pull a cut strip converges to).
+"""
+
+from .equilibrium import MAX_ITERATIONS
+from .pull import PeriodicPull, periodic_bias_pull, periodic_pull
+from .sample import MAX_TURN_PER_REPEAT, default_ranges, sample_tasks, solve_sample, solve_samples
+from .surface import SurfaceMap, TiledRepeat, tile_repeat, transfer_fluctuation
+
+__all__ = [
+    "MAX_ITERATIONS",
+    "MAX_TURN_PER_REPEAT",
+    "PeriodicPull",
+    "SurfaceMap",
+    "TiledRepeat",
+    "default_ranges",
+    "periodic_bias_pull",
+    "periodic_pull",
+    "sample_tasks",
+    "solve_sample",
+    "solve_samples",
+    "tile_repeat",
+    "transfer_fluctuation",
+]

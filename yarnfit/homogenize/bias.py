@@ -1,0 +1,207 @@
+"""Uniaxial tension off the yarn axes (the bias): two free strains of the pull's frame, the
+transverse strain and the frame's shear, found by a two-strain Newton on the envelope-theorem
+slopes."""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticResult, Residual
+from ..engine.contact import TilingReachError
+from ..relax import RelaxedRepeat
+from ..samples import SampleResult, SampleSpec, stretch_share
+from .equilibrium import _green_slope, _solve_from, _solve_with_continuation
+from .surface import TiledRepeat
+from .uniaxial import FLAT_ENERGY_RTOL, FREE_SLOPE_RTOL, FREE_STRAIN_SOLVES, SEARCH_ENERGY_RTOL, SMALLEST_FREE_STRETCH
+
+
+# A bias pull's search (:func:`_search_bias`): the pull's direction from weft (rad), and the
+# largest step of its free strains per trial (Green strain): a Newton step from the pure stretch
+# can promise a contraction the solver cannot reach from there in one solve.
+BIAS_ANGLE = math.pi / 4
+BIAS_STEP_LIMIT = 0.05
+# ... and the Newton step (H⁻¹ times the slopes) below which the free strains count as found. Far
+# tighter than the axis search's FREE_STRAIN_TOLERANCE: on the bias the pull's own stress is small
+# against its coupling to the free strains (the plain weave at 1 %: ~0.3 N/m of force against
+# ~4e4 N/m per unit of the transverse strain), so an error of 1e-5 in them moves the force by more
+# than itself. Newton's last steps cost one solve each.
+BIAS_STEP_TOLERANCE = 1e-7
+# The probes that give the search its first Hessian, as a fraction of the pull's Green strain: the
+# free strains' answer is of the pull's size (0.16–1.4 of it over the presets and the stockinette),
+# and Ū is far from quadratic beyond it. The stockinette at 0.1 % probed with a fixed 1e-3 (six
+# times its answer) met its loops jamming there, slopes 100x the start's; the Hessian from that
+# sent the first step 50x too far and the search took 19 solves (497 Newton iterations, 2.8 s)
+# where probes of a tenth of the pull take 10 (121).
+BIAS_PROBE_FRACTION = 0.1
+
+
+@dataclass(frozen=True)
+class _BiasSearch:
+    """Outcome of :func:`_search_bias`: the free Green strains ``(f, g)`` of the pull's frame
+    chosen (across the pull, and the frame's shear), the first form there, its solve on ``tiled``
+    (``None`` if none converged), the Newton iterations of every trial, why it did not converge
+    (``None`` if it did), and Ū's slopes along ``f`` and ``g`` there (J/m²)."""
+
+    free: np.ndarray
+    form: np.ndarray
+    result: QuasiStaticResult | None
+    tiled: TiledRepeat | None
+    iterations: int
+    failure: str | None
+    slopes: np.ndarray
+
+
+def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOptions,
+                 angle: float = BIAS_ANGLE) -> _BiasSearch:
+    """The periodic repeat pulled to the engineering ``strain`` at ``angle`` from weft with every
+    other stress free: in the pull's frame ``q`` the Green strain is ``[[e, g], [g, f]]``, ``e``
+    prescribed and ``(f, g)`` where Ū is least. Off the yarn axes the two couple (a fabric pulled
+    on the bias contracts and shears its own frame), so the search is a two-strain Newton on the
+    envelope-theorem slopes (:func:`_green_slope` along ``q e_1 e_1ᵀ qᵀ`` and ``q (e_0 e_1ᵀ + e_1
+    e_0ᵀ) qᵀ``), its Hessian from two probe solves and secant (BFGS) updates, steps at most
+    :data:`BIAS_STEP_LIMIT` and halved until Ū or the slopes fall, each trial warm-started from
+    the nearest equilibrium mapped by ``√I' √I⁻¹`` (which keeps C_RVE's values: they are linear in
+    the positions). It starts from the pure stretch along the pull and stops when the Newton step
+    is below :data:`BIAS_STEP_TOLERANCE`, or when no step lowers Ū any more and the slopes are below
+    :data:`FREE_SLOPE_RTOL` of the pure stretch's with the decrease of Ū they promise below
+    :data:`SEARCH_ENERGY_RTOL` of Ū; not converged otherwise or after :data:`FREE_STRAIN_SOLVES`."""
+    c, s = math.cos(angle), math.sin(angle)
+    q = np.array([[c, -s], [s, c]])
+    pulled = 0.5 * ((1.0 + strain) ** 2 - 1.0)
+    changes = (q @ np.diag([0.0, 1.0]) @ q.T, q @ np.array([[0.0, 1.0], [1.0, 0.0]]) @ q.T)
+    flat = np.zeros((2, 2))
+    least_free = 0.5 * (SMALLEST_FREE_STRETCH**2 - 1.0)
+    iterations = 0
+    solved = []  # (free (2,), result, tiled, energy, slopes (2,))
+
+    def form(free: np.ndarray) -> np.ndarray:
+        return np.eye(2) + 2.0 * q @ np.array([[pulled, free[1]], [free[1], free[0]]]) @ q.T
+
+    def admissible(free: np.ndarray) -> bool:
+        first = form(free)
+        return bool(free[0] >= least_free and first[0, 0] > 0.0 and np.linalg.det(first) > 0.0)
+
+    def solve_at(free: np.ndarray):
+        nonlocal iterations
+        first = form(free)
+        if not solved:
+            tiled, result, count = _solve_with_continuation(relaxed, first, flat, options)
+            iterations += count
+        else:
+            nearest = min(solved, key=lambda point: float(np.abs(point[0] - free).max()))
+            try:
+                tiled, result = _solve_from(relaxed, first, flat, options, (nearest[1].state, form(nearest[0])))
+                iterations += result.iterations
+            except TilingReachError:
+                return None
+        if result is None or not result.converged:
+            return None
+        slopes = np.array([_green_slope(tiled.model, result, first, change, tiled.area) for change in changes])
+        point = (np.array(free, dtype=np.float64), result, tiled, result.energy.internal / tiled.area, slopes)
+        solved.append(point)
+        return point
+
+    current = solve_at(np.zeros(2))  # the pure stretch along the pull
+    if current is None:
+        return _BiasSearch(np.zeros(2), form(np.zeros(2)), None, None, iterations,
+                           "the pure stretch along the pull did not converge", np.full(2, math.nan))
+    scale, start_energy = float(np.abs(current[4]).max()), current[3]
+    # The Hessian from two probes of the slopes from the pure stretch, one per free strain,
+    # towards where each points, BIAS_PROBE_FRACTION of the pull's strain long.
+    base, hessian = current, np.zeros((2, 2))
+    for k in range(2):
+        probe = np.zeros(2)
+        probe[k] = -math.copysign(BIAS_PROBE_FRACTION * pulled, base[4][k] or 1.0)
+        if not admissible(probe) or (point := solve_at(probe)) is None:
+            return _BiasSearch(current[0], form(current[0]), current[1], current[2], iterations,
+                               "a probe of the free strains did not converge", current[4])
+        hessian[:, k] = (point[4] - base[4]) / probe[k]
+        if point[3] < current[3]:
+            current = point
+    hessian = 0.5 * (hessian + hessian.T)
+    failure = "the search ran out of solves"
+
+    def balanced(point, w, v) -> bool:
+        """Both slopes below FREE_SLOPE_RTOL of the pure stretch's, and the decrease of Ū they
+        still promise (½ sᵀ H⁻¹ s) below SEARCH_ENERGY_RTOL of Ū, as the axis search asks: a
+        knit's free minimum can lie far below its jammed pure stretch (wool jersey at 2 %: Ū 0.03
+        against 2.0 J/m²), where slopes of 1 % of the pure stretch's still move Ū by a tenth."""
+        promised = 0.5 * float(point[4] @ ((v / w) @ (v.T @ point[4])))
+        slope = float(np.abs(point[4]).max())
+        # Or Ū does not depend on the free strains at all (straight parallel yarns on the bias: a
+        # line of minima at Ū = 0 to round-off), as FLAT_ENERGY_RTOL says for the axis search.
+        return (slope <= FREE_SLOPE_RTOL * scale and promised <= SEARCH_ENERGY_RTOL * abs(point[3])
+                or slope * BIAS_STEP_LIMIT <= FLAT_ENERGY_RTOL * abs(start_energy))
+
+    while len(solved) < FREE_STRAIN_SOLVES:
+        w, v = np.linalg.eigh(hessian)
+        # A curvature that is not positive (a kink, a mechanism), or so small that the step would
+        # pass the limit, is replaced by the current slopes over the limit: a step as long as the
+        # limit allows. (Not the pure stretch's slopes: near a knit's free minimum Ū is far softer
+        # than its jammed pure stretch, wool jersey's curvature there ~1/60 of the start's.)
+        w = np.maximum(w, max(float(np.abs(current[4]).max()), np.finfo(float).tiny) / BIAS_STEP_LIMIT)
+        step = -(v / w) @ (v.T @ current[4])
+        step *= min(1.0, BIAS_STEP_LIMIT / float(np.abs(step).max()))
+        if float(np.abs(step).max()) <= BIAS_STEP_TOLERANCE:
+            failure = None
+            break
+        accepted = None
+        while float(np.abs(step).max()) > BIAS_STEP_TOLERANCE and len(solved) < FREE_STRAIN_SOLVES:
+            trial = current[0] + step
+            point = solve_at(trial) if admissible(trial) else None
+            # Taken if Ū falls or the slopes do: near the minimum warm-started solves land in
+            # contact states whose Ū differ by more than the step changes it (the plain weave at
+            # 0.1 %: 3e-7 J/m², 2.5 % of Ū), while the slopes still fall steadily.
+            if point is not None and (point[3] < current[3]
+                                      or float(np.abs(point[4]).max()) < float(np.abs(current[4]).max())):
+                accepted = point
+                break
+            step = 0.5 * step
+        if accepted is None:
+            # No step lowers Ū: its changes are round-off here. Found if the slopes are as small
+            # as the axis search asks (balanced); else the search is stuck.
+            failure = None if balanced(current, w, v) else "no step of the free strains lowered Ū"
+            break
+        moved, change = accepted[0] - current[0], accepted[4] - current[4]
+        if float(moved @ change) > 0.0:  # BFGS keeps the Hessian positive definite
+            hs = hessian @ moved
+            hessian = hessian - np.outer(hs, hs) / float(moved @ hs) + np.outer(change, change) / float(moved @ change)
+        current = accepted
+    return _BiasSearch(current[0], form(current[0]), current[1], current[2], iterations, failure, current[4])
+
+
+def _solve_bias(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:
+    """A uniaxial-tension sample off the yarn axes (:func:`_search_bias` at the family's angle):
+    its spec carries the form found, its ``pull_slope`` dŪ/de along the pull (:func:`_green_slope`)
+    and its ``across_slope`` the search's slope along the transverse strain (the pull frame's
+    shear is free too: its slope is ~0 where the search converged)."""
+    angle = spec.family.uniaxial_angle
+    search = _search_bias(relaxed, spec.parameter, options, angle)
+    if search.failure is not None:
+        warnings.warn(f"uniaxial sample {spec.family} {spec.parameter:+.3g} did not converge: {search.failure}"
+                      + ("" if search.result is None else f": {search.result.residual}"), ConvergenceWarning,
+                      stacklevel=3)
+    result = search.result
+    if result is None:
+        return SampleResult(spec=spec, energy_density=math.nan, converged=False,
+                            residual=Residual(math.nan, math.nan, math.nan, math.nan), iterations=search.iterations,
+                            seconds=time.perf_counter() - start)
+    direction = np.array([math.cos(angle), math.sin(angle)])
+    area = search.tiled.area
+    return SampleResult(
+        spec=SampleSpec(spec.family, search.form, spec.II, spec.parameter),
+        energy_density=result.energy.internal / area,
+        converged=search.failure is None,
+        residual=result.residual,
+        iterations=search.iterations,
+        seconds=time.perf_counter() - start,
+        position=result.state.node_position,
+        stretch_share=stretch_share(result.energy),
+        pull_slope=_green_slope(search.tiled.model, result, search.form, np.outer(direction, direction), area),
+        across_slope=float(search.slopes[0]),
+    )

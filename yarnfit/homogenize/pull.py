@@ -1,0 +1,90 @@
+"""The periodic pull: the infinite fabric pulled along weft, warp or the bias with every other
+stress free (a uniaxial sample), and its force per reference width: the yarn-level reference a cut
+strip converges to as it widens, and that the fitted shell should follow."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..checks import positive_number
+from ..engine import QuasiStaticOptions, Residual
+from ..relax import RelaxedRepeat
+from ..samples import UNIAXIAL_FAMILIES, Family, SampleSpec
+from .sample import solve_sample
+
+
+@dataclass(frozen=True)
+class PeriodicPull:
+    """The periodic fabric pulled along weft, warp or the bias with every other stress free: what
+    a uniaxial-tension sample gives a tensile test (:func:`periodic_pull`,
+    :func:`periodic_bias_pull`).
+
+    Attributes:
+        direction: ``"weft"``, ``"warp"`` or ``"bias"`` (45° from weft).
+        strain: the pull's engineering strain λ − 1.
+        force_n_per_m: force per reference width, dŪ/dλ (N/m).
+        width_ratio: the distance between the strip's long edges (which stay lines along the
+            pull) over the reference width, ``√det I / λ``: the free transverse stretch μ along
+            weft or warp.
+        converged: the sample converged (its solve and the free-strain search).
+        residual: the solve's residuals at the result.
+        iterations: Newton iterations over every trial of the search.
+        seconds: wall time (s).
+    """
+
+    direction: str
+    strain: float
+    force_n_per_m: float
+    width_ratio: float
+    converged: bool
+    residual: Residual
+    iterations: int
+    seconds: float
+
+
+def periodic_pull(relaxed: RelaxedRepeat, axis: int, strain: float,
+                  options: QuasiStaticOptions | None = None) -> PeriodicPull:
+    """The infinite fabric of ``relaxed`` pulled to the engineering ``strain`` (λ − 1) along
+    ``axis`` (0 weft, 1 warp) with the other direction free: the uniaxial-tension sample
+    (:func:`_solve_uniaxial`) and its force per reference width ``dŪ/dλ = λ dŪ/dE`` (N/m), ``λ``
+    times the sample's ``pull_slope``. The yarn-level reference a cut strip converges to as it
+    widens, and that the fitted shell's :meth:`~yarnfit.shell.ShellMaterial.uniaxial_pull` should
+    follow. Warns :class:`~yarnfit.engine.ConvergenceWarning` when the sample does not converge."""
+    if axis not in (0, 1):
+        raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
+    family = next(f for f in UNIAXIAL_FAMILIES if f.uniaxial_axis == axis)
+    return _periodic_pull(relaxed, family, ("weft", "warp")[axis], strain, options)
+
+
+def _periodic_pull(relaxed: RelaxedRepeat, family: Family, direction: str, strain: float,
+                   options: QuasiStaticOptions | None) -> PeriodicPull:
+    """:class:`PeriodicPull` ``direction`` of the uniaxial ``family``'s sample at ``strain``
+    (:func:`solve_sample`): force ``λ`` times its ``pull_slope``; width the free transverse
+    stretch along a yarn axis, ``√det I / λ`` off it."""
+    strain = positive_number(strain, "strain")
+    start = time.perf_counter()
+    sample = solve_sample(relaxed, SampleSpec.at(family, strain), options)
+    stretch = 1.0 + strain
+    if not math.isfinite(sample.pull_slope):
+        width = math.nan
+    elif family.uniaxial_axis is not None:
+        width = math.sqrt(sample.I[1 - family.uniaxial_axis, 1 - family.uniaxial_axis])
+    else:
+        width = math.sqrt(float(np.linalg.det(sample.I))) / stretch
+    return PeriodicPull(direction, strain, stretch * sample.pull_slope, width, sample.converged, sample.residual,
+                        sample.iterations, time.perf_counter() - start)
+
+
+def periodic_bias_pull(relaxed: RelaxedRepeat, strain: float,
+                       options: QuasiStaticOptions | None = None) -> PeriodicPull:
+    """The infinite fabric of ``relaxed`` pulled to the engineering ``strain`` (λ − 1) on the bias
+    (45° from weft) with every other stress free: the bias uniaxial sample (:func:`_solve_bias`:
+    the transverse strain and the pull frame's shear both free) and its force per reference width
+    ``λ dŪ/de`` (N/m), ``e`` the pull's Green strain, ``λ`` times the sample's ``pull_slope``. The
+    reference a cut bias strip converges to as it widens. Warns
+    :class:`~yarnfit.engine.ConvergenceWarning` when the search does not converge."""
+    return _periodic_pull(relaxed, Family.BIAS_UNIAXIAL, "bias", strain, options)
