@@ -49,8 +49,9 @@ SOFTENING_REL = 1e-3
 # the 10 % range.
 INTERPOLATED_REL = 0.05
 # A free-width pull at a uniaxial sample (weft, warp, bias) of a material outside the span,
-# fitted with the samples' pull slopes: 2.4 % worst measured (its kinks lie between the
-# candidates' knots, so energies and slopes cannot all be met); from the energies alone, 19 %.
+# fitted with the samples' pull slopes: 2.8 % worst measured (its kinks lie between the
+# candidates' knots, so energies and slopes cannot all be met; 2.4 % without the mixed rays of
+# session 37); from the energies alone, 19 %.
 PULL_AT_SAMPLES_REL = 0.04
 # The ranges of the synthetic designs: a woven's (20 % and 200 /m), five magnitudes per family.
 RANGES = SampleRanges(stretch=0.2, curvature=200.0)
@@ -369,7 +370,9 @@ def test_a_sample_stopped_at_the_end_of_its_search_gives_its_stress_across():
 def test_no_feasible_membrane_fits_better_than_the_fit():
     """On noisy data (outside the span), an independent minimiser of the same objective
     (:func:`objective`'s terms, on the fitted material's own energies), a bounded least-squares solve on the
-    candidates' segment tangents, finds no lower cost."""
+    candidates' segment tangents (a ray mixing normal and shear strains and its mirror in the
+    shear, the same knots, share one: the fit's membrane is even in the shear), finds no lower
+    cost."""
     from yarnfit.fit import RIDGE_SMOOTHING
 
     samples = samples_of(TRUE, noise=0.05)
@@ -384,9 +387,15 @@ def test_no_feasible_membrane_fits_better_than_the_fit():
     opposite = [(i, j) for i in first for j in first if j > i and np.array_equal(directions[j], -directions[i])]
     reference = max(fit.linear.s00, fit.linear.s11, fit.linear.s22)
     unit = fit.linear.s00  # tangents in units of the weft stiffness: columns of comparable size
+    where = {(tuple(d), t): j for j, (d, t) in enumerate(zip(directions.tolist(), knots))}
+    owner = np.array([min(j, where.get(((d[0], d[1], -d[2]), t), j)) if d[2] != 0.0 and (d[0] or d[1]) else j
+                      for j, (d, t) in enumerate(zip(directions.tolist(), knots))])
+    unknowns = np.unique(owner)
+    assert len(unknowns) < n  # the candidates hold mirrored mixed rays
+    expand = np.searchsorted(unknowns, owner)
 
     def residuals(x):
-        tangents = np.asarray(x) * unit
+        tangents = np.asarray(x)[expand] * unit
         previous = np.zeros(n)
         previous[same + 1] = tangents[same]
         c = tangents - previous
@@ -403,8 +412,9 @@ def test_no_feasible_membrane_fits_better_than_the_fit():
     # The residuals are affine in the tangents: their matrix column by column, then a bounded
     # least-squares solve by another method than the fit's (trust-region reflective, not
     # Lawson–Hanson).
-    r0 = residuals(np.zeros(n))
-    A = np.stack([residuals(np.eye(n)[j]) - r0 for j in range(n)], axis=1)
+    m = len(unknowns)
+    r0 = residuals(np.zeros(m))
+    A = np.stack([residuals(np.eye(m)[j]) - r0 for j in range(m)], axis=1)
     result = scipy.optimize.lsq_linear(A, -r0, bounds=(0.0, np.inf), method="trf", tol=1e-15, max_iter=100000)
     result.fun = float(np.sum((A @ result.x + r0) ** 2))
     ours = objective(fit.material.nonlinear, samples, fit)

@@ -184,8 +184,11 @@ class RidgeMembrane:
     What it cannot represent: an energy that is not convex in the Green strain (a membrane that
     buckles in its own plane), hysteresis and friction (it is elastic), a coupling between shear
     and the normal strains beyond what its ridges' directions carry (the fit's ridges lie in the
-    normal-strain plane and on the shear axis: an orthotropic membrane), and stiffening sharper
-    than its knots resolve (the fit spaces them logarithmically over the sampled strains).
+    normal-strain plane, on the shear axis, and on rays between the two at 45° tied in pairs mirrored
+    in the shear: an orthotropic membrane, whose coupling of shear and normal strains is even in the
+    shear; a jersey's skew, which is not, is followed only on average over the shear's two signs),
+    and stiffening sharper than its knots resolve (the fit spaces them logarithmically over the
+    sampled strains).
 
     Attributes:
         base: ``(q00, q01, q11, q22)`` (Pa), positive semi-definite.
