@@ -15,7 +15,7 @@ from yarnfit.engine import Rod, RodMaterial, RodModel, RodState, energy
 from yarnfit.engine.model import quaternion_d3
 from yarnfit.engine.tiling import cut_rectangle
 from yarnfit.validate.swatch import (FRICTION_STRAIN_STEP, STRAIN_TIMELINE, cut_swatch, edge_draw_in, free_side_ends,
-                                     stretch_repeat, stretch_swatch)
+                                     mid_strain, stretch_repeat, stretch_swatch)
 
 E = 1e9  # Pa
 RADIUS = 1e-4  # m
@@ -28,6 +28,9 @@ FORCE_RTOL = 1e-5
 # A cut swatch's rest state is its cut shape: its energy is round-off of curvatures and twists
 # recomputed from the frames it was built from (~1e-16 rad over 1e-4 m edges, EI ~ 1e-8 N·m²).
 REST_ENERGY_ATOL = 1e-20
+# The extensometer on a uniformly stretched strip: the nodes between the marks move affinely to the
+# solve's force tolerance (1e-8 of the force scale, so ~1e-8 of the strain).
+MID_STRAIN_RTOL = 1e-6
 # Rest frames along their edges: d3 against the unit tangent, round-off of the frames' transport.
 TANGENT_ATOL = 1e-12
 
@@ -89,7 +92,31 @@ def test_straight_wefts_match_closed_form(hardening):
         assert point["force_n_per_m"] == pytest.approx(expected, rel=FORCE_RTOL)
         assert point["fixed_force_n_per_m"] == pytest.approx(expected, rel=FORCE_RTOL)
         assert point["compression_ratio"] == pytest.approx(1.0, abs=1e-9)
+        # Uniform between the jaws: the extensometer reads the jaws' strain.
+        assert point["mid_strain"] == pytest.approx(point["strain"], rel=MID_STRAIN_RTOL)
         assert point["residual"]["force"] <= 1e-6
+
+
+def test_the_extensometer_reads_the_middle_not_the_jaws():
+    # Positions made by hand: the middle half of the gauge stretched by 7 %, the rest of the strip
+    # by 1 % (as if stiff near its jaws): the marks lie in the middle, so the reading is 7 %
+    # whatever the jaws did; a strip too narrow to hold a node in the marks' middle half reads NaN.
+    model, material = straight_weft_repeat()
+    swatch = cut_swatch(model, model.node_rest_position, material, direction="weft", gauge=8 * PX, width=2 * PY,
+                        clamp=PX)
+    rest = swatch.position
+    mid = 0.5 * (rest[swatch.moving, 0].min() + rest[swatch.fixed, 0].max())
+    u = rest[:, 0] - mid
+    inner = 0.3 * swatch.gauge  # beyond both marks and their bands
+    stretched = np.where(np.abs(u) <= inner, 1.07 * u, np.sign(u) * (1.07 * inner + 1.01 * (np.abs(u) - inner)))
+    position = rest.copy()
+    position[:, 0] = mid + stretched
+    assert mid_strain(swatch, position) == pytest.approx(0.07, rel=1e-12)
+    assert mid_strain(swatch, rest) == pytest.approx(0.0, abs=1e-15)
+    narrow = cut_swatch(model, model.node_rest_position, material, direction="weft", gauge=8 * PX, width=0.6 * PY,
+                        clamp=PX)
+    assert narrow.model.n_rods == 2  # the yarns at ±PY/4 lie outside its middle half (±0.15 PY)
+    assert math.isnan(mid_strain(narrow, narrow.position))
 
 
 def test_jaw_reaction_equals_sum_of_yarn_forces():

@@ -4,7 +4,9 @@ For a material file, cut strips of several sizes (gauge × width between the jaw
 the larger repeat side; each jaw band half a repeat) along each direction, pull each to 2, 5 and
 10 % (:func:`yarnfit.validate.swatch.stretch_swatch`, converged solves warm-started one from the
 next) and print, per direction and size: nodes, force per width (N/m) and compression ratio at each
-strain, and the slowest strain's solve time (one core). The sizes are not shrunk to the suite's
+strain, the strain of the strip's middle half read between two marks as an extensometer reads it
+(:func:`yarnfit.validate.swatch.mid_strain`: where it differs from the nominal strain, the jaws
+constrain the strip), and the slowest strain's solve time (one core). The sizes are not shrunk to the suite's
 node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what says how large a strip
 has to be.
 
@@ -106,8 +108,14 @@ def convergence_row(curve: dict) -> str:
     return (f"| {curve['direction']} | {gauge:g} × {width:g} | {curve['nodes']} | "
             + " | ".join(f"{p['force_n_per_m']:.4g}" for p in points) + " | "
             + " | ".join(f"{p['compression_ratio']:.3f}" for p in points) + " | "
+            + " | ".join(_percent(p.get("mid_strain")) for p in points) + " | "
             + " | ".join(_micrometres(p.get("edge_draw_in_m")) for p in points) + " | "
             + f"{max(p['seconds'] for p in points):.1f} | {'yes' if curve['converged'] else 'NO'} |")
+
+
+def _percent(value) -> str:
+    """A strain in % for the table; '—' where it is not known (an empty mark, or an older run)."""
+    return "—" if value is None else f"{100 * value:.3g}"
 
 
 def _micrometres(value) -> str:
@@ -218,8 +226,9 @@ def main(argv: list[str] | None = None) -> int:
     strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
     order = sorted(curves.values(), key=lambda c: (c["direction"], c["nodes"]))
     print_table("", ["direction", "repeats (gauge × width)", "nodes", f"N/m at {strains}", f"compression at {strains}",
-                     f"edge draw-in (µm) at {strains}", "slowest strain (s)", "converged"],
-                [convergence_row(curve) for curve in order], columns=5 + 3 * len(STRAINS))
+                     f"middle's strain (%) at {strains}", f"edge draw-in (µm) at {strains}", "slowest strain (s)",
+                     "converged"],
+                [convergence_row(curve) for curve in order], columns=5 + 4 * len(STRAINS))
     pulls = periodic_pulls(relaxed, sorted({curve["direction"] for curve in curves.values()}))
     rows, fit_rows, passed = shell_rows(file, curves, pulls)
     print_table(f"{name}: shell and periodic repeat against the largest strip per direction (force within "

@@ -32,6 +32,10 @@ Outputs per direction and strain:
   the initial strip width; ``fixed_force_n_per_m`` the same on the fixed jaw (minus sign: it pulls
   back), equal and opposite at equilibrium; ``rod_force_n_per_m`` the rods' part alone
   (``contact_share`` the rest).
+- ``mid_strain``: the strain of the strip's middle half, where it is furthest from the jaws, read
+  between two material marks as an extensometer reads it (:func:`mid_strain`; null where a mark
+  holds no node): beside ``compression_ratio`` (measured at mid-length too), the strip's own
+  state where it is most nearly uniform, which a free pull at that strain should match.
 - ``compression_ratio``: width at mid-length over the initial width, the width being the span
   across the strip of the points where yarn centrelines cross the mid-length plane (at more than
   30° from it), plus one diameter (:func:`mid_width`; yarns lying along the plane and their loose
@@ -125,6 +129,12 @@ CLAMP_SLACK = 1e-9
 # Edges count towards the mid-length width only if they cross the mid-length plane at more than
 # 30° from it (|Δx| ≥ sin 30° |e|); see mid_width.
 CROSSING_SLOPE = 0.5
+# The extensometer of mid_strain: two marks a quarter of the gauge either side of mid-length (the
+# middle half, where a strip 4/3 as long as wide is farthest from its jaws), each the nodes within
+# MARK_BAND of the gauge of it at rest (a band, not a plane: a knit's loops put nodes of one course
+# at many x) and within the middle half of the width (the cut ends at the long sides splay).
+EXTENSOMETER_SPAN = 0.5
+MARK_BAND = 0.05
 # Newton iterations per strain; a solve that needs more is reported as not converged. The cotton
 # twill's warp strip (1819 nodes, the presets' largest) converges at 2 / 5 / 10 % in 345 / 694 /
 # 1835 iterations, ~60 ms each on one core (session 29): 800 lets its 5 % converge (45 s) and keeps
@@ -328,6 +338,27 @@ def mid_width(swatch: Swatch, position: np.ndarray) -> float:
     return float(y.max() - y.min() + 2.0 * swatch.radius)
 
 
+def mid_strain(swatch: Swatch, position: np.ndarray) -> float:
+    """Engineering strain of the strip's middle, read as a tensile tester's extensometer reads it:
+    the distance along x between two marks :data:`EXTENSOMETER_SPAN` of the gauge apart about
+    mid-length, each the mean x of the nodes that lay within :data:`MARK_BAND` of the gauge of it
+    at rest and in the middle half of the width, over that distance at rest, minus 1. Where the
+    strip is uniform it is the nominal strain (the jaws' travel over the gauge); near stiff or
+    constraining jaws the middle strains more or less than that. NaN where a mark holds no node."""
+    rest = swatch.position
+    mid = 0.5 * (rest[swatch.moving, 0].min() + rest[swatch.fixed, 0].max())
+    centre = 0.5 * (rest[:, 1].max() + rest[:, 1].min())
+    inner = np.abs(rest[:, 1] - centre) <= 0.25 * swatch.width
+    marks = []
+    for side in (-1.0, 1.0):
+        near = inner & (np.abs(rest[:, 0] - (mid + side * 0.5 * EXTENSOMETER_SPAN * swatch.gauge))
+                        <= MARK_BAND * swatch.gauge)
+        if not near.any():
+            return math.nan
+        marks.append((float(rest[near, 0].mean()), float(position[near, 0].mean())))
+    return (marks[1][1] - marks[0][1]) / (marks[1][0] - marks[0][0]) - 1.0
+
+
 def extent_width(swatch: Swatch, position: np.ndarray, band: float) -> float:
     """Width (m) from all nodes within ``band`` of mid-length in x: their span in y plus one
     diameter (loose cut ends at the long sides included)."""
@@ -408,7 +439,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     extent0 = extent_width(swatch, rest, band)
     state = RodState.from_model(model)
     points = [{"strain": 0.0, "force_n_per_m": 0.0, "fixed_force_n_per_m": 0.0, "rod_force_n_per_m": 0.0,
-               "compression_ratio": 1.0, "extent_ratio": 1.0, "width_m": width0,
+               "compression_ratio": 1.0, "mid_strain": 0.0, "extent_ratio": 1.0, "width_m": width0,
                "edge_draw_in_m": 0.0 if len(free_side_ends(swatch)) else None, "converged": True, "iterations": 0,
                "seconds": 0.0, "residual": None}]
     if on_step is not None:
@@ -451,6 +482,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "rod_force_n_per_m": rod_pull / swatch.width,
             "contact_share": 0.0 if pull == 0 else 1.0 - rod_pull / pull,
             "compression_ratio": width / width0,
+            "mid_strain": finite_or_none(mid_strain(swatch, state.node_position)),
             "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
             "width_m": width,
             "edge_draw_in_m": finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
