@@ -155,9 +155,7 @@ def transform_images(model: RodModel, matrix: np.ndarray) -> RodModel:
     if matrix.shape != (3, 3):
         raise ValueError(f"matrix must be (3, 3), got {matrix.shape}")
     if model.tiling is not None:
-        if model.tiling.turns:
-            raise ValueError("transform_images needs a tiling of translations (its maps turn the images)")
-        model = replace(model, tiling=model.tiling.translated(matrix))
+        model = replace(model, tiling=model.tiling.translated(matrix))  # refuses a tiling that turns
     return replace(model, lattice=model.lattice @ matrix.T, edge_offset=np.ascontiguousarray(model.edge_offset @ matrix.T))
 
 

@@ -321,13 +321,24 @@ def _turn(before: YarnPiece, after: YarnPiece, outward: float, edge: float) -> Y
     return YarnPiece(points, lengths, as_frames(Rotation.concatenate(spread)), before.radius)
 
 
+def mid_length(swatch: Swatch, position: np.ndarray) -> float:
+    """x (m) halfway between the jaws' inner edges at ``position (N, 3)``: where the strip's
+    middle is measured."""
+    return 0.5 * float(position[swatch.moving, 0].min() + position[swatch.fixed, 0].max())
+
+
+def centre_line(swatch: Swatch) -> float:
+    """y (m) of the strip's centre line at rest, halfway between its long sides."""
+    return 0.5 * float(swatch.position[:, 1].max() + swatch.position[:, 1].min())
+
+
 def mid_width(swatch: Swatch, position: np.ndarray) -> float:
     """Width (m) at mid-length: the span across the strip (y) of the points where yarn centrelines
     pass through the plane halfway between the jaws' current positions, plus one yarn diameter.
     Only edges crossing that plane at more than 30° from it count (``|Δx| ≥ |e| / 2``): yarns
     lying along the plane (a weft strip's warps) would add their cut ends, which splay out at the
     long sides as the strip is pulled (cotton twill, weft strip at 5 %: +6 % width with them)."""
-    mid = 0.5 * (position[swatch.moving, 0].min() + position[swatch.fixed, 0].max())
+    mid = mid_length(swatch, position)
     a = position[swatch.model.edge_nodes[:, 0]]
     b = position[swatch.model.edge_nodes[:, 1]]
     crossing = (a[:, 0] - mid) * (b[:, 0] - mid) <= 0.0
@@ -346,9 +357,8 @@ def mid_strain(swatch: Swatch, position: np.ndarray) -> float:
     strip is uniform it is the nominal strain (the jaws' travel over the gauge); near stiff or
     constraining jaws the middle strains more or less than that. NaN where a mark holds no node."""
     rest = swatch.position
-    mid = 0.5 * (rest[swatch.moving, 0].min() + rest[swatch.fixed, 0].max())
-    centre = 0.5 * (rest[:, 1].max() + rest[:, 1].min())
-    inner = np.abs(rest[:, 1] - centre) <= 0.25 * swatch.width
+    mid = mid_length(swatch, rest)
+    inner = np.abs(rest[:, 1] - centre_line(swatch)) <= 0.25 * swatch.width
     marks = []
     for side in (-1.0, 1.0):
         near = inner & (np.abs(rest[:, 0] - (mid + side * 0.5 * EXTENSOMETER_SPAN * swatch.gauge))
@@ -362,8 +372,7 @@ def mid_strain(swatch: Swatch, position: np.ndarray) -> float:
 def extent_width(swatch: Swatch, position: np.ndarray, band: float) -> float:
     """Width (m) from all nodes within ``band`` of mid-length in x: their span in y plus one
     diameter (loose cut ends at the long sides included)."""
-    mid = 0.5 * (position[swatch.moving, 0].min() + position[swatch.fixed, 0].max())
-    near = np.abs(position[:, 0] - mid) <= band
+    near = np.abs(position[:, 0] - mid_length(swatch, position)) <= band
     y = position[near, 1]
     return float(y.max() - y.min() + 2.0 * swatch.radius)
 
@@ -376,8 +385,7 @@ def free_side_ends(swatch: Swatch) -> np.ndarray:
     ends = np.unique(np.concatenate([model.rod_node_start[:-1], model.rod_node_start[1:] - 1]))
     ends = ends[~model.node_pinned[ends]]
     x = swatch.position[ends, 0]
-    mid = 0.5 * (swatch.position[swatch.moving, 0].min() + swatch.position[swatch.fixed, 0].max())
-    return ends[np.abs(x - mid) <= 0.25 * swatch.gauge]
+    return ends[np.abs(x - mid_length(swatch, swatch.position)) <= 0.25 * swatch.gauge]
 
 
 def edge_draw_in(swatch: Swatch, position: np.ndarray, compression_ratio: float) -> float:
@@ -389,9 +397,8 @@ def edge_draw_in(swatch: Swatch, position: np.ndarray, compression_ratio: float)
     ends = free_side_ends(swatch)
     if len(ends) == 0:
         return math.nan
-    rest_y = swatch.position[:, 1]
-    centre = 0.5 * (rest_y.max() + rest_y.min())
-    offset = rest_y[ends] - centre
+    centre = centre_line(swatch)
+    offset = swatch.position[ends, 1] - centre
     return float(np.mean(np.sign(offset) * (compression_ratio * offset - (position[ends, 1] - centre))))
 
 
