@@ -163,6 +163,36 @@ def test_penalties_stiffen_only_where_updates_stall():
     assert np.all(later.stiffening[~new] <= MAX_STIFFENING) and later.stiffening[~new].min() == 1.0
 
 
+def test_a_new_load_step_keeps_the_multipliers_at_base_penalties():
+    model, position, options, lagrangian, contacts = queried()
+    n = contacts.start[-1]
+    gap = np.full(n, -10 * options.penetration_tolerance * 2 * RADIUS)  # every constraint too deep
+    force = np.linspace(1.0, 2.0, n)
+    for _ in range(2):  # the second update stalls: every pair stiffens tenfold
+        lagrangian.update(contacts, gap, force, balanced(1e-3))
+    assert np.all(contacts.stiffening == 10.0)
+    fresh = contacts.with_base_penalties()
+    assert np.all(fresh.stiffening == 1.0) and np.array_equal(fresh.stiffness, fresh.base_stiffness)
+    assert np.array_equal(fresh.multiplier, force) and np.array_equal(fresh.pairs.pairs, contacts.pairs.pairs)
+    # A copy: the step it starts updates its own multipliers, not the last step's record.
+    fresh.multiplier[0] = -1.0
+    assert contacts.multiplier[0] == force[0] and np.all(contacts.stiffening == 10.0)
+    # A solve starting from it recalls those multipliers, and pairs it meets later start at base
+    # penalties too: the stiffest level reached is the new step's own (the second rod moved by
+    # three edges crosses other edges of the first).
+    step = ContactLagrangian(model, options)
+    step.remember(fresh)
+    again = step.query(position)
+    assert np.array_equal(again.pairs.pairs, fresh.pairs.pairs) and np.array_equal(again.multiplier, fresh.multiplier)
+    assert np.all(again.stiffening == 1.0)
+    shifted = position.copy()
+    shifted[9:, 0] += 6 * RADIUS
+    later = step.query(shifted)
+    known = set(fresh.pairs.keys(model.n_edges).tolist())
+    assert any(key not in known for key in later.pairs.keys(model.n_edges).tolist())
+    assert np.all(later.stiffening == 1.0)
+
+
 def test_the_potential_of_some_pairs_adds_up_to_the_whole():
     # A swept query finds pairs a query at the start does not: the solver corrects the start's
     # potential by the pairs one set lacks (pairs_energy over those alone) instead of assessing it

@@ -2,6 +2,8 @@
 values against the smoothed Coulomb law and derivatives against central differences, and a rod
 pressed onto another and dragged: sliding, its jaw holds μ N; stuck, less, growing with the drag."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -215,3 +217,31 @@ def test_a_warm_start_refuses_another_models_contacts():
     other = RodModel.from_rods([Rod(straight, RADIUS, YARN)])
     with pytest.raises(ValueError, match="edges"):
         QuasiStaticSolver(other).solve(RodState.from_model(other), contacts=rest.contacts)
+
+
+def test_a_load_step_starts_from_the_last_multipliers_at_base_penalties():
+    """``lagged_solve`` is a new load step: its first pass starts from the multipliers of
+    ``anchors_from`` with their penalties back at base (``ContactSet.with_base_penalties``), and
+    each later pass from the contacts the pass before it reached, penalties included."""
+    model, loads, jaw = _dragged_rod(1.0)
+    solver = QuasiStaticSolver(model, QuasiStaticOptions(force_tolerance=1e-10, torque_tolerance=1e-10))
+    rest = solver.solve(RodState.from_model(model), loads)
+    stiffened = dataclasses.replace(rest.contacts, stiffening=np.full_like(rest.contacts.stiffening, 100.0))
+    moved = rest.state.node_position.copy()
+    moved[jaw, 0] += 3e-3 * 2 * RADIUS
+    guess = RodState(moved, rest.state.edge_quaternion, np.zeros_like(moved), np.zeros((model.n_edges, 3)))
+    started, reached = [], []
+    solve = solver.solve
+
+    def recording(*args, contacts=None, **kwargs):
+        started.append(contacts)
+        reached.append(solve(*args, contacts=contacts, **kwargs))
+        return reached[-1]
+
+    solver.solve = recording
+    lagged = lagged_solve(solver, guess, rest.state.node_position, 0.3, anchors_from=(rest.state.node_position, stiffened),
+                          loads=loads, tolerance=LAG_SETTLED)
+    assert lagged.result.converged and lagged.passes == len(started) >= 2
+    assert np.all(started[0].stiffening == 1.0) and np.array_equal(started[0].multiplier, rest.contacts.multiplier)
+    assert np.all(stiffened.stiffening == 100.0)  # the caller's record is left alone
+    assert all(later is before.contacts for later, before in zip(started[1:], reached))

@@ -16,7 +16,7 @@ that is not an energy kernel:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -140,6 +140,21 @@ class ContactSet:
             and np.array_equal(self.pairs.images, other.pairs.images)
             and np.array_equal(self.multiplier, other.multiplier)
             and np.array_equal(self.stiffness, other.stiffness))
+
+    def with_base_penalties(self) -> "ContactSet":
+        """The same pairs and multipliers (copied) with every penalty back at its base value: how
+        a new load step starts from the last one's contacts.
+
+        Penalties are a load step's own; the multipliers carry the contact forces on. Carried over,
+        the stiffening ratchets: a new pair starts at the largest factor reached so far
+        (``_Memory.recall``), so once a few pairs of a cut strip had reached 1000× every contact a
+        later Newton step ran into was a thousand times stiffer than the step's model knew, and
+        the line search cut such steps to 1/4000. The cotton twill's warp strip with friction
+        (1819 nodes) had 1073 pairs at 1000× by 5 %; its 5 and 10 % levels took 3096 and 3322
+        Newton iterations from carried penalties, 2162 and 1895 from base ones, pulling the same
+        to 3 digits (session 38, ``validation/bench.py swatch``). Within a load step (its lagged
+        passes) the penalties are kept: its loads do not change."""
+        return replace(self, multiplier=self.multiplier.copy(), stiffening=np.ones_like(self.stiffening))
 
     def measures(self, gap: np.ndarray, force: np.ndarray) -> tuple[float, float]:
         """``(penetration, separation)`` of constraint gaps ``gap`` (m) and normal forces

@@ -59,10 +59,11 @@ def lagged_solve(solver: QuasiStaticSolver, guess: RodState, reference: np.ndarr
     normal forces (the step's start, solved; default: a frictionless first pass). ``solver`` a
     :class:`~yarnfit.engine.QuasiStaticSolver`; other keywords go to its ``solve``.
 
-    Each pass starts from the last one's contact multipliers (``solve(contacts=...)``), the first
-    from those of ``anchors_from``: a pass starts at the last one's solution, where they nearly
-    balance, and from zero every pass spent its first multiplier updates pushing the residual
-    back up (design notes §5, "Lagged friction")."""
+    Each pass starts from the last one's contact multipliers and penalties (``solve(contacts=...)``),
+    the first from the multipliers of ``anchors_from`` at base penalties (a new load step,
+    :meth:`~yarnfit.engine.contact_lagrangian.ContactSet.with_base_penalties`): a pass starts at the last one's
+    solution, where they nearly balance, and from zero every pass spent its first multiplier
+    updates pushing the residual back up (design notes §5, "Lagged friction")."""
     model = solver.model
     if anchors_from is None:
         result = solver.solve(guess, **solve_args)
@@ -71,7 +72,9 @@ def lagged_solve(solver: QuasiStaticSolver, guess: RodState, reference: np.ndarr
     else:
         iterations, passes = 0, 0
     anchors = anchor_contacts(model, anchors_from[0], anchors_from[1], reference, coefficient, slip_length)
-    contacts = anchors_from[1]
+    # The step's normal forces are those the step's start was solved with; its first pass starts
+    # from their multipliers but from base penalties (ContactSet.with_base_penalties).
+    contacts = anchors_from[1].with_base_penalties()
     while True:
         result = solver.solve(guess, friction=anchors, contacts=contacts, **solve_args)
         iterations += result.iterations

@@ -471,7 +471,8 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                     settled &= lagged.settled
                     iterations += lagged.iterations
                 else:
-                    lagged, result = None, solver.solve(guess, contacts=contacts)
+                    lagged, result = None, solver.solve(
+                        guess, contacts=None if contacts is None else contacts.with_base_penalties())
                     iterations += result.iterations
             converged &= bool(result.converged)
             state, contacts, reached = result.state, result.contacts, target
