@@ -143,7 +143,8 @@ class ContactSet:
 
     def with_base_penalties(self) -> "ContactSet":
         """The same pairs and multipliers (copied) with every penalty back at its base value: how
-        a new load step starts from the last one's contacts.
+        a frictional load step (:func:`yarnfit.engine.lagged.lagged_solve`) starts from the last
+        one's contacts.
 
         Penalties are a load step's own; the multipliers carry the contact forces on. Carried over,
         the stiffening ratchets: a new pair starts at the largest factor reached so far
@@ -153,7 +154,11 @@ class ContactSet:
         (1819 nodes) had 1073 pairs at 1000× by 5 %; its 5 and 10 % levels took 3096 and 3322
         Newton iterations from carried penalties, 2162 and 1895 from base ones, pulling the same
         to 3 digits (session 38, ``validation/bench.py swatch``). Within a load step (its lagged
-        passes) the penalties are kept: its loads do not change."""
+        passes) the penalties are kept: its loads do not change. A frictionless strip takes each
+        strain in one large solve, which needs the stiffening the last one reached: from base
+        penalties the twill's weft strip at 10 % hit the 800-iteration cap (555 iterations
+        carried), while its warp strip at 5 % converged (698 against the cap): no gain, so it
+        keeps them (``validation/bench.py swatch_frictionless``, session 38)."""
         return replace(self, multiplier=self.multiplier.copy(), stiffening=np.ones_like(self.stiffening))
 
     def measures(self, gap: np.ndarray, force: np.ndarray) -> tuple[float, float]:

@@ -471,8 +471,9 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                     settled &= lagged.settled
                     iterations += lagged.iterations
                 else:
-                    lagged, result = None, solver.solve(
-                        guess, contacts=None if contacts is None else contacts.with_base_penalties())
+                    # One solve per strain, and a large one: it keeps the penalties the last strain
+                    # stiffened (ContactSet.with_base_penalties says why frictional steps do not).
+                    lagged, result = None, solver.solve(guess, contacts=contacts)
                     iterations += result.iterations
             converged &= bool(result.converged)
             state, contacts, reached = result.state, result.contacts, target
