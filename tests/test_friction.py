@@ -239,8 +239,8 @@ def test_a_load_step_starts_from_the_last_multipliers_at_base_penalties():
         return reached[-1]
 
     solver.solve = recording
-    lagged = lagged_solve(solver, guess, rest.state.node_position, 0.3, anchors_from=(rest.state.node_position, stiffened),
-                          loads=loads, tolerance=LAG_SETTLED)
+    lagged = lagged_solve(solver, guess, rest.state.node_position, 0.3,
+                          anchors_from=(rest.state.node_position, stiffened), loads=loads, tolerance=LAG_SETTLED)
     assert lagged.result.converged and lagged.passes == len(started) >= 2
     assert np.all(started[0].stiffening == 1.0) and np.array_equal(started[0].multiplier, rest.contacts.multiplier)
     assert np.all(stiffened.stiffening == 100.0)  # the caller's record is left alone

@@ -148,17 +148,12 @@ class ContactSet:
 
         Penalties are a load step's own; the multipliers carry the contact forces on. Carried over,
         the stiffening ratchets: a new pair starts at the largest factor reached so far
-        (``_Memory.recall``), so once a few pairs of a cut strip had reached 1000× every contact a
-        later Newton step ran into was a thousand times stiffer than the step's model knew, and
-        the line search cut such steps to 1/4000. The cotton twill's warp strip with friction
-        (1819 nodes) had 1073 pairs at 1000× by 5 %; its 5 and 10 % levels took 3096 and 3322
-        Newton iterations from carried penalties, 2162 and 1895 from base ones, pulling the same
-        to 3 digits (session 38, ``validation/bench.py swatch``). Within a load step (its lagged
-        passes) the penalties are kept: its loads do not change. A frictionless strip takes each
-        strain in one large solve, which needs the stiffening the last one reached: from base
-        penalties the twill's weft strip at 10 % hit the 800-iteration cap (555 iterations
-        carried), while its warp strip at 5 % converged (698 against the cap): no gain, so it
-        keeps them (``validation/bench.py swatch_frictionless``, session 38)."""
+        (``_Memory.recall``), so every contact a later Newton step runs into can be far stiffer
+        than the step's model knows, and the line search cuts such steps to a sliver. Within a load
+        step (its lagged passes) the penalties are kept: its loads do not change; so does a
+        frictionless strip's strain, one large solve that needs the stiffening the last reached.
+        The measurements behind both: docs/design.md §5, "Penalties are a frictional load step's
+        own"."""
         return replace(self, multiplier=self.multiplier.copy(), stiffening=np.ones_like(self.stiffening))
 
     def measures(self, gap: np.ndarray, force: np.ndarray) -> tuple[float, float]:
