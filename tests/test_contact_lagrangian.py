@@ -150,17 +150,64 @@ def test_penalties_stiffen_only_where_updates_stall():
     for _ in range(10):
         lagrangian.update(contacts, gap, np.zeros(n), balanced(PENETRATION_PROGRESS * 1e-3))
     assert contacts.stiffening[0] == MAX_STIFFENING
-    # Pairs met before keep their own factor; a pair met later starts at the stiffest level
-    # reached (its load is the same problem's). The second rod (nodes 9–17) moved by three edges
-    # crosses other edges of the first.
-    known = set(contacts.pairs.keys(model.n_edges).tolist())
+    # A pair met later starts at the stiffest level reached (its load is the same problem's); a
+    # pair met before keeps its own factor. The second rod (nodes 9–17) moved by one edge crosses
+    # the next edge of the first, and leaves the edge it crossed before.
+    n_edges = model.n_edges
+    own = dict(zip(contacts.pairs.keys(n_edges).tolist(), contacts.stiffening.tolist()))
     shifted = position.copy()
-    shifted[9:, 0] += 6 * RADIUS
+    shifted[9:, 0] += 2 * RADIUS
     later = lagrangian.query(shifted)
-    new = np.array([key not in known for key in later.pairs.keys(model.n_edges).tolist()])
-    assert new.any() and (~new).any()
+    later_keys = later.pairs.keys(n_edges).tolist()
+    new = np.array([key not in own for key in later_keys])
+    assert new.any() and (~new).any() and not set(own) <= set(later_keys)
     assert np.all(later.stiffening[new] == MAX_STIFFENING)
-    assert np.all(later.stiffening[~new] <= MAX_STIFFENING) and later.stiffening[~new].min() == 1.0
+    assert [s for s, key in zip(later.stiffening, later_keys) if key in own] == [own[k] for k in later_keys if k in own]
+    # Updated there, the pairs it left out lose their multipliers (they were out of reach) but not
+    # their penalties: back at rest, every pair has its own factor again.
+    lagrangian.update(later, np.full(later.start[-1], 0.5 * rsum), np.zeros(later.start[-1]), balanced(0.0))
+    back = lagrangian.query(position)
+    assert sorted(back.pairs.keys(n_edges).tolist()) == sorted(own)
+    assert [own[k] for k in back.pairs.keys(n_edges).tolist()] == back.stiffening.tolist()
+    assert np.all(back.multiplier == 0.0)
+
+
+def test_a_query_holds_every_pair_that_can_push():
+    # A query keeps only the pairs within the constraints' reach, (λ + δ) / k: the others add a
+    # constant to the potential and nothing else. Against a query out to the broad phase's margin,
+    # at a configuration where some pairs are loaded, some slack and some far: the same pairs
+    # push with the same forces, the potentials differ by the left-out pairs' constant only.
+    model, position, options, lagrangian, contacts = queried()
+    n = contacts.start[-1]
+    rsum = 2 * RADIUS
+    assert lagrangian.reach == pytest.approx(CONTACT_SMOOTHING * rsum, rel=1e-5)  # nothing remembered
+    force = np.linspace(0.0, 5.0, n)
+    lagrangian.update(contacts, np.zeros(n), force, balanced(1e-3))
+    largest = np.maximum.reduceat(force, contacts.start[:-1]) / contacts.stiffness
+    assert lagrangian.reach == pytest.approx(largest.max() + CONTACT_SMOOTHING * rsum, rel=1e-5)
+    assert lagrangian.reach < 0.01 * lagrangian.margin  # the test separates the two sets
+    # The second rod lifted to within half the reach of the first, and a quarter of a radius:
+    # still pushing, then out of reach but inside the margin.
+    for lift, pushing in ((0.5 * lagrangian.reach, True), (0.25 * RADIUS, False)):
+        moved = position.copy()
+        moved[9:, 2] += 0.2 * RADIUS + lift  # the 10 % overlap first
+        narrow = lagrangian.query(moved)
+        wide = lagrangian.query(moved, slack=lagrangian.margin)
+        assert len(wide) > len(narrow) and (len(narrow) > 0) == pushing
+        results = []
+        for each in (narrow, wide):
+            gradient = np.zeros((model.n_nodes, 3))
+            gap, each_force = np.empty(each.start[-1]), np.empty(each.start[-1])
+            energy = _contact_kernels.contact_energy_gradient(moved, model.edge_nodes, model.edge_radius,
+                                                              *each.kernel_args(), gradient, np.zeros(model.n_nodes),
+                                                              gap, each_force)
+            results.append((energy, gradient, each.per_pair_sum(each_force)))
+        (energy_n, gradient_n, pushes_n), (energy_w, gradient_w, pushes_w) = results
+        left_out = wide.missing_from(narrow, model.n_edges)
+        assert np.all(pushes_w[left_out] == 0.0) and (pushes_n.max(initial=0.0) > 0.0) == pushing
+        np.testing.assert_array_equal(gradient_n, gradient_w)
+        constant = contact_potential(model, moved, wide, left_out)
+        assert energy_w == pytest.approx(energy_n + constant, rel=REGROUPED_RTOL, abs=1e-30)
 
 
 def test_a_new_load_step_keeps_the_multipliers_at_base_penalties():

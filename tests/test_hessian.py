@@ -280,3 +280,43 @@ def test_csc_assembly_matches_scipy_on_random_triplets():
     np.testing.assert_array_equal(indices[diagonal], np.arange(free.size))
     off = indices != np.repeat(np.arange(free.size), np.diff(indptr))
     assert np.all(data[off] != 0.0)
+
+
+def test_fixed_pattern_assembly_matches_scipy_on_random_triplets():
+    """The rods' triplets go into a fixed pattern (csc_slots once, scatter_add at every iterate) and
+    the contacts' are added to it (add_csc): the sum is scipy's COO → CSC of all of them, with
+    every diagonal entry stored and no explicit zero off it, also where a rod entry is zero now
+    and where the two parts cancel."""
+    rng = np.random.default_rng(11)
+    n_full, n_rod, n_pair = 40, 500, 200
+    rows, cols = rng.integers(0, n_full, n_rod), rng.integers(0, n_full, n_rod)
+    p_rows, p_cols = rng.integers(0, n_full, n_pair), rng.integers(0, n_full, n_pair)
+    dof_map = np.full(n_full, -1)
+    free = np.flatnonzero(rng.random(n_full) < 0.8)
+    dof_map[free] = np.arange(free.size)
+    indptr, indices, slot = _kernels.csc_slots(rows, cols, n_rod, dof_map, free.size)
+    data = np.empty(indices.size)
+    r, c = dof_map[rows], dof_map[cols]
+    keep = (r >= 0) & (c >= 0)
+    assert np.all((slot >= 0) == keep)
+    for trial in range(3):  # one pattern, new values each time
+        vals = rng.normal(size=n_rod)
+        vals[:40] = 0.0  # rod entries that are zero at this iterate
+        p_vals = rng.normal(size=n_pair)
+        p_rows[:5], p_cols[:5], p_vals[:5] = rows[keep][-1], cols[keep][-1], 0.0  # adds nothing ...
+        p_rows[5], p_cols[5] = rows[keep][-2], cols[keep][-2]  # ... and cancels a rod entry
+        same = (rows[keep] == rows[keep][-2]) & (cols[keep] == cols[keep][-2])
+        p_vals[5] = -vals[keep][same].sum()
+        _kernels.scatter_add(slot, vals, n_rod, data)
+        pairs = _kernels.assemble_csc(p_rows, p_cols, p_vals, n_pair, dof_map, free.size)[:3]
+        s_indptr, s_indices, s_data, diagonal = _kernels.add_csc(indptr, indices, data, *pairs)
+        pr, pc = dof_map[p_rows], dof_map[p_cols]
+        p_keep = (pr >= 0) & (pc >= 0)
+        reference = (sp.coo_matrix((vals[keep], (r[keep], c[keep])), shape=(free.size, free.size))
+                     + sp.coo_matrix((p_vals[p_keep], (pr[p_keep], pc[p_keep])), shape=(free.size, free.size)))
+        ours = sp.csc_matrix((s_data, s_indices, s_indptr), shape=(free.size, free.size))
+        np.testing.assert_allclose(ours.toarray(), reference.toarray(), rtol=0.0, atol=ASSEMBLY_ATOL)
+        assert all(np.all(np.diff(s_indices[s_indptr[j]:s_indptr[j + 1]]) > 0) for j in range(free.size))
+        np.testing.assert_array_equal(s_indices[diagonal], np.arange(free.size))
+        off = s_indices != np.repeat(np.arange(free.size), np.diff(s_indptr))
+        assert np.all(s_data[off] != 0.0)

@@ -768,6 +768,78 @@ def assemble_csc(rows, cols, vals, count, dof_map, n_free):
 
 
 @njit(cache=True)
+def csc_slots(rows, cols, count, dof_map, n_free):
+    """A fixed CSC pattern over the free DOFs for the first ``count`` COO triplets over full DOFs
+    (``dof_map`` as :func:`assemble_csc`), every diagonal entry included, and where each triplet
+    adds to: ``(indptr (n_free + 1,), indices, slot (count,))``, ``slot[k]`` the position of
+    triplet k's entry (−1 for a triplet on a pinned DOF). For triplets whose positions never
+    change (the rods'), so that :func:`scatter_add` assembles their values without sorting."""
+    indptr, indices, _, _ = assemble_csc(rows, cols, np.ones(count), count, dof_map, n_free)
+    slot = np.full(count, -1, dtype=np.int64)
+    for k in range(count):
+        i = dof_map[rows[k]]
+        j = dof_map[cols[k]]
+        if i < 0 or j < 0:
+            continue
+        lo, hi = indptr[j], indptr[j + 1]
+        while lo < hi:  # binary search of row i in column j
+            mid = (lo + hi) // 2
+            if indices[mid] < i:
+                lo = mid + 1
+            else:
+                hi = mid
+        slot[k] = lo
+    return indptr, indices, slot
+
+
+@njit(cache=True)
+def scatter_add(slot, vals, count, out):
+    """``out`` zeroed, then ``out[slot[k]] += vals[k]`` for the first ``count`` triplets (those with
+    ``slot[k] < 0`` dropped), in the order written."""
+    out[:] = 0.0
+    for k in range(count):
+        if slot[k] >= 0:
+            out[slot[k]] += vals[k]
+
+
+@njit(cache=True)
+def add_csc(a_indptr, a_indices, a_data, b_indptr, b_indices, b_data):
+    """The sum of two square CSC matrices of one shape, each canonical with every diagonal entry
+    stored, in the same form as :func:`assemble_csc` returns (no explicit zero off the diagonal):
+    ``(indptr, indices, data, diagonal)``."""
+    n = a_indptr.shape[0] - 1
+    indptr = np.empty(n + 1, dtype=np.int64)
+    indices = np.empty(a_indptr[n] + b_indptr[n], dtype=np.int64)
+    data = np.empty(a_indptr[n] + b_indptr[n])
+    diagonal = np.empty(n, dtype=np.int64)
+    u = 0
+    indptr[0] = 0
+    for j in range(n):
+        p, p_end = a_indptr[j], a_indptr[j + 1]
+        q, q_end = b_indptr[j], b_indptr[j + 1]
+        while p < p_end or q < q_end:
+            if q == q_end or (p < p_end and a_indices[p] < b_indices[q]):
+                row, value = a_indices[p], a_data[p]
+                p += 1
+            elif p == p_end or b_indices[q] < a_indices[p]:
+                row, value = b_indices[q], b_data[q]
+                q += 1
+            else:
+                row, value = a_indices[p], a_data[p] + b_data[q]
+                p += 1
+                q += 1
+            if row == j:
+                diagonal[j] = u
+            elif value == 0.0:
+                continue
+            indices[u] = row
+            data[u] = value
+            u += 1
+        indptr[j + 1] = u
+    return indptr, indices[:u], data[:u], diagonal
+
+
+@njit(cache=True)
 def plus_row_norms(scale, rows):
     """``scale + |rows|`` row by row (``(N,)`` and ``(N, 3)``)."""
     out = np.empty(scale.shape[0])
