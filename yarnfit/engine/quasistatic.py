@@ -71,12 +71,12 @@ ARMIJO_SLOPE = 1e-4
 # potential: each costs one gradient and one back-substitution; on slender rods they cut the
 # iteration count by a fifth to a third (cantilever L/r = 100: 32 → 20 iterations).
 CHORD_STEPS = 3
-# How far chord steps may move a node beyond the Newton step's end, in units of the smallest
-# radius: the line search's contacts are the pairs that can push anywhere along the step or up to
-# twice this beyond it (ContactLagrangian.query), so a larger allowance holds more pairs in every
-# evaluation and a smaller one stops more chord steps. The 2 mm twill warp strip's 5 % load step
-# (two captured lagged solves): 1637 Newton iterations at 0.02, 1474 at 0.05, 1554 at 0.2; HYLC's
-# stockinette fit: 6198, 6152, 5798 iterations, the same time within noise.
+# Reach of the line search's contacts beyond the pairs that can push along the Newton step, in
+# units of the smallest radius: chord steps after the step may then move nodes by half this (a
+# pair's distance changes by at most its two edges' largest node moves) and stop there. Larger
+# holds more pairs in every evaluation, smaller stops more chord steps. The 2 mm twill warp
+# strip's 5 % load step (two captured lagged solves): 1637 Newton iterations at 0.02, 1474 at 0.05,
+# 1554 at 0.2; HYLC's stockinette fit: 6198, 6152, 5798 iterations, the same time within noise.
 # Chord steps there moved nodes by 0.01 radii (median), 0.05 (90th percentile), 0.12 at most.
 CHORD_SLACK = 0.05
 # Round-off floor of a residual, in units of one rounding of the largest coordinate times the
@@ -836,9 +836,9 @@ class QuasiStaticSolver:
         if opt.contact:
             # Pairs that may push anywhere along the step or after chord steps that move no node
             # further than chord_reach from its end, and a cap so that none passes through another.
-            slack = CHORD_SLACK * float(m.edge_radius.min())
-            chord_reach = 0.5 * max(0.0, min(slack, lagrangian.margin - lagrangian.reach))
-            contacts = lagrangian.query(work.position, work.position + alpha_max * dx, slack=2.0 * chord_reach)
+            slack = min(CHORD_SLACK * float(m.edge_radius.min()), max(0.0, lagrangian.margin - lagrangian.reach))
+            chord_reach = 0.5 * slack
+            contacts = lagrangian.query(work.position, work.position + alpha_max * dx, slack=slack)
             if len(contacts.pairs):
                 alpha_max *= _contact_kernels.tunneling_step_limit(
                     work.position, alpha_max * dx, m.edge_nodes, *contacts.pairs.kernel_args(), TUNNELING_FRACTION,
