@@ -320,3 +320,32 @@ def test_fixed_pattern_assembly_matches_scipy_on_random_triplets():
         np.testing.assert_array_equal(s_indices[diagonal], np.arange(free.size))
         off = s_indices != np.repeat(np.arange(free.size), np.diff(s_indptr))
         assert np.all(s_data[off] != 0.0)
+
+
+def test_node_block_assembly_matches_scipy_on_random_groups():
+    """The contact and friction Hessians' triplets (groups of 144: a 12 × 12 block over four nodes'
+    positions, row-major) summed by node blocks are scipy's COO → CSC of the same triplets, also
+    where a group names one node twice (a pair with its own image), groups share blocks, and
+    pinned DOFs and the frames' DOFs (which no group touches) are in the map."""
+    rng = np.random.default_rng(5)
+    n_nodes, n_edges, n_groups = 12, 11, 30
+    nodes = rng.integers(0, n_nodes, (n_groups, 4))
+    nodes[0] = [3, 3, 5, 7]  # one node twice
+    nodes[1] = nodes[2]  # the same blocks twice
+    i = np.arange(12)
+    rows = (3 * nodes[:, i // 3] + i % 3)[:, :, None].repeat(12, axis=2).reshape(-1)
+    cols = (3 * nodes[:, i // 3] + i % 3)[:, None, :].repeat(12, axis=1).reshape(-1)
+    vals = rng.normal(size=rows.size)
+    n_full = 3 * (n_nodes + n_edges)
+    dof_map = np.full(n_full, -1)
+    free = np.flatnonzero(rng.random(n_full) < 0.8)
+    dof_map[free] = np.arange(free.size)
+    count = 144 * (n_groups - 1)  # the last group not counted
+    indptr, indices, data = _kernels.assemble_node_blocks(rows, cols, vals, count, dof_map, free.size, n_nodes)
+    r, c = dof_map[rows[:count]], dof_map[cols[:count]]
+    keep = (r >= 0) & (c >= 0)
+    reference = sp.coo_matrix((vals[:count][keep], (r[keep], c[keep])), shape=(free.size, free.size)).toarray()
+    ours = sp.csc_matrix((data, indices, indptr), shape=(free.size, free.size))
+    np.testing.assert_allclose(ours.toarray(), reference, rtol=0.0, atol=ASSEMBLY_ATOL)
+    assert indptr[-1] == indices.size and np.all(np.diff(indptr) >= 0)
+    assert all(np.all(np.diff(indices[indptr[j]:indptr[j + 1]]) > 0) for j in range(free.size))

@@ -793,6 +793,77 @@ def csc_slots(rows, cols, count, dof_map, n_free):
 
 
 @njit(cache=True)
+def assemble_node_blocks(rows, cols, vals, count, dof_map, n_free, n_nodes):
+    """Sum the first ``count`` COO triplets into a CSC matrix over the free DOFs (``dof_map`` as
+    :func:`assemble_csc`; rows sorted within each column, duplicates summed, zeros kept, no
+    diagonal added) when they come as the contact and friction Hessians write them: in groups of
+    144, each a 12 × 12 block over the positions of four nodes written row-major (entry (i, j) of
+    group g at ``144 g + 12 i + j``, on DOFs ``3 n[i // 3] + i % 3`` and ``3 n[j // 3] + j % 3``).
+    Sorts each group's sixteen 3 × 3 node blocks instead of its 144 entries (counting sort by the
+    column's node, insertion sort by the row's within a column): O(count + nodes). Returns
+    ``(indptr (n_free + 1,), indices, data)``."""
+    n_blocks = 16 * (count // 144)
+    block_row = np.empty(n_blocks, dtype=np.int64)
+    block_col = np.empty(n_blocks, dtype=np.int64)
+    block_source = np.empty(n_blocks, dtype=np.int64)
+    column_start = np.zeros(n_nodes + 1, dtype=np.int64)
+    for g in range(count // 144):
+        base = 144 * g
+        for a in range(4):
+            for b in range(4):
+                k = 16 * g + 4 * a + b
+                block_row[k] = rows[base + 36 * a] // 3
+                block_col[k] = cols[base + 3 * b] // 3
+                block_source[k] = base + 36 * a + 3 * b
+                column_start[block_col[k] + 1] += 1
+    for n in range(n_nodes):
+        column_start[n + 1] += column_start[n]
+    order = np.empty(n_blocks, dtype=np.int64)
+    fill = column_start[:n_nodes].copy()
+    for k in range(n_blocks):
+        order[fill[block_col[k]]] = k
+        fill[block_col[k]] += 1
+    indptr = np.zeros(n_free + 1, dtype=np.int64)
+    indices = np.empty(9 * n_blocks, dtype=np.int64)
+    data = np.empty(9 * n_blocks)
+    u = 0
+    for n in range(n_nodes):
+        lo, hi = column_start[n], column_start[n + 1]
+        for t in range(lo + 1, hi):  # the column's blocks by row node (a few each)
+            k = order[t]
+            s = t
+            while s > lo and block_row[order[s - 1]] > block_row[k]:
+                order[s] = order[s - 1]
+                s -= 1
+            order[s] = k
+        for c in range(3):
+            j = dof_map[3 * n + c]
+            if j < 0:
+                continue
+            t = lo
+            while t < hi:
+                row_node = block_row[order[t]]
+                run = t
+                while run < hi and block_row[order[run]] == row_node:
+                    run += 1
+                for r in range(3):
+                    i = dof_map[3 * row_node + r]
+                    if i < 0:
+                        continue
+                    value = 0.0
+                    for q in range(t, run):
+                        value += vals[block_source[order[q]] + 12 * r + c]
+                    indices[u] = i
+                    data[u] = value
+                    u += 1
+                t = run
+            indptr[j + 1] = u
+    for j in range(n_free):  # the frames' columns, after the nodes', have no entry
+        indptr[j + 1] = max(indptr[j + 1], indptr[j])
+    return indptr, indices[:u], data[:u]
+
+
+@njit(cache=True)
 def scatter_add(slot, vals, count, out):
     """``out`` zeroed, then ``out[slot[k]] += vals[k]`` for the first ``count`` triplets (those with
     ``slot[k] < 0`` dropped), in the order written."""
@@ -804,9 +875,10 @@ def scatter_add(slot, vals, count, out):
 
 @njit(cache=True)
 def add_csc(a_indptr, a_indices, a_data, b_indptr, b_indices, b_data):
-    """The sum of two square CSC matrices of one shape, each canonical with every diagonal entry
-    stored, in the same form as :func:`assemble_csc` returns (no explicit zero off the diagonal):
-    ``(indptr, indices, data, diagonal)``."""
+    """The sum of two square CSC matrices of one shape, each canonical (rows sorted, no
+    duplicates), the first with every diagonal entry stored, in the same form as
+    :func:`assemble_csc` returns (no explicit zero off the diagonal): ``(indptr, indices, data,
+    diagonal)``."""
     n = a_indptr.shape[0] - 1
     indptr = np.empty(n + 1, dtype=np.int64)
     indices = np.empty(a_indptr[n] + b_indptr[n], dtype=np.int64)

@@ -771,7 +771,7 @@ class QuasiStaticSolver:
         if friction is not None:
             count = _friction_kernels.friction_hessian_coo(work.position, *friction.kernel_args(), rows, cols, vals,
                                                            count)
-        pairs = _kernels.assemble_csc(rows, cols, vals, count, self._dof_map, n_free)[:3]
+        pairs = _kernels.assemble_node_blocks(rows, cols, vals, count, self._dof_map, n_free, m.n_nodes)
         indptr, indices, data, diagonal = _kernels.add_csc(rods.indptr, rods.indices, rods.data, *pairs)
         hessian = sp.csc_matrix((data, indices.astype(np.int32), indptr.astype(np.int32)), shape=(n_free, n_free))
         hessian.has_canonical_format = True
