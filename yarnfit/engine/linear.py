@@ -44,6 +44,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
+from ._kernels import add_csc
+
 __all__ = ["BACKWARD_ERROR", "PIVOT_THRESHOLD", "UNION_FILL_LIMIT", "FactorCache", "SingularSystemError", "SymmetricSolve",
            "ZeroPivotError"]
 
@@ -169,33 +171,6 @@ def _scatter(pattern_indptr, pattern_indices, indptr, indices, data, out):
     return True
 
 
-@njit(cache=True)
-def _union(a_indptr, a_indices, b_indptr, b_indices):
-    """The union of two CSC patterns of the same shape (rows sorted in both)."""
-    n = a_indptr.shape[0] - 1
-    indptr = np.empty(n + 1, dtype=np.int64)
-    indices = np.empty(a_indptr[n] + b_indptr[n], dtype=np.int64)
-    u = 0
-    indptr[0] = 0
-    for j in range(n):
-        p, p_end = a_indptr[j], a_indptr[j + 1]
-        q, q_end = b_indptr[j], b_indptr[j + 1]
-        while p < p_end or q < q_end:
-            if q == q_end or (p < p_end and a_indices[p] < b_indices[q]):
-                indices[u] = a_indices[p]
-                p += 1
-            elif p == p_end or b_indices[q] < a_indices[p]:
-                indices[u] = b_indices[q]
-                q += 1
-            else:
-                indices[u] = a_indices[p]
-                p += 1
-                q += 1
-            u += 1
-        indptr[j + 1] = u
-    return indptr, indices[:u]
-
-
 class ZeroPivotError(RuntimeError):
     """LDLᵀ without pivoting met an exactly zero pivot on this pattern."""
 
@@ -228,7 +203,9 @@ class FactorCache:
                 and _scatter(cached.indptr, cached.indices, indptr, indices, data, cached.data)):
             pattern = (indptr, indices)
             if same_shape:
-                union = _union(cached.indptr, cached.indices, indptr, indices)
+                # The union of the two patterns (entries summed as ones: none cancels).
+                union = add_csc(cached.indptr, cached.indices, np.ones(cached.indices.shape[0]), indptr, indices,
+                                np.ones(indices.shape[0]))[:2]
                 if union[1].shape[0] <= UNION_FILL_LIMIT * indices.shape[0]:
                     pattern = union
             values = np.empty(pattern[1].shape[0])
