@@ -25,7 +25,8 @@ from ._contact_kernels import constraint_measures
 from .contact import ContactPairs, ImageMaps, NeighbourList
 from .model import RodModel
 
-__all__ = ["CONTACT_SAMPLE_SPACING", "CONTACT_SMOOTHING", "ContactLagrangian", "ContactSet", "contact_potential"]
+__all__ = ["CONTACT_SAMPLE_SPACING", "CONTACT_SMOOTHING", "ContactLagrangian", "ContactSet", "contact_potential",
+           "exchanged_potential"]
 
 # Contact penalty: each pair starts at EA / (ra + rb) (a yarn under strain ε presses a contact in by
 # ~ε of the diameter before the multipliers take the force over). The multiplier iteration removes
@@ -182,6 +183,18 @@ def contact_potential(model: RodModel, position: np.ndarray, contacts: ContactSe
                                                model.edge_radius, *contacts.kernel_args(), which))
 
 
+def exchanged_potential(model: RodModel, position: np.ndarray, new: ContactSet, old: ContactSet) -> float:
+    """The contact potential (J) of ``new`` less that of ``old`` at ``position``, where both come
+    from one solve's memory (the pairs they share carry the same multipliers and penalties, so
+    only the pairs one of them lacks count): what a potential assessed with ``old`` gains when
+    assessed with ``new`` instead (0 when they hold the same constraints)."""
+    if new.same_constraints(old):
+        return 0.0
+    n_edges = model.n_edges
+    return (contact_potential(model, position, new, new.missing_from(old, n_edges))
+            - contact_potential(model, position, old, old.missing_from(new, n_edges)))
+
+
 class _Memory:
     """Multipliers and penalty factors remembered per edge pair across broad-phase queries (a
     pair's constraint count depends only on its edges, so its multipliers keep their layout).
@@ -232,8 +245,8 @@ class _Memory:
         source = np.repeat(contacts.start[:-1][order], counts) + (
             np.arange(counts.sum()) - np.repeat(self._start[:-1], counts))
         self._multiplier = contacts.multiplier[source]
-        kept = _lookup(self._keys, self._penalty_keys)[0]
-        kept = self._keys[kept] != self._penalty_keys if self._keys.size else np.ones(self._penalty_keys.size, bool)
+        kept = np.ones(self._penalty_keys.size, dtype=np.bool_)  # the penalties of pairs this set lacks
+        kept[_lookup(self._keys, self._penalty_keys)[1]] = False
         penalty_keys = np.concatenate([self._penalty_keys[kept], self._keys])
         stiffening = np.concatenate([self._stiffening[kept], contacts.stiffening[order]])
         order = np.argsort(penalty_keys)

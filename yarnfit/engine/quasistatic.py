@@ -58,7 +58,7 @@ import scipy.sparse as sp
 
 from . import _contact_kernels, _friction_kernels, _kernels
 from .contact import ContactPairs
-from .contact_lagrangian import ContactLagrangian, ContactSet, contact_potential
+from .contact_lagrangian import ContactLagrangian, ContactSet, exchanged_potential
 from .energy import EnergyTerms, internal_forces
 from .friction import FrictionAnchors
 from .linear import FactorCache, SingularSystemError, SymmetricSolve
@@ -834,6 +834,7 @@ class QuasiStaticSolver:
         if reach > self._max_displacement:
             alpha_max *= self._max_displacement / reach
         contacts = work.contacts
+        slack = math.inf  # no contacts: chord steps go as far as they decrease the potential
         if opt.contact:
             # Pairs that may push anywhere along the step or within a chord step's allowance of
             # its end, and a cap so that none passes through another.
@@ -847,16 +848,10 @@ class QuasiStaticSolver:
         def assess(point):
             return self._assess(point, contacts, node_force, moment)
 
-        # The current iterate's potential with the swept contacts: the evaluation's own when the
-        # sweep found the same constraints (same pairs, multipliers and penalties), else corrected
-        # by the pairs only one of the two sets has (both come from the same memory, so the pairs
-        # they share carry the same multipliers and penalties). Most sweeps add pairs, and
-        # assessing the iterate again was a fifth of a stockinette sample's evaluations.
-        start = ev.potential
-        if not contacts.same_constraints(work.contacts):
-            n_edges = m.n_edges
-            start += (contact_potential(m, work.position, contacts, contacts.missing_from(work.contacts, n_edges))
-                      - contact_potential(m, work.position, work.contacts, work.contacts.missing_from(contacts, n_edges)))
+        # The current iterate's potential with the swept contacts: the evaluation's own, corrected
+        # by the pairs only one of the two sets has. Most sweeps add pairs, and assessing the
+        # iterate again was a fifth of a stockinette sample's evaluations.
+        start = ev.potential + exchanged_potential(m, work.position, contacts, work.contacts)
         g_dot_d = float(ev.gradient[self._free] @ direction)
         scale = max(abs(start), abs(ev.internal), 1e-300)
 
@@ -892,8 +887,7 @@ class QuasiStaticSolver:
                 gain = 1.0 if below_roundoff(1.0) or not predicted > 0.0 else (start - trial.potential) / predicted
                 damping.succeeded(gain)
             whole = point
-            point, trial = self._chord_steps(point, trial, solve, contacts, lagrangian, node_force, moment,
-                                             slack if opt.contact else math.inf)
+            point, trial = self._chord_steps(point, trial, solve, contacts, lagrangian, node_force, moment, slack)
             return accept(point, trial, alpha_max, on_segment=point is whole)
         damping.failed()
         alpha = 0.5 * alpha_max
@@ -929,11 +923,7 @@ class QuasiStaticSolver:
             current = trial.potential
             if math.sqrt(_contact_kernels.largest_squared_move(start, candidate[0])) > 0.5 * slack:
                 along = lagrangian.query(point[0], candidate[0], slack=slack)
-                if not along.same_constraints(contacts):
-                    n_edges = self.model.n_edges
-                    current += (contact_potential(self.model, point[0], along, along.missing_from(contacts, n_edges))
-                                - contact_potential(self.model, point[0], contacts,
-                                                    contacts.missing_from(along, n_edges)))
+                current += exchanged_potential(self.model, point[0], along, contacts)
                 contacts, start = along, candidate[0]
             result = self._assess(candidate, contacts, node_force, moment)
             if result.potential > current + ARMIJO_SLOPE * slope:
