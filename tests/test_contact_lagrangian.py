@@ -263,3 +263,35 @@ def test_the_potential_of_some_pairs_adds_up_to_the_whole():
     parts = contact_potential(model, position, swept, missing) + contact_potential(model, position, swept, rest)
     assert parts == pytest.approx(whole, rel=REGROUPED_RTOL) and whole != 0.0
     assert contact_potential(model, position, swept) == pytest.approx(whole, rel=REGROUPED_RTOL)
+
+
+def test_a_subset_of_pairs_is_their_part_of_the_potential():
+    # ContactSet.subset keeps each chosen pair's constraints, multipliers and penalties: its
+    # potential is contact_potential over those pairs, and two complementary subsets' gradients
+    # add up to the whole set's (cut_forces sums the pull of some pairs this way).
+    model, position, options, lagrangian, at_rest = queried()
+    moved = position + np.array([0.0, 0.0, 3.0 * RADIUS]) * (np.arange(model.n_nodes) >= model.n_nodes // 2)[:, None]
+    swept = lagrangian.query(position, moved)
+    swept.multiplier = np.linspace(0.0, 2.0, swept.start[-1])
+    swept.stiffening = np.linspace(1.0, 3.0, len(swept))
+    assert len(swept) >= 4
+    some = np.arange(1, len(swept), 3)
+    others = np.setdiff1d(np.arange(len(swept)), some)
+
+    def gradient(contacts: ContactSet) -> tuple[float, np.ndarray]:
+        out = np.zeros((model.n_nodes, 3))
+        energy = _contact_kernels.contact_energy_gradient(
+            position, model.edge_nodes, model.edge_radius, *contacts.kernel_args(), out, np.zeros(model.n_nodes),
+            np.empty(contacts.start[-1]), np.empty(contacts.start[-1]))
+        return energy, out
+
+    part = swept.subset(some)
+    assert len(part) == len(some) and np.array_equal(part.counts, swept.counts[some])
+    np.testing.assert_array_equal(part.stiffness, swept.stiffness[some])
+    energy, part_gradient = gradient(part)
+    assert energy == pytest.approx(contact_potential(model, position, swept, some), rel=REGROUPED_RTOL)
+    whole_energy, whole_gradient = gradient(swept)
+    assert whole_energy != 0.0
+    np.testing.assert_allclose(part_gradient + gradient(swept.subset(others))[1], whole_gradient,
+                               rtol=REGROUPED_RTOL, atol=REGROUPED_RTOL * np.abs(whole_gradient).max())
+    assert len(swept.subset(np.zeros(0, dtype=np.int64))) == 0

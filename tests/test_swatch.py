@@ -11,11 +11,11 @@ import pytest
 import rerun as rr
 
 import yarnfit.validate.swatch as swatch_module
-from yarnfit.engine import Rod, RodMaterial, RodModel, RodState, energy
+from yarnfit.engine import QuasiStaticOptions, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState, energy
 from yarnfit.engine.model import quaternion_d3
 from yarnfit.engine.tiling import cut_rectangle
-from yarnfit.validate.swatch import (FRICTION_STRAIN_STEP, STRAIN_TIMELINE, cut_swatch, edge_draw_in, free_side_ends,
-                                     mid_strain, stretch_repeat, stretch_swatch)
+from yarnfit.validate.swatch import (FRICTION_STRAIN_STEP, STRAIN_TIMELINE, SWATCH_OPTIONS, cut_forces, cut_swatch,
+                                     edge_draw_in, free_side_ends, mid_strain, stretch_repeat, stretch_swatch)
 
 E = 1e9  # Pa
 RADIUS = 1e-4  # m
@@ -35,12 +35,13 @@ MID_STRAIN_RTOL = 1e-6
 TANGENT_ATOL = 1e-12
 
 
-def straight_weft_repeat(hardening: float = 0.0):
-    """Two straight periodic weft yarns per PX × PY repeat, at y = PY/4 and 3PY/4."""
+def straight_weft_repeat(hardening: float = 0.0, heights=(0.25, 0.75)):
+    """Straight periodic weft yarns in a PX × PY repeat, at ``heights`` × PY (two, at y = PY/4 and
+    3PY/4, by default)."""
     material = RodMaterial(E, poisson_ratio=0.3, density=1500.0, hardening_tension=hardening,
                            hardening_compression=hardening)
     rods = []
-    for y in (0.25 * PY, 0.75 * PY):
+    for y in PY * np.asarray(heights):
         points = np.stack([np.arange(NODES) * PX / NODES, np.full(NODES, y), np.zeros(NODES)], axis=1)
         tiles = np.zeros((NODES, 2), dtype=int)
         tiles[-1] = (1, 0)
@@ -91,6 +92,9 @@ def test_straight_wefts_match_closed_form(hardening):
         expected = axial_force(point["strain"], hardening) / spacing
         assert point["force_n_per_m"] == pytest.approx(expected, rel=FORCE_RTOL)
         assert point["fixed_force_n_per_m"] == pytest.approx(expected, rel=FORCE_RTOL)
+        # The middle half of the width (|y| <= PY / 2) holds the yarns at ±PY/4: the same pull.
+        assert point["cut_force_n_per_m"] == pytest.approx(expected, rel=FORCE_RTOL)
+        assert point["middle_force_n_per_m"] == pytest.approx(expected, rel=FORCE_RTOL)
         assert point["compression_ratio"] == pytest.approx(1.0, abs=1e-9)
         # Uniform between the jaws: the extensometer reads the jaws' strain.
         assert point["mid_strain"] == pytest.approx(point["strain"], rel=MID_STRAIN_RTOL)
@@ -205,6 +209,29 @@ def test_selvedges_join_the_courses_into_one_force_free_yarn():
     np.testing.assert_allclose(quaternion_d3(joined.model.edge_rest_quaternion[edges]), tangents, atol=TANGENT_ATOL)
 
 
+def test_the_middle_pull_counts_the_middle_yarns_only():
+    # One weft per repeat, a strip 3 PY wide: yarns at y = −PY, 0 and PY. The middle half of the
+    # width (|y| <= 3 PY / 4) holds the centre yarn alone, so the middle pulls N / (1.5 PY) while
+    # the whole width pulls 3 N / (3 PY), the jaws' force; every plane across the gauge carries the
+    # jaws' force over the whole width (the part before it is a free body).
+    model, material = straight_weft_repeat(heights=(0.5,))
+    swatch = cut_swatch(model, model.node_rest_position, material, direction="weft", gauge=4 * PX, width=3 * PY,
+                        clamp=PX)
+    assert sorted(np.unique(np.round(swatch.position[:, 1] / PY, 9))) == [-1.0, 0.0, 1.0]
+    solver = QuasiStaticSolver(swatch.model, QuasiStaticOptions(**SWATCH_OPTIONS))
+    strain = 0.04
+    guess = RodState.from_model(swatch.model)
+    guess.node_position[swatch.moving, 0] += strain * swatch.gauge
+    result = solver.solve(guess)
+    assert result.converged
+    cut = cut_forces(swatch, result.state, result.contacts, planes=5)
+    pull = float(result.reaction_force[swatch.moving, 0].sum())
+    assert pull == pytest.approx(3 * axial_force(strain), rel=FORCE_RTOL)
+    np.testing.assert_allclose(cut.whole, pull, rtol=FORCE_RTOL)
+    np.testing.assert_allclose(cut.middle, axial_force(strain), rtol=FORCE_RTOL)
+    assert np.all(np.diff(cut.plane_x) > 0) and np.ptp(cut.plane_x) == pytest.approx(0.5 * (1 + strain) * swatch.gauge)
+
+
 def test_small_weave_balances_with_contacts():
     # A real relaxed plain weave in a tiny strip: the moving and the fixed jaw pull equally (global
     # balance, contacts included) and it does not widen.
@@ -229,6 +256,12 @@ def test_small_weave_balances_with_contacts():
     assert point["extent_ratio"] < 1.0  # the cut warp ends do
 
 
+# The pull across a plane (cut_forces) against the jaws': both are sums of the same gradient over
+# the nodes before the plane, apart by the free nodes' residual force, which the swatch solves stop
+# at 1e-6 of the force scale; measured 4e-9 (bias, friction) to 2e-8 (weft, frictionless) of it.
+CUT_BALANCE_RTOL = 1e-6
+
+
 def test_friction_holds_a_small_weave_stiffer_and_balanced():
     """A small plain weave's bias strip with the fibre's friction at its crossings (lagged per
     strain): the jaws still pull equally (the friction forces are internal), the lagged normal
@@ -249,6 +282,8 @@ def test_friction_holds_a_small_weave_stiffer_and_balanced():
     for point, steps in zip(points[cotton.friction], (4, 6)):  # 0 → 2 → 5 % in steps of 0.5 %
         assert point["converged"] and point["load_steps"] == steps and point["friction_passes"] >= 2 * steps
         assert point["fixed_force_n_per_m"] == pytest.approx(point["force_n_per_m"], rel=1e-4)
+        # The rods, contacts and friction anchors crossing a plane carry the jaws' pull.
+        assert point["cut_force_n_per_m"] == pytest.approx(point["force_n_per_m"], rel=CUT_BALANCE_RTOL)
     for frictionless, frictional in zip(points[0.0], points[cotton.friction]):
         assert frictionless["friction_passes"] is None and frictionless["load_steps"] == 1
         assert frictional["force_n_per_m"] > 1.2 * frictionless["force_n_per_m"]

@@ -3,7 +3,9 @@
 For a material file, cut strips of several sizes (gauge × width between the jaws, in repeats of
 the larger repeat side; each jaw band half a repeat) along each direction, pull each to 2, 5 and
 10 % (:func:`yarnfit.validate.swatch.stretch_swatch`, converged solves warm-started one from the
-next) and print, per direction and size: nodes, force per width (N/m) and compression ratio at each
+next) and print, per direction and size: nodes, force per width (N/m) on the jaws and carried by
+the strip's middle half of the width across its middle half of the gauge (where it is furthest
+from its cut sides and jaws: :func:`yarnfit.validate.swatch.cut_forces`), compression ratio at each
 strain, the strain of the strip's middle half read between two marks as an extensometer reads it
 (:func:`yarnfit.validate.swatch.mid_strain`: where it differs from the nominal strain, the jaws
 constrain the strip), and the slowest strain's solve time (one core). The sizes are not shrunk to the suite's
@@ -24,12 +26,15 @@ crossings, as the suite's yarn scene pulls them (the fibre's coefficient, lagged
 
 Then the material's shell (nonlinear) and its linear fit from the same samples (``fit.linear``)
 against the largest strip of each direction
-(issue 14's acceptance): a long strip of the shell pulled at the strip's angle with every other
-stress free (:meth:`yarnfit.shell.ShellMaterial.uniaxial_pull`), force per width and width ratio
-at each strain, with a verdict (force within SHELL_FORCE_RTOL, width within
-SHELL_COMPRESSION_ATOL). Beside them the periodic repeat pulled the same way along weft and warp
+(issue 14's acceptance), measured where the strip is uniform: a long strip of the shell pulled
+at the strip's angle with every other stress free (:meth:`yarnfit.shell.ShellMaterial.uniaxial_pull`)
+to the strain the strip's middle reached at each level (its extensometer's reading: the jaws hold
+the strip's ends unsheared and unnarrowed, so its middle strains more than their travel), force
+per width and width ratio, with a verdict (force within SHELL_FORCE_RTOL of the strip's middle half, where
+the strip is uniform as issue 14 asks it measured; width within SHELL_COMPRESSION_ATOL). Beside them the periodic repeat pulled the same way along weft, warp and bias
 (:func:`yarnfit.homogenize.periodic_pull`: the limit a strip tends to as it widens), and then the
-shell against that pull: the fit's own error, told apart from the strip's size. ``--from-json``
+shell against that pull at the nominal strains: the fit's own error, told apart from the strip's
+size. ``--from-json``
 reads curves written by earlier runs instead of solving (runs of several sizes or directions made
 in parallel).
 """
@@ -107,10 +112,24 @@ def convergence_row(curve: dict) -> str:
     gauge, width = curve["repeats"]
     return (f"| {curve['direction']} | {gauge:g} × {width:g} | {curve['nodes']} | "
             + " | ".join(f"{p['force_n_per_m']:.4g}" for p in points) + " | "
+            + " | ".join(_force(p.get("middle_force_n_per_m")) for p in points) + " | "
             + " | ".join(f"{p['compression_ratio']:.3f}" for p in points) + " | "
             + " | ".join(_percent(p.get("mid_strain")) for p in points) + " | "
             + " | ".join(_micrometres(p.get("edge_draw_in_m")) for p in points) + " | "
             + f"{max(p['seconds'] for p in points):.1f} | {'yes' if curve['converged'] else 'NO'} |")
+
+
+def _force(value) -> str:
+    """A force per width in N/m for the table; '—' where it is not known (an older run)."""
+    return "—" if value is None else f"{value:.4g}"
+
+
+def middle_force(point: dict) -> float:
+    """The strip's force per width where it is uniform: its middle half's pull across planes over
+    the middle half of the gauge (:func:`yarnfit.validate.swatch.cut_forces`), or the jaws' for
+    curves written before it was measured."""
+    value = point.get("middle_force_n_per_m")
+    return point["force_n_per_m"] if value is None else value
 
 
 def _percent(value) -> str:
@@ -123,18 +142,27 @@ def _micrometres(value) -> str:
     return "—" if value is None else f"{1e6 * value:.3g}"
 
 
+def periodic_pull_along(relaxed, direction: str, strain: float):
+    """The periodic repeat pulled to ``strain`` along ``direction`` (weft, warp or bias) with
+    every other stress free (:func:`yarnfit.homogenize.periodic_pull`,
+    :func:`~yarnfit.homogenize.periodic_bias_pull`): the limit a strip tends to as it widens and
+    the reference the shell was fitted towards (weft and warp; the fit has no bias pulls yet);
+    None for another direction."""
+    if direction in ("weft", "warp"):
+        return periodic_pull(relaxed, 0 if direction == "weft" else 1, strain)
+    if direction == "bias":
+        return periodic_bias_pull(relaxed, strain)
+    return None
+
+
 def periodic_pulls(relaxed, directions) -> dict:
-    """``{(direction, strain): PeriodicPull}``: the periodic repeat pulled along weft, warp and the
-    bias at each of STRAINS (:func:`yarnfit.homogenize.periodic_pull`,
-    :func:`~yarnfit.homogenize.periodic_bias_pull`), the limit a strip tends to as it widens and
-    the reference the shell was fitted towards (weft and warp; the fit has no bias pulls yet)."""
+    """``{(direction, strain): PeriodicPull}`` at each of STRAINS (:func:`periodic_pull_along`)."""
     pulls = {}
     for direction in directions:
         for strain in STRAINS:
-            if direction in ("weft", "warp"):
-                pulls[direction, strain] = periodic_pull(relaxed, 0 if direction == "weft" else 1, strain)
-            elif direction == "bias":
-                pulls[direction, strain] = periodic_bias_pull(relaxed, strain)
+            pull = periodic_pull_along(relaxed, direction, strain)
+            if pull is not None:
+                pulls[direction, strain] = pull
     return pulls
 
 
@@ -143,11 +171,25 @@ def _against(value: float, reference: float) -> str:
     return f"{value:.4g} ({100 * (ratio - 1.0):+.0f} %)"
 
 
-def shell_rows(file: MaterialFile, curves: dict, pulls: dict) -> tuple[list[str], list[str], bool]:
+def middle_strain(point: dict) -> float:
+    """The strain of the strip's middle as its extensometer reads it
+    (:func:`yarnfit.validate.swatch.mid_strain`), or the nominal strain where no mark held a node
+    (or for curves written before it was measured)."""
+    value = point.get("mid_strain")
+    return point["strain"] if value is None else value
+
+
+def shell_rows(file: MaterialFile, curves: dict, pulls: dict, relaxed) -> tuple[list[str], list[str], bool]:
     """Table rows of the shell (nonlinear and linear) and of the periodic repeat's pull against
-    the largest strip per direction, rows of the nonlinear shell against the periodic pulls (the
-    fit's own error, apart from the strip's size), and whether every converged point of the
-    nonlinear shell meets both criteria against the strip."""
+    the largest strip per direction, rows of the nonlinear shell against the periodic pulls at
+    STRAINS (``pulls``: the fit's own error, apart from the strip's size), and whether every
+    converged point of the nonlinear shell meets both criteria against the strip.
+
+    The strip is judged where it is uniform: its middle half's force per width
+    (:func:`middle_force`) against the shell and the periodic repeat pulled to the strain its
+    middle reached (:func:`middle_strain`; a strip's jaws hold its ends unsheared and unnarrowed,
+    so its middle strains more than the jaws' travel says, up to half as much again on a small
+    bias strip), and its width at mid-length."""
     largest = {}
     for curve in curves.values():
         if curve["nodes"] > largest.get(curve["direction"], {"nodes": -1})["nodes"]:
@@ -158,29 +200,32 @@ def shell_rows(file: MaterialFile, curves: dict, pulls: dict) -> tuple[list[str]
         angle = math.radians(curve["angle_deg"])
         gauge, width = curve["repeats"]
         for point in curve["points"][1:]:
-            strain = point["strain"]
-            periodic = pulls.get((direction, strain))
+            strain, local = point["strain"], middle_strain(point)
+            reference = middle_force(point)
+            periodic = periodic_pull_along(relaxed, direction, local)
             cells = ["— | —" if periodic is None else
-                     f"{_against(periodic.force_n_per_m, point['force_n_per_m'])} | {periodic.width_ratio:.3f}"]
+                     f"{_against(periodic.force_n_per_m, reference)} | {periodic.width_ratio:.3f}"]
             verdicts = {}
             for name, shell in shells.items():
-                pull = shell.uniaxial_pull(angle, 1.0 + strain)
-                ratio = pull.force_n_per_m / point["force_n_per_m"] if point["force_n_per_m"] > 0 else math.inf
+                pull = shell.uniaxial_pull(angle, 1.0 + local)
+                ratio = pull.force_n_per_m / reference if reference > 0 else math.inf
                 within = (abs(ratio - 1.0) <= SHELL_FORCE_RTOL
                           and abs(pull.width_ratio - point["compression_ratio"]) <= SHELL_COMPRESSION_ATOL)
                 verdicts[name] = within
-                cells.append(f"{_against(pull.force_n_per_m, point['force_n_per_m'])} | {pull.width_ratio:.3f}")
-                if name == "nonlinear" and periodic is not None:
-                    fit_rows.append(f"| {direction} | {100 * strain:g} % | {periodic.force_n_per_m:.4g} | "
-                                    f"{periodic.width_ratio:.3f} | {'yes' if periodic.converged else 'NO'} | "
-                                    f"{_against(pull.force_n_per_m, periodic.force_n_per_m)} | "
-                                    f"{pull.width_ratio:.3f} |")
+                cells.append(f"{_against(pull.force_n_per_m, reference)} | {pull.width_ratio:.3f}")
+            nominal = pulls.get((direction, strain))
+            if nominal is not None:
+                pull = file.shell.uniaxial_pull(angle, 1.0 + strain)
+                fit_rows.append(f"| {direction} | {100 * strain:g} % | {nominal.force_n_per_m:.4g} | "
+                                f"{nominal.width_ratio:.3f} | {'yes' if nominal.converged else 'NO'} | "
+                                f"{_against(pull.force_n_per_m, nominal.force_n_per_m)} | {pull.width_ratio:.3f} |")
             converged = point["converged"]
             if converged:
                 passed &= verdicts["nonlinear"]
             verdict = ("not converged" if not converged else
                        "within" if verdicts["nonlinear"] else "MISSED")
             rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * strain:g} % | {point['force_n_per_m']:.4g} | "
+                        f"{_force(point.get('middle_force_n_per_m'))} | {100 * local:.3g} % | "
                         f"{point['compression_ratio']:.3f} | " + " | ".join(cells) + f" | {verdict} |")
     return rows, fit_rows, passed
 
@@ -225,15 +270,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
     strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
     order = sorted(curves.values(), key=lambda c: (c["direction"], c["nodes"]))
-    print_table("", ["direction", "repeats (gauge × width)", "nodes", f"N/m at {strains}", f"compression at {strains}",
+    print_table("", ["direction", "repeats (gauge × width)", "nodes", f"N/m (jaws) at {strains}",
+                     f"N/m (middle half) at {strains}", f"compression at {strains}",
                      f"middle's strain (%) at {strains}", f"edge draw-in (µm) at {strains}", "slowest strain (s)",
                      "converged"],
-                [convergence_row(curve) for curve in order], columns=5 + 4 * len(STRAINS))
+                [convergence_row(curve) for curve in order], columns=5 + 5 * len(STRAINS))
     pulls = periodic_pulls(relaxed, sorted({curve["direction"] for curve in curves.values()}))
-    rows, fit_rows, passed = shell_rows(file, curves, pulls)
-    print_table(f"{name}: shell and periodic repeat against the largest strip per direction (force within "
-                f"{SHELL_FORCE_RTOL:.0%}, compression within {SHELL_COMPRESSION_ATOL}; % against the strip)",
-                ["direction", "repeats", "strain", "swatch N/m", "swatch compression", "periodic N/m",
+    rows, fit_rows, passed = shell_rows(file, curves, pulls, relaxed)
+    print_table(f"{name}: shell and periodic repeat against the largest strip per direction, pulled to the strain "
+                f"of the strip's middle (force within {SHELL_FORCE_RTOL:.0%} of the strip's middle half, compression "
+                f"within {SHELL_COMPRESSION_ATOL}; % against the middle half)",
+                ["direction", "repeats", "strain", "swatch N/m (jaws)", "swatch N/m (middle half)", "middle's strain",
+                 "swatch compression", "periodic N/m",
                  "periodic compression", "nonlinear N/m", "nonlinear compression", "linear N/m", "linear compression",
                  "verdict (nonlinear)"], rows)
     if fit_rows:

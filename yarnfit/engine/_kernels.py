@@ -240,6 +240,29 @@ def rod_energy_gradient(
     return u_stretch, u_shear, u_bend, u_twist
 
 
+@njit(cache=True)
+def stretch_shear_forces(pos, quat, rod, out):
+    """The force ``n`` (N, world) each stretch–shear element exerts on its start node, written into
+    ``out (E, 3)``: the yarn's tension and shear resultant ``R σ`` carried along the edge (the
+    element exerts ``−n``, mapped into the end node's tile, on its end node). Only these elements
+    join nodes: a bend–twist element acts on frames alone."""
+    (edge_nodes, edge_end_rotation, edge_offset, edge_rest_length, edge_shear_stiffness, edge_stretch_stiffness,
+     edge_hardening, _, _, _, _, _) = rod
+    for e in range(edge_nodes.shape[0]):
+        _, _, n, _ = stretch_shear_element(
+            row3(pos, edge_nodes[e, 0]),
+            _edge_end(pos, edge_nodes, edge_end_rotation, edge_offset, e),
+            row4(quat, e),
+            edge_rest_length[e],
+            edge_shear_stiffness[e],
+            edge_stretch_stiffness[e],
+            edge_hardening[e, 0],
+            edge_hardening[e, 1],
+        )
+        for k in range(3):
+            out[e, k] = n[k]
+
+
 # ---------------------------------------------------------------------------------------------
 # Hessian: analytic for stretch–shear, central differences of the analytic gradient for bend–twist
 # ---------------------------------------------------------------------------------------------

@@ -127,6 +127,18 @@ class ContactSet:
         return (self.edge_samples, *self.pairs.kernel_args(), self.start, self.multiplier, self.stiffness,
                 CONTACT_SMOOTHING)
 
+    def subset(self, which: np.ndarray) -> "ContactSet":
+        """The pairs ``which`` selects (indices, ascending) with their constraints, multipliers and
+        penalties: the part of the contact potential they contribute."""
+        which = np.asarray(which, dtype=np.int64)
+        counts = self.counts[which]
+        constraints = np.concatenate([np.arange(self.start[p], self.start[p + 1]) for p in which]) \
+            if which.size else np.zeros(0, dtype=np.int64)
+        return ContactSet(self.pairs.subset(which), self.edge_samples,
+                          np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+                          self.multiplier[constraints], self.base_stiffness[which], self.stiffening[which],
+                          self.radius_sum[which])
+
     def missing_from(self, other: "ContactSet", n_edges: int) -> np.ndarray:
         """Indices of this set's pairs (edges and image) that ``other`` does not have."""
         mine = self.pairs.keys(n_edges)

@@ -67,6 +67,18 @@ def internal_forces(model: RodModel, position: np.ndarray, quaternion: np.ndarra
     return InternalForces(terms, node_gradient, edge_gradient, node_scale, edge_scale)
 
 
+def element_forces(model: RodModel, position: np.ndarray, quaternion: np.ndarray) -> np.ndarray:
+    """``(E, 3)`` the force (N, world) each edge's stretch–shear element exerts on the edge's start
+    node, ``∂U/∂p1 = −∂U/∂p0``: the yarn's tension along the edge plus its shear resultant (the
+    element pulls its end node with the opposite force, mapped into the end node's tile). These
+    are the only rod forces between nodes, so the rods' force across any cut is their sum over the
+    edges the cut crosses."""
+    out = np.empty((model.n_edges, 3))
+    _kernels.stretch_shear_forces(np.ascontiguousarray(position, dtype=np.float64),
+                                  np.ascontiguousarray(quaternion, dtype=np.float64), model.arrays, out)
+    return out
+
+
 def edge_rotation_from_rest(model: RodModel, quaternion: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """Rotation vectors ``log(q q̄_rest)`` of the frames of ``edges`` from their rest frames,
     ``(len(edges), 3)`` rad (principal branch, angle ≤ π)."""

@@ -74,6 +74,11 @@ class FrictionAnchors:
         return (self.nodes, self.weight, self.rotation, self.translation, self.tangent, self.origin, self.bound,
                 self.slip_length)
 
+    def subset(self, which: np.ndarray) -> "FrictionAnchors":
+        """The anchors ``which`` selects (a boolean mask or indices)."""
+        return FrictionAnchors(self.nodes[which], self.weight[which], self.rotation[which], self.translation[which],
+                               self.tangent[which], self.origin[which], self.bound[which], self.slip_length)
+
     def energy_gradient(self, position: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """Friction energy (J) at node positions ``position (N, 3)``, its gradient ``(N, 3)``
         (N) and each anchor's friction force magnitude ``(K,)`` (N)."""

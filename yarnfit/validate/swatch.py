@@ -32,6 +32,14 @@ Outputs per direction and strain:
   the initial strip width; ``fixed_force_n_per_m`` the same on the fixed jaw (minus sign: it pulls
   back), equal and opposite at equilibrium; ``rod_force_n_per_m`` the rods' part alone
   (``contact_share`` the rest).
+- ``middle_force_n_per_m``: the pull the middle half of the width carries across planes over the
+  middle half of the gauge (:func:`cut_forces`: the rod elements, contact pairs and friction
+  anchors of that band crossing each plane), mean over :data:`CUT_PLANES` planes, divided by half
+  the initial width (``middle_force_range_n_per_m`` its least and largest plane); the force of
+  the strip where it is furthest from its cut sides and jaws. ``cut_force_n_per_m`` the same over
+  the whole width: the jaws' pull, to the solve's residual. Cut yarn ends at the long sides carry
+  little, so a narrow strip's middle pulls more than its jaws say (a 4 × 3 repeat cotton jersey
+  bias strip 1.7 times).
 - ``mid_strain``: the strain of the strip's middle half, where it is furthest from the jaws, read
   between two material marks as an extensometer reads it (:func:`mid_strain`; null where a mark
   holds no node): beside ``compression_ratio`` (measured at mid-length too), the strip's own
@@ -94,6 +102,10 @@ from ..engine import (
     RodState,
     energy_gradient,
 )
+from ..engine import _contact_kernels
+from ..engine.contact_lagrangian import ContactSet
+from ..engine.energy import element_forces
+from ..engine.friction import FrictionAnchors
 from ..engine.lagged import lagged_solve
 from ..engine.rotations import as_frames, as_rotations, quaternion_between
 from ..engine.tiling import YarnPiece, cut_rectangle
@@ -135,6 +147,11 @@ CROSSING_SLOPE = 0.5
 # at many x) and within the middle half of the width (the cut ends at the long sides splay).
 EXTENSOMETER_SPAN = 0.5
 MARK_BAND = 0.05
+# The pull across the strip is read on this many planes, evenly over the middle half of the gauge
+# (cut_forces): a knit's loops and a weave's crossings cross a plane differently at each x, so the
+# middle half of the width carries a share of the pull that varies along a repeat; the mean over
+# planes spread over two repeats (a 4-repeat gauge) or more is the middle's pull.
+CUT_PLANES = 9
 # Newton iterations per strain; a solve that needs more is reported as not converged. The cotton
 # twill's warp strip (1819 nodes, the presets' largest) converges at 2 / 5 / 10 % in 345 / 694 /
 # 1835 iterations, ~60 ms each on one core (session 29): 800 lets its 5 % converge (45 s) and keeps
@@ -402,6 +419,74 @@ def edge_draw_in(swatch: Swatch, position: np.ndarray, compression_ratio: float)
     return float(np.mean(np.sign(offset) * (compression_ratio * offset - (position[ends, 1] - centre))))
 
 
+@dataclass(frozen=True)
+class CutForces:
+    """The pull carried across planes across the strip (x = const, current positions), each the
+    x force (N) the strip beyond the plane exerts on the part before it.
+
+    Attributes:
+        plane_x: ``(K,)`` the planes (m), evenly over the middle half of the gauge.
+        whole: ``(K,)`` over the whole width: the fixed jaw's pull wherever the plane lies, to the
+            solve's residual (the part before the plane is a free body held by that jaw).
+        middle: ``(K,)`` carried by the rod elements, contact pairs and friction anchors of the
+            middle half of the width (their nodes' mean y at rest within a quarter width of the
+            centre line): the strip's own pull where it is furthest from its cut sides.
+    """
+
+    plane_x: np.ndarray
+    whole: np.ndarray
+    middle: np.ndarray
+
+
+def cut_forces(swatch: Swatch, state: RodState, contacts: ContactSet, anchors: FrictionAnchors | None = None,
+               planes: int = CUT_PLANES) -> CutForces:
+    """The pull across ``planes`` planes over the middle half of the gauge at ``state`` (an
+    equilibrium of the rods, the augmented-Lagrangian ``contacts`` it balances and the friction
+    ``anchors`` it was solved with), over the whole width and over its middle half
+    (:class:`CutForces`).
+
+    The force a part of the strip receives across a cut is the sum, over the energy terms that
+    join nodes on both sides, of minus their gradient at the part's nodes: the stretch–shear
+    elements the plane crosses (:func:`~yarnfit.engine.energy.element_forces`; bend–twist
+    elements act on frames only), the contact pairs and the friction anchors with nodes on both
+    sides. A term with all its nodes on one side adds nothing (its gradient sums to zero there), so
+    the sum runs over every term of a band and the plane picks out the crossing ones."""
+    model = swatch.model
+    if model.periodic:
+        raise ValueError("cut forces are measured on a cut (non-periodic) swatch")
+    position = np.ascontiguousarray(state.node_position, dtype=np.float64)
+    rest_y = swatch.position[:, 1]
+
+    def in_middle(nodes: np.ndarray) -> np.ndarray:
+        return np.abs(rest_y[nodes].mean(axis=1) - centre_line(swatch)) <= 0.25 * swatch.width
+
+    gradients = {}
+    element = element_forces(model, position, state.edge_quaternion)
+    edge_nodes = model.edge_nodes
+    pair_nodes = edge_nodes[contacts.pairs.pairs].reshape(-1, 4)
+    for key, edges, pairs, held in (
+            ("whole", np.ones(model.n_edges, dtype=np.bool_), np.arange(len(contacts)), None if anchors is None
+             else np.ones(len(anchors), dtype=np.bool_)),
+            ("middle", in_middle(edge_nodes), np.flatnonzero(in_middle(pair_nodes)), None if anchors is None
+             else in_middle(anchors.nodes))):
+        gradient = np.zeros_like(position)
+        np.add.at(gradient, edge_nodes[edges, 0], -element[edges])
+        np.add.at(gradient, edge_nodes[edges, 1], element[edges])
+        if len(pairs):
+            part = contacts.subset(pairs)
+            _contact_kernels.contact_energy_gradient(
+                position, edge_nodes, model.edge_radius, *part.kernel_args(), gradient, np.zeros(len(position)),
+                np.empty(part.start[-1]), np.empty(part.start[-1]))
+        if held is not None and held.any():
+            gradient += anchors.subset(held).energy_gradient(position)[1]
+        gradients[key] = gradient
+    mid, half = mid_length(swatch, position), 0.25 * float(position[swatch.moving, 0].min()
+                                                          - position[swatch.fixed, 0].max())
+    plane_x = mid + half * np.linspace(-1.0, 1.0, planes)
+    before = position[:, 0][None, :] < plane_x[:, None]
+    return CutForces(plane_x, -(before @ gradients["whole"][:, 0]), -(before @ gradients["middle"][:, 0]))
+
+
 def _stretched_guess(swatch: Swatch, state: RodState, strain: float, previous: float) -> RodState:
     """The warm start of a pull to ``strain`` from ``state``, the equilibrium at ``previous``: its
     free nodes stretched affinely between the jaws, the moving jaw's nodes exactly at their new
@@ -446,6 +531,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     extent0 = extent_width(swatch, rest, band)
     state = RodState.from_model(model)
     points = [{"strain": 0.0, "force_n_per_m": 0.0, "fixed_force_n_per_m": 0.0, "rod_force_n_per_m": 0.0,
+               "cut_force_n_per_m": 0.0, "middle_force_n_per_m": 0.0, "middle_force_range_n_per_m": [0.0, 0.0],
                "compression_ratio": 1.0, "mid_strain": 0.0, "extent_ratio": 1.0, "width_m": width0,
                "edge_draw_in_m": 0.0 if len(free_side_ends(swatch)) else None, "converged": True, "iterations": 0,
                "seconds": 0.0, "residual": None}]
@@ -479,6 +565,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             state, contacts, reached = result.state, result.contacts, target
             slowest = max(slowest, time.perf_counter() - step_start)
         _, rod_gradient, _ = energy_gradient(model, state)
+        cut = cut_forces(swatch, state, result.contacts, None if lagged is None else lagged.anchors)
         pull = float(result.reaction_force[swatch.moving, 0].sum())
         back = float(result.reaction_force[swatch.fixed, 0].sum())
         rod_pull = float(rod_gradient[swatch.moving, 0].sum())
@@ -490,6 +577,10 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "fixed_force_n_per_m": -back / swatch.width,
             "rod_force_n_per_m": rod_pull / swatch.width,
             "contact_share": 0.0 if pull == 0 else 1.0 - rod_pull / pull,
+            "cut_force_n_per_m": float(cut.whole.mean()) / swatch.width,
+            "middle_force_n_per_m": float(cut.middle.mean()) / (0.5 * swatch.width),
+            "middle_force_range_n_per_m": [float(cut.middle.min()) / (0.5 * swatch.width),
+                                           float(cut.middle.max()) / (0.5 * swatch.width)],
             "compression_ratio": width / width0,
             "mid_strain": finite_or_none(mid_strain(swatch, state.node_position)),
             "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
@@ -511,7 +602,8 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         points.append(point)
         previous = strain
         if progress is not None:
-            progress(f"{swatch.direction} {100 * strain:g} %: {point['force_n_per_m']:.5g} N/m, compression "
+            progress(f"{swatch.direction} {100 * strain:g} %: {point['force_n_per_m']:.5g} N/m (middle half "
+                     f"{point['middle_force_n_per_m']:.5g} N/m at {_strain_text(point['mid_strain'])}), compression "
                      f"{point['compression_ratio']:.4f}, {'converged' if point['converged'] else 'NOT converged'} "
                      f"in {point['iterations']} iterations"
                      f"{'' if lagged is None else f' over {steps} load steps and {passes} friction passes'} "
@@ -534,6 +626,10 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         "points": points,
         "seconds": float(sum(p["seconds"] for p in points)),
     }
+
+
+def _strain_text(strain: float | None) -> str:
+    return "an unmarked strain" if strain is None else f"{100 * strain:.3g} %"
 
 
 def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection | RodMaterial, *, name: str = "swatch",
