@@ -272,6 +272,10 @@ def validation_summary(shell) -> dict:
                       "compression_ratio": [1.0, 0.99, 0.97, 0.95], "converged": d != "warp",
                       "points": [{"converged": not (d == "warp" and k == 3)} for k in range(4)]}
                   for d in ("weft", "warp")}
+    # The weft swatch measured where it is uniform too (its middle half's pull at its middle's
+    # strain); the warp's points, as an older run's, without.
+    for k, point in enumerate(directions["weft"]["points"]):
+        point.update(middle_force_n_per_m=1.5 * directions["weft"]["force_n_per_m"][k], mid_strain=1.2 * strains[k])
     yarn = YarnResult(name=FABRIC_NAME, strains=strains, directions=directions, seconds=1.0, material=FABRIC_NAME,
                       quick=True, relaxation={}, recording=None).summary()
     like_swatch = StripResult("swatch_weft", 0.08, 0.08 * 0.008 / 0.012, 0.0, levels,
@@ -321,6 +325,15 @@ def test_validation_figures_plot_the_summarys_curves_in_n_per_cm(tmp_path):
             np.testing.assert_allclose([cell(r["force per width [N/cm]"]) for r in yarn_rows],
                                        np.array(yarn["force_n_per_m"]) * N_PER_CM_PER_N_PER_M, rtol=CONVERSION_RTOL)
             assert [r["converged"] == "true" for r in yarn_rows] == [p["converged"] for p in yarn["points"]]
+        middle_rows = by_series.get("yarn level, middle half at its own strain", [])
+        if direction == "weft":
+            np.testing.assert_allclose([cell(r["force per width [N/cm]"]) for r in middle_rows],
+                                       [p["middle_force_n_per_m"] * N_PER_CM_PER_N_PER_M for p in yarn["points"]],
+                                       rtol=CONVERSION_RTOL)
+            np.testing.assert_allclose([cell(r["strain [%]"]) for r in middle_rows],
+                                       [100.0 * p["mid_strain"] for p in yarn["points"]], rtol=CONVERSION_RTOL)
+        else:
+            assert not middle_rows
     # The measured curve in the lab's own units, read back as written; the shell strip of the
     # swatch's proportions beside the others.
     _, rows = read_table(tmp_path / "figures" / "test_twill-stretch-weft.csv")

@@ -347,6 +347,10 @@ def test_recording_reads_back(tmp_path):
     (column,) = [c for c in force if c.endswith("scalars")]
     logged = [force[column][k][0] for k in range(len(strains) + 1)]
     assert np.allclose(logged, out["directions"]["weft"]["force_n_per_m"], rtol=1e-6)
+    middle = rows["yarn/plots/middle_force_weft"]
+    (column,) = [c for c in middle if c.endswith("scalars")]
+    assert np.allclose([middle[column][k][0] for k in range(len(strains) + 1)],
+                       [p["middle_force_n_per_m"] for p in out["directions"]["weft"]["points"]], rtol=1e-6)
     assert STRAIN_TIMELINE in timelines["yarn/swatch/yarns"]
     text = [v for c, v in rows["yarn/summary"].items() if c.endswith(":text")]
     assert "force (N/m)" in str(text[0][None])

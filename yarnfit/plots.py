@@ -100,6 +100,7 @@ DIRECTION_COLORS = {"weft": "tab:blue", "warp": "tab:orange", "bias": "tab:green
 STRIP_COLORS = ("tab:blue", "tab:cyan", "tab:purple", "tab:olive")
 STRIP_STYLE = {"marker": "o", "ls": "-", "lw": 1.3, "ms": 4}
 YARN_STYLE = {"color": "tab:orange", "marker": "s", "ls": "--", "lw": 1.0, "ms": 5}
+YARN_MIDDLE_STYLE = {"color": "tab:orange", "marker": "s", "mfc": "none", "ls": ":", "lw": 1.0, "ms": 5}
 MEASURED_STYLE = {"color": "black", "marker": "D", "ls": "none", "ms": 5}
 LAW_STYLE = {"color": "0.45", "ls": "-", "lw": 0.9, "zorder": 1}
 # The fit figures use the Rerun recording's colours (yarnfit.record: samples blue, samples left out
@@ -331,7 +332,8 @@ def validation_figures(summary: str | os.PathLike | Mapping, out_dir: str | os.P
     bias) with a curve: ``<fabric>-stretch-<direction>.png``, ``.svg``, ``.csv``. Force per width
     (N/cm) against engineering strain (%): each shell strip in MuJoCo (line with dots; crosses at
     levels that did not come to rest or met an unstable step), the yarn-level swatch (squares;
-    crosses where a solve did not converge), the reference (black diamonds) and the shell's law
+    crosses where a solve did not converge) and its middle half's pull against its middle's strain
+    (hollow squares, where the points carry them: where the swatch is uniform), the reference (black diamonds) and the shell's law
     (thin grey line; the strips' clamped ends make them stiffer than it for a fabric with a large
     Poisson ratio). CSV columns: ``series``, ``strain [%]``, ``force per width [N/cm]``,
     ``compression ratio [1]`` (empty where not measured) and ``converged`` (empty for the law).
@@ -400,6 +402,9 @@ def _stretch_series(direction: str, strips: Mapping, yarn: Mapping, reference: R
                           {"compression ratio [1]": np.asarray(curve.get("compression_ratio",
                                                                          [math.nan] * len(strain)), float)}, ok,
                           YARN_STYLE))
+        middle = _middle_series(curve, ok)
+        if middle is not None:
+            out.append(middle)
     if reference is not None and direction in reference.curves:
         measured = reference.curves[direction]
         out.append(Series(f"measured: {reference.name}", PERCENT * measured.strain,
@@ -407,6 +412,24 @@ def _stretch_series(direction: str, strips: Mapping, yarn: Mapping, reference: R
                           {"compression ratio [1]": measured.compression_ratio}, np.ones(len(measured.strain), bool),
                           MEASURED_STYLE))
     return out
+
+
+def _middle_series(curve: Mapping, ok: np.ndarray) -> Series | None:
+    """The swatch where it is uniform: its middle half's pull against the strain its middle
+    reached (``middle_force_n_per_m`` and ``mid_strain`` of each point), the pair a free pull of
+    the shell's law should match; ``None`` for curves without them (older runs) or where a mark
+    held no node."""
+    points = curve.get("points")
+    if not isinstance(points, list) or not points:
+        return None
+    force = [p.get("middle_force_n_per_m") for p in points]
+    strain = [p.get("mid_strain") for p in points]
+    if any(v is None for v in force + strain):
+        return None
+    return Series("yarn level, middle half at its own strain", PERCENT * np.asarray(strain, float),
+                  np.asarray(force, float) / N_PER_M_IN_N_PER_CM,
+                  {"compression ratio [1]": np.asarray([p.get("compression_ratio", math.nan) for p in points], float)},
+                  ok if len(ok) == len(points) else np.ones(len(points), bool), YARN_MIDDLE_STYLE)
 
 
 def _law_series(direction: str, strips: Mapping, series: list[Series], shell: ShellMaterial | None) -> Series | None:

@@ -69,6 +69,8 @@ the pull, y across, z the fabric normal):
   radius = yarn radius, grey for pieces starting in a jaw and blue for the others, at each step.
 - ``yarn/plots/force_<direction>``: ``Scalars``, pull per unit width (N/m) at that direction's
   steps.
+- ``yarn/plots/middle_force_<direction>``: ``Scalars``, the middle half's pull per unit width
+  (N/m, ``middle_force_n_per_m``).
 - ``yarn/plots/compression_<direction>``: ``Scalars``, compression ratio (dimensionless).
 - ``yarn/plots/strain``: ``Scalars``, the nominal strain of the step (dimensionless).
 - ``yarn/summary``: ``TextDocument`` (markdown), the table of results (static, by ``finish``).
@@ -776,6 +778,7 @@ class SwatchRecording(Recording):
         colors = np.where(m.node_pinned[m.rod_node_start[:-1]][:, None], [[150, 150, 150]], [[60, 120, 220]])
         rec.log("yarn/swatch/yarns", rr.LineStrips3D(strips, radii=swatch.radius, colors=colors))
         rec.log(f"yarn/plots/force_{swatch.direction}", rr.Scalars(point["force_n_per_m"]))
+        rec.log(f"yarn/plots/middle_force_{swatch.direction}", rr.Scalars(point["middle_force_n_per_m"]))
         rec.log(f"yarn/plots/compression_{swatch.direction}", rr.Scalars(point["compression_ratio"]))
         rec.log("yarn/plots/strain", rr.Scalars(strain))
 
@@ -800,18 +803,22 @@ def blueprint():
 
 
 def summary_markdown(out: dict) -> str:
-    """Markdown table of a run: per direction and strain, force per width, compression ratio, edge
-    draw-in, convergence, iterations, residuals and wall time."""
+    """Markdown table of a run: per direction and strain, force per width on the jaws and in the
+    middle half (with the middle's strain), compression ratio, edge draw-in, convergence,
+    iterations, residuals and wall time."""
     rows = []
     for direction, curve in out["directions"].items():
         for p in curve["points"][1:]:
             res = p["residual"]["force"] if p["residual"] else float("nan")
             draw_in = p.get("edge_draw_in_m")
-            rows.append((direction, f"{100 * p['strain']:g} %", f"{p['force_n_per_m']:.5g}", f"{p['compression_ratio']:.4f}",
-                         "—" if draw_in is None else f"{1e6 * draw_in:.3g}",
+            middle = p.get("middle_force_n_per_m")
+            rows.append((direction, f"{100 * p['strain']:g} %", f"{p['force_n_per_m']:.5g}",
+                         "—" if middle is None else f"{middle:.5g}",
+                         "—" if p.get("mid_strain") is None else f"{100 * p['mid_strain']:.3g} %",
+                         f"{p['compression_ratio']:.4f}", "—" if draw_in is None else f"{1e6 * draw_in:.3g}",
                          "yes" if p["converged"] else "**no**", p["iterations"], f"{res:.2e}", f"{p['seconds']:.1f}"))
-    header = ("direction", "strain", "force (N/m)", "compression ratio", "edge draw-in (µm)", "converged", "iterations",
-              "force residual", "seconds")
+    header = ("direction", "strain", "force (N/m)", "middle half's force (N/m)", "middle's strain",
+              "compression ratio", "edge draw-in (µm)", "converged", "iterations", "force residual", "seconds")
     mu = out.get("friction", 0.0)
     lines = [f"# yarn-level stretch: {out.get('name', '')}", "",
              f"Friction at the yarn contacts: μ = {mu:g}." if mu else "Frictionless yarn contacts.", "",
