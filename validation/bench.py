@@ -607,7 +607,8 @@ def bench_swatch(friction: bool = True) -> None:
     without): nodes, and per strain the solve's wall time, Newton iterations (over every lagged
     pass), the pull (N/m), and with friction the load steps it was reached in
     (:data:`yarnfit.validate.swatch.FRICTION_STRAIN_STEP` apart), the slowest step's wall time and
-    the lagged passes. Cotton jersey along the weft, cotton twill along
+    the lagged passes, and the middle half's pull where the strip is uniform
+    (:func:`yarnfit.validate.swatch.cut_forces`, with its middle's strain). Cotton jersey along the weft, cotton twill along
     weft and warp (the warp strip, 1819 nodes, is the presets' largest; a satin is cut to the node
     budget). ``validation/swatch_convergence.py`` gives the strips of other sizes."""
     import warnings
@@ -634,6 +635,9 @@ def bench_swatch(friction: bool = True) -> None:
                     report(f"{key}_{percent}_iterations", point["iterations"], "iterations")
                     report(f"{key}_{percent}_converged", int(point["converged"]), "bool")
                     report(f"{key}_{percent}_force", point["force_n_per_m"], "N/m")
+                    report(f"{key}_{percent}_middle_force", point["middle_force_n_per_m"],
+                           f"N/m (middle half, its strain {100 * point['mid_strain']:.3g} %)"
+                           if point["mid_strain"] is not None else "N/m (middle half)")
                     if friction:
                         report(f"{key}_{percent}_load_steps", point["load_steps"], "steps")
                         report(f"{key}_{percent}_slowest_step_seconds", point["slowest_step_seconds"], "s (one core)")
