@@ -15,7 +15,9 @@ from yarnfit.engine import QuasiStaticOptions, QuasiStaticSolver, Rod, RodMateri
 from yarnfit.engine.model import quaternion_d3
 from yarnfit.engine.tiling import cut_rectangle
 from yarnfit.validate.swatch import (FRICTION_STRAIN_STEP, STRAIN_TIMELINE, SWATCH_OPTIONS, cut_forces, cut_swatch,
-                                     edge_draw_in, free_side_ends, mid_strain, stretch_repeat, stretch_swatch)
+                                     edge_draw_in, free_side_ends, mid_strain, middle_compression, stretch_repeat,
+                                     stretch_swatch)
+from yarnfit.validate.swatch import centre_line as middle_line
 
 E = 1e9  # Pa
 RADIUS = 1e-4  # m
@@ -121,6 +123,28 @@ def test_the_extensometer_reads_the_middle_not_the_jaws():
                         clamp=PX)
     assert narrow.model.n_rods == 2  # the yarns at ±PY/4 lie outside its middle half (±0.15 PY)
     assert math.isnan(mid_strain(narrow, narrow.position))
+
+
+def test_the_transverse_extensometer_reads_the_middle_half_of_the_width():
+    # Wefts at y = ±PY/4, ±3PY/4, ±5PY/4 in a strip 3 PY wide: the marks lie at ±3PY/4 (a quarter
+    # width either side of the centre line). Positions made by hand: the middle |y| <= PY drawn in
+    # to 0.9 of its width, the rest by 0.7 more (cut sides drawn in): the reading is 0.9 whatever
+    # the sides did. A strip whose marks hold no yarn reads NaN; a straight pull does not narrow.
+    model, material = straight_weft_repeat()
+    swatch = cut_swatch(model, model.node_rest_position, material, direction="weft", gauge=4 * PX, width=3 * PY,
+                        clamp=PX)
+    rest = swatch.position
+    y = rest[:, 1] - middle_line(swatch)
+    drawn = np.where(np.abs(y) <= PY, 0.9 * y, np.sign(y) * (0.9 * PY + 0.7 * (np.abs(y) - PY)))
+    position = rest.copy()
+    position[:, 1] = middle_line(swatch) + drawn
+    assert middle_compression(swatch, position) == pytest.approx(0.9, rel=1e-12)
+    assert middle_compression(swatch, rest) == pytest.approx(1.0, rel=1e-15)
+    two = cut_swatch(model, model.node_rest_position, material, direction="weft", gauge=4 * PX, width=2 * PY,
+                     clamp=PX)
+    assert math.isnan(middle_compression(two, two.position))  # marks at ±PY/2, yarns at ±PY/4, ±3PY/4
+    out = stretch_swatch(swatch, (0.03,))
+    assert out["points"][1]["middle_compression_ratio"] == pytest.approx(1.0, abs=1e-9)
 
 
 def test_jaw_reaction_equals_sum_of_yarn_forces():

@@ -416,8 +416,8 @@ def _stretch_series(direction: str, strips: Mapping, yarn: Mapping, reference: R
 
 def _middle_series(curve: Mapping, ok: np.ndarray) -> Series | None:
     """The swatch where it is uniform: its middle half's pull against the strain its middle
-    reached (``middle_force_n_per_m`` and ``mid_strain`` of each point), the pair a free pull of
-    the shell's law should match; ``None`` for curves without them (older runs) or where a mark
+    reached (``middle_force_n_per_m`` and ``mid_strain`` of each point; its width ratio
+    ``middle_compression_ratio``), the pair a free pull of the shell's law should match; ``None`` for curves without them (older runs) or where a mark
     held no node."""
     points = curve.get("points")
     if not isinstance(points, list) or not points:
@@ -428,8 +428,13 @@ def _middle_series(curve: Mapping, ok: np.ndarray) -> Series | None:
         return None
     return Series("yarn level, middle half at its own strain", PERCENT * np.asarray(strain, float),
                   np.asarray(force, float) / N_PER_M_IN_N_PER_CM,
-                  {"compression ratio [1]": np.asarray([p.get("compression_ratio", math.nan) for p in points], float)},
+                  {"compression ratio [1]": np.asarray([_or_nan(p.get("middle_compression_ratio")) for p in points],
+                                                       float)},
                   ok if len(ok) == len(points) else np.ones(len(points), bool), YARN_MIDDLE_STYLE)
+
+
+def _or_nan(value) -> float:
+    return math.nan if value is None else float(value)
 
 
 def _law_series(direction: str, strips: Mapping, series: list[Series], shell: ShellMaterial | None) -> Series | None:

@@ -44,6 +44,9 @@ Outputs per direction and strain:
   between two material marks as an extensometer reads it (:func:`mid_strain`; null where a mark
   holds no node): beside ``compression_ratio`` (measured at mid-length too), the strip's own
   state where it is most nearly uniform, which a free pull at that strain should match.
+- ``middle_compression_ratio``: the width ratio of the strip's middle half (:func:`middle_compression`:
+  two material marks a half width apart, across the middle half of the gauge; null where a mark
+  holds no node), the compression where the strip is uniform, beside ``middle_force_n_per_m``.
 - ``compression_ratio``: width at mid-length over the initial width, the width being the span
   across the strip of the points where yarn centrelines cross the mid-length plane (at more than
   30° from it), plus one diameter (:func:`mid_width`; yarns lying along the plane and their loose
@@ -388,6 +391,25 @@ def mid_strain(swatch: Swatch, position: np.ndarray) -> float:
     return (marks[1][1] - marks[0][1]) / (marks[1][0] - marks[0][0]) - 1.0
 
 
+def middle_compression(swatch: Swatch, position: np.ndarray) -> float:
+    """Width ratio of the strip's middle half, read as a transverse extensometer reads it: the
+    distance across the strip (y) between two material marks half the width apart about the
+    centre line, each the mean y of the nodes that lay within :data:`MARK_BAND` of the width of
+    it at rest and in the middle half of the gauge, over that distance at rest. Where the strip is
+    uniform it narrows as the whole width does; a knit's cut sides, drawn in, narrow the whole
+    width more (:func:`mid_width`). NaN where a mark holds no node."""
+    rest = swatch.position
+    inner = np.abs(rest[:, 0] - mid_length(swatch, rest)) <= 0.25 * swatch.gauge
+    centre = centre_line(swatch)
+    marks = []
+    for side in (-1.0, 1.0):
+        near = inner & (np.abs(rest[:, 1] - (centre + side * 0.25 * swatch.width)) <= MARK_BAND * swatch.width)
+        if not near.any():
+            return math.nan
+        marks.append((float(rest[near, 1].mean()), float(position[near, 1].mean())))
+    return (marks[1][1] - marks[0][1]) / (marks[1][0] - marks[0][0])
+
+
 def extent_width(swatch: Swatch, position: np.ndarray, band: float) -> float:
     """Width (m) from all nodes within ``band`` of mid-length in x: their span in y plus one
     diameter (loose cut ends at the long sides included)."""
@@ -534,7 +556,8 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     state = RodState.from_model(model)
     points = [{"strain": 0.0, "force_n_per_m": 0.0, "fixed_force_n_per_m": 0.0, "rod_force_n_per_m": 0.0,
                "cut_force_n_per_m": 0.0, "middle_force_n_per_m": 0.0, "middle_force_range_n_per_m": [0.0, 0.0],
-               "compression_ratio": 1.0, "mid_strain": 0.0, "extent_ratio": 1.0, "width_m": width0,
+               "compression_ratio": 1.0, "middle_compression_ratio": 1.0, "mid_strain": 0.0, "extent_ratio": 1.0,
+               "width_m": width0,
                "edge_draw_in_m": 0.0 if len(free_side_ends(swatch)) else None, "converged": True, "iterations": 0,
                "seconds": 0.0, "residual": None}]
     if on_step is not None:
@@ -584,6 +607,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "middle_force_range_n_per_m": [float(cut.middle.min()) / (0.5 * swatch.width),
                                            float(cut.middle.max()) / (0.5 * swatch.width)],
             "compression_ratio": width / width0,
+            "middle_compression_ratio": finite_or_none(middle_compression(swatch, state.node_position)),
             "mid_strain": finite_or_none(mid_strain(swatch, state.node_position)),
             "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
             "width_m": width,
@@ -605,7 +629,8 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         previous = strain
         if progress is not None:
             progress(f"{swatch.direction} {100 * strain:g} %: {point['force_n_per_m']:.5g} N/m (middle half "
-                     f"{point['middle_force_n_per_m']:.5g} N/m at {_strain_text(point['mid_strain'])}), compression "
+                     f"{point['middle_force_n_per_m']:.5g} N/m at {_strain_text(point['mid_strain'])}, width ratio "
+                     f"{_ratio_text(point['middle_compression_ratio'])}), compression "
                      f"{point['compression_ratio']:.4f}, {'converged' if point['converged'] else 'NOT converged'} "
                      f"in {point['iterations']} iterations"
                      f"{'' if lagged is None else f' over {steps} load steps and {passes} friction passes'} "
@@ -632,6 +657,10 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
 
 def _strain_text(strain: float | None) -> str:
     return "an unmarked strain" if strain is None else f"{100 * strain:.3g} %"
+
+
+def _ratio_text(ratio: float | None) -> str:
+    return "unmarked" if ratio is None else f"{ratio:.4f}"
 
 
 def stretch_repeat(model: RodModel, position: np.ndarray, material: RodSection | RodMaterial, *, name: str = "swatch",
@@ -804,7 +833,8 @@ def blueprint():
 
 def summary_markdown(out: dict) -> str:
     """Markdown table of a run: per direction and strain, force per width on the jaws and in the
-    middle half (with the middle's strain), compression ratio, edge draw-in, convergence,
+    middle half (with the middle's strain), compression ratio of the whole width and of the middle
+    half, edge draw-in, convergence,
     iterations, residuals and wall time."""
     rows = []
     for direction, curve in out["directions"].items():
@@ -815,10 +845,12 @@ def summary_markdown(out: dict) -> str:
             rows.append((direction, f"{100 * p['strain']:g} %", f"{p['force_n_per_m']:.5g}",
                          "—" if middle is None else f"{middle:.5g}",
                          "—" if p.get("mid_strain") is None else f"{100 * p['mid_strain']:.3g} %",
-                         f"{p['compression_ratio']:.4f}", "—" if draw_in is None else f"{1e6 * draw_in:.3g}",
+                         f"{p['compression_ratio']:.4f}",
+                         "—" if p.get("middle_compression_ratio") is None else f"{p['middle_compression_ratio']:.4f}",
+                         "—" if draw_in is None else f"{1e6 * draw_in:.3g}",
                          "yes" if p["converged"] else "**no**", p["iterations"], f"{res:.2e}", f"{p['seconds']:.1f}"))
     header = ("direction", "strain", "force (N/m)", "middle half's force (N/m)", "middle's strain",
-              "compression ratio", "edge draw-in (µm)", "converged", "iterations", "force residual", "seconds")
+              "compression ratio", "middle half's compression ratio", "edge draw-in (µm)", "converged", "iterations", "force residual", "seconds")
     mu = out.get("friction", 0.0)
     lines = [f"# yarn-level stretch: {out.get('name', '')}", "",
              f"Friction at the yarn contacts: μ = {mu:g}." if mu else "Frictionless yarn contacts.", "",
