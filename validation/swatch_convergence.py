@@ -25,19 +25,18 @@ crossings, as the suite's yarn scene pulls them (the fibre's coefficient, lagged
 ``--frictionless`` pulls them without.
 
 Then the material's shell (nonlinear) and its linear fit from the same samples (``fit.linear``)
-against the largest strip of each direction
-(issue 14's acceptance), measured where the strip is uniform: a long strip of the shell pulled
-at the strip's angle with every other stress free (:meth:`yarnfit.shell.ShellMaterial.uniaxial_pull`)
-to the strain the strip's middle reached at each level (its extensometer's reading: the jaws hold
-the strip's ends unsheared and unnarrowed, so its middle strains more than their travel), force
-per width and width ratio, with a verdict (force within SHELL_FORCE_RTOL of the strip's middle half,
-width ratio within SHELL_COMPRESSION_ATOL of the middle half's: where the strip is uniform, as issue
-14 asks it measured). Beside them the periodic repeat pulled the same way along weft, warp and bias
-(:func:`yarnfit.homogenize.periodic_pull`: the limit a strip tends to as it widens), and then the
-shell against that pull at the nominal strains: the fit's own error, told apart from the strip's
-size. ``--from-json``
-reads curves written by earlier runs instead of solving (runs of several sizes or directions made
-in parallel).
+against the largest strip of each direction (issue 14's acceptance): a long strip of the shell
+pulled at the strip's angle with every other stress free
+(:meth:`yarnfit.shell.ShellMaterial.uniaxial_pull`), force per width and width ratio, with a
+verdict (force within SHELL_FORCE_RTOL, width ratio within SHELL_COMPRESSION_ATOL), the strip read
+two ways (READINGS): at its jaws (their pull over the whole width at their travel, the whole
+width at mid-length) and where it is uniform, as issue 14 asks it measured (the middle half's pull
+at the strain the strip's middle reached, the middle half's width). Beside them the periodic
+repeat pulled the same way along weft, warp and bias (:func:`yarnfit.homogenize.periodic_pull`:
+the limit a strip tends to as it widens), and then the shell against that pull at the nominal
+strains: the fit's own error, told apart from the strip's size. ``--from-json`` reads curves
+written by earlier runs instead of solving (runs of several sizes or directions made in
+parallel).
 """
 
 from __future__ import annotations
@@ -47,6 +46,9 @@ import json
 import math
 import sys
 import time
+
+from dataclasses import dataclass
+from typing import Callable
 
 import numba
 
@@ -194,57 +196,87 @@ def middle_strain(point: dict) -> float:
     return point["strain"] if value is None else value
 
 
-def shell_rows(file: MaterialFile, curves: dict, pulls: dict, relaxed) -> tuple[list[str], list[str], bool]:
-    """Table rows of the shell (nonlinear and linear) and of the periodic repeat's pull against
-    the largest strip per direction, rows of the nonlinear shell against the periodic pulls at
-    STRAINS (``pulls``: the fit's own error, apart from the strip's size), and whether every
-    converged point of the nonlinear shell meets both criteria against the strip.
+@dataclass(frozen=True)
+class Reading:
+    """How a strip's pull is read for the verdict: its force per width, the strain the free pulls
+    are taken to, and its width ratio, each of a point of :func:`stretch_swatch`'s curve."""
 
-    The strip is judged where it is uniform: its middle half's force per width
-    (:func:`middle_force`) against the shell and the periodic repeat pulled to the strain its
-    middle reached (:func:`middle_strain`; a strip's jaws hold its ends unsheared and unnarrowed,
-    so its middle strains more than the jaws' travel says, up to half as much again on a small
-    bias strip), and its middle half's width ratio (:func:`middle_compression`: a knit's cut sides,
-    drawn in, narrow the whole width far more)."""
+    name: str
+    title: str
+    force: Callable[[dict], float]
+    strain: Callable[[dict], float]
+    compression: Callable[[dict], float]
+
+
+READINGS = (
+    # As a tensile tester without extensometers reads a strip: the jaws' force over the whole
+    # width, at the jaws' travel, and the whole width at mid-length.
+    Reading("jaws", "the jaws' pull over the whole width at the jaws' strain, the whole width at mid-length",
+            lambda p: p["force_n_per_m"], lambda p: p["strain"], lambda p: p["compression_ratio"]),
+    # Where the strip is uniform (issue 14): the middle half's pull at the strain its middle
+    # reached, the middle half's width (a strip's jaws hold its ends unsheared and unnarrowed, so
+    # its middle strains more than their travel; a knit's cut sides, drawn in, carry little and
+    # narrow the whole width far more).
+    Reading("middle", "the middle half's pull at the strain of the strip's middle, the middle half's width",
+            lambda p: middle_force(p), lambda p: middle_strain(p), lambda p: middle_compression(p)),
+)
+
+
+def largest_strips(curves: dict) -> dict:
+    """``{direction: curve}``: the strip of each direction with the most nodes."""
     largest = {}
     for curve in curves.values():
         if curve["nodes"] > largest.get(curve["direction"], {"nodes": -1})["nodes"]:
             largest[curve["direction"]] = curve
+    return largest
+
+
+def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Callable) -> tuple[list[str], int, int]:
+    """Table rows of the shell (nonlinear and linear) and of the periodic repeat's pull
+    (``periodic(direction, strain)``, a :class:`PeriodicPull` or None) against the largest strip
+    per direction read by ``reading``, the number of converged points and of those where the
+    nonlinear shell meets both criteria."""
     shells = {"nonlinear": file.shell, "linear": file.linear_shell}  # the linear (StVK) fit from the same samples
-    rows, fit_rows, passed = [], [], True
-    for direction, curve in largest.items():
+    rows, judged, within = [], 0, 0
+    for direction, curve in largest_strips(curves).items():
         angle = math.radians(curve["angle_deg"])
         gauge, width = curve["repeats"]
         for point in curve["points"][1:]:
-            strain, local = point["strain"], middle_strain(point)
-            reference, narrowing = middle_force(point), middle_compression(point)
-            periodic = periodic_pull_along(relaxed, direction, local)
-            cells = ["— | —" if periodic is None else
-                     f"{_against(periodic.force_n_per_m, reference)} | {periodic.width_ratio:.3f}"]
+            force, strain, narrowing = reading.force(point), reading.strain(point), reading.compression(point)
+            pull = periodic(direction, strain)
+            cells = ["— | —" if pull is None else f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}"]
             verdicts = {}
             for name, shell in shells.items():
-                pull = shell.uniaxial_pull(angle, 1.0 + local)
-                ratio = pull.force_n_per_m / reference if reference > 0 else math.inf
-                within = (abs(ratio - 1.0) <= SHELL_FORCE_RTOL
-                          and abs(pull.width_ratio - narrowing) <= SHELL_COMPRESSION_ATOL)
-                verdicts[name] = within
-                cells.append(f"{_against(pull.force_n_per_m, reference)} | {pull.width_ratio:.3f}")
-            nominal = pulls.get((direction, strain))
-            if nominal is not None:
-                pull = file.shell.uniaxial_pull(angle, 1.0 + strain)
-                fit_rows.append(f"| {direction} | {100 * strain:g} % | {nominal.force_n_per_m:.4g} | "
-                                f"{nominal.width_ratio:.3f} | {'yes' if nominal.converged else 'NO'} | "
-                                f"{_against(pull.force_n_per_m, nominal.force_n_per_m)} | {pull.width_ratio:.3f} |")
-            converged = point["converged"]
-            if converged:
-                passed &= verdicts["nonlinear"]
-            verdict = ("not converged" if not converged else
+                pull = shell.uniaxial_pull(angle, 1.0 + strain)
+                ratio = pull.force_n_per_m / force if force > 0 else math.inf
+                verdicts[name] = (abs(ratio - 1.0) <= SHELL_FORCE_RTOL
+                                  and abs(pull.width_ratio - narrowing) <= SHELL_COMPRESSION_ATOL)
+                cells.append(f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}")
+            if point["converged"]:
+                judged += 1
+                within += verdicts["nonlinear"]
+            verdict = ("not converged" if not point["converged"] else
                        "within" if verdicts["nonlinear"] else "MISSED")
-            rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * strain:g} % | {point['force_n_per_m']:.4g} | "
-                        f"{_force(point.get('middle_force_n_per_m'))} | {100 * local:.3g} % | "
-                        f"{point['compression_ratio']:.3f} | {_ratio(point.get('middle_compression_ratio'))} | "
-                        + " | ".join(cells) + f" | {verdict} |")
-    return rows, fit_rows, passed
+            rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * point['strain']:g} % | {force:.4g} | "
+                        f"{100 * strain:.3g} % | {narrowing:.3f} | " + " | ".join(cells) + f" | {verdict} |")
+    return rows, judged, within
+
+
+def fit_rows(file: MaterialFile, curves: dict, pulls: dict) -> list[str]:
+    """Rows of the nonlinear shell against the periodic pulls at STRAINS (``pulls``): the fit's
+    own error, apart from any strip's size."""
+    rows = []
+    for direction, curve in largest_strips(curves).items():
+        angle = math.radians(curve["angle_deg"])
+        for strain in STRAINS:
+            nominal = pulls.get((direction, strain))
+            if nominal is None:
+                continue
+            pull = file.shell.uniaxial_pull(angle, 1.0 + strain)
+            rows.append(f"| {direction} | {100 * strain:g} % | {nominal.force_n_per_m:.4g} | "
+                        f"{nominal.width_ratio:.3f} | {'yes' if nominal.converged else 'NO'} | "
+                        f"{_against(pull.force_n_per_m, nominal.force_n_per_m)} | {pull.width_ratio:.3f} |")
+    return rows
 
 
 def print_table(title: str, header: list[str], rows: list[str], columns: int | None = None) -> None:
@@ -294,20 +326,33 @@ def main(argv: list[str] | None = None) -> int:
                      "converged"],
                 [convergence_row(curve) for curve in order], columns=5 + 6 * len(STRAINS))
     pulls = periodic_pulls(relaxed, sorted({curve["direction"] for curve in curves.values()}))
-    rows, fit_rows, passed = shell_rows(file, curves, pulls, relaxed)
-    print_table(f"{name}: shell and periodic repeat against the largest strip per direction, pulled to the strain "
-                f"of the strip's middle (force within {SHELL_FORCE_RTOL:.0%} of the strip's middle half, compression "
-                f"within {SHELL_COMPRESSION_ATOL} of the middle half's; % against the middle half)",
-                ["direction", "repeats", "strain", "swatch N/m (jaws)", "swatch N/m (middle half)", "middle's strain",
-                 "swatch compression", "middle half's compression", "periodic N/m",
-                 "periodic compression", "nonlinear N/m", "nonlinear compression", "linear N/m", "linear compression",
-                 "verdict (nonlinear)"], rows)
-    if fit_rows:
+
+    def periodic(direction: str, strain: float):
+        """The periodic pull at ``strain``: solved at STRAINS already, else now."""
+        return pulls[direction, strain] if (direction, strain) in pulls else periodic_pull_along(relaxed, direction,
+                                                                                                   strain)
+
+    counts = {}
+    for reading in READINGS:
+        rows, judged, within = shell_rows(file, curves, reading, periodic)
+        counts[reading.name] = (within, judged)
+        print_table(f"{name}: shell and periodic repeat against the largest strip per direction, read as "
+                    f"{reading.title} (force within {SHELL_FORCE_RTOL:.0%}, compression within "
+                    f"{SHELL_COMPRESSION_ATOL}; % against the strip)",
+                    ["direction", "repeats", "level", "swatch N/m", "strain pulled to", "swatch compression",
+                     "periodic N/m", "periodic compression", "nonlinear N/m", "nonlinear compression", "linear N/m",
+                     "linear compression", "verdict (nonlinear)"], rows)
+    rows = fit_rows(file, curves, pulls)
+    if rows:
         print_table(f"{name}: nonlinear shell against the periodic repeat's pull (the fit's own error; % against "
                     f"the periodic pull)",
                     ["direction", "strain", "periodic N/m", "periodic compression", "periodic converged",
-                     "nonlinear N/m", "nonlinear compression"], fit_rows)
-    print(f"\nshell (nonlinear) vs largest swatch: {'within' if passed else 'MISSED'}")
+                     "nonlinear N/m", "nonlinear compression"], rows)
+    print()
+    for reading in READINGS:
+        within, judged = counts[reading.name]
+        print(f"shell (nonlinear) vs largest swatch, {reading.name}: within at {within} of {judged} converged points: "
+              f"{'within' if within == judged else 'MISSED'}")
     if args.json:
         with open(args.json, "w") as out:
             json.dump({"material": name, "curves": curves}, out, indent=1)
