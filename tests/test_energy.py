@@ -6,6 +6,7 @@ import pytest
 
 from yarnfit.engine import Loads, Rod, RodMaterial, RodModel, RodState, energy, energy_gradient
 from yarnfit.engine import _kernels
+from yarnfit.engine.energy import element_forces
 from yarnfit.engine._quat import quat_log, quat_mul
 from yarnfit.engine.quasistatic import _rotate_frames
 
@@ -90,6 +91,34 @@ def test_gradient_matches_central_differences(case):
             fd_edge[e, k] = (total(plus) - total(minus)) / (2 * h_rot)
     assert np.abs(node_gradient - fd_node).max() <= GRADIENT_RTOL * np.abs(node_gradient).max()
     assert np.abs(edge_gradient - fd_edge).max() <= GRADIENT_RTOL * np.abs(edge_gradient).max()
+
+
+def test_element_forces_are_the_node_gradient_split_by_edge():
+    # Only stretch-shear elements join nodes, so the node gradient is the sum over edges of −n on
+    # each edge's start node and +n (mapped back by the edge's end rotation) on its end node; and
+    # n is ∂U/∂p1 of its own element, checked by central differences of the element's energy
+    # alone (one edge of the deformed helix, its end point moved with the frame held).
+    model, state, _ = deformed_model_and_state()
+    n = element_forces(model, state.node_position, state.edge_quaternion)
+    assembled = np.zeros_like(state.node_position)
+    np.add.at(assembled, model.edge_nodes[:, 0], -n)
+    np.add.at(assembled, model.edge_nodes[:, 1], np.einsum("eji,ej->ei", model.edge_end_rotation, n))
+    _, node_gradient, _ = energy_gradient(model, state)
+    np.testing.assert_allclose(assembled, node_gradient, rtol=INVARIANCE_RTOL,
+                               atol=INVARIANCE_RTOL * np.abs(node_gradient).max())
+    e, h = 3, 1e-6 * float(model.edge_rest_length[3])
+    p0 = state.node_position[model.edge_nodes[e, 0]]
+    p1 = state.node_position[model.edge_nodes[e, 1]]
+    a = model.arrays
+
+    def element_energy(end):
+        us, uh, _, _ = _kernels.stretch_shear_element(
+            tuple(p0), tuple(end), tuple(state.edge_quaternion[e]), a.edge_rest_length[e], a.edge_shear_stiffness[e],
+            a.edge_stretch_stiffness[e], a.edge_hardening[e, 0], a.edge_hardening[e, 1])
+        return us + uh
+
+    central = [(element_energy(p1 + h * d) - element_energy(p1 - h * d)) / (2 * h) for d in np.eye(3)]
+    np.testing.assert_allclose(n[e], central, rtol=GRADIENT_RTOL, atol=GRADIENT_RTOL * np.abs(n[e]).max())
 
 
 def test_energy_is_invariant_under_rigid_motion():
