@@ -253,6 +253,9 @@ def test_the_middle_pull_counts_the_middle_yarns_only():
     assert pull == pytest.approx(3 * axial_force(strain), rel=FORCE_RTOL)
     np.testing.assert_allclose(cut.whole, pull, rtol=FORCE_RTOL)
     np.testing.assert_allclose(cut.middle, axial_force(strain), rtol=FORCE_RTOL)
+    # Quarters of the width from −y: the yarns at −PY, 0 and +PY lie in the first, third and
+    # fourth (the centre yarn on the boundary between the inner two falls in the upper one).
+    np.testing.assert_allclose(cut.quarters / axial_force(strain), [[1.0, 0.0, 1.0, 1.0]] * 5, atol=FORCE_RTOL)
     assert np.all(np.diff(cut.plane_x) > 0) and np.ptp(cut.plane_x) == pytest.approx(0.5 * (1 + strain) * swatch.gauge)
 
 

@@ -37,9 +37,10 @@ Outputs per direction and strain:
   anchors of that band crossing each plane), mean over :data:`CUT_PLANES` planes, divided by half
   the initial width (``middle_force_range_n_per_m`` its least and largest plane); the force of
   the strip where it is furthest from its cut sides and jaws. ``cut_force_n_per_m`` the same over
-  the whole width: the jaws' pull, to the solve's residual. Cut yarn ends at the long sides carry
-  little, so a narrow strip's middle pulls more than its jaws say (a 4 × 3 repeat cotton jersey
-  bias strip 1.7 times).
+  the whole width: the jaws' pull, to the solve's residual; ``quarter_forces_n_per_m`` each
+  quarter's from −y to +y, per quarter width (the profile across the strip). Cut yarn ends at the
+  long sides carry little, so a strip's middle pulls more than its jaws say (a 4 × 3 repeat
+  cotton jersey bias strip 1.7 times, 16 × 8 knit strips 1.4–1.9 times).
 - ``mid_strain``: the strain of the strip's middle half, where it is furthest from the jaws, read
   between two material marks as an extensometer reads it (:func:`mid_strain`; null where a mark
   holds no node): beside ``compression_ratio`` (measured at mid-length too), the strip's own
@@ -450,24 +451,32 @@ class CutForces:
 
     Attributes:
         plane_x: ``(K,)`` the planes (m), evenly over the middle half of the gauge.
-        whole: ``(K,)`` over the whole width: the fixed jaw's pull wherever the plane lies, to the
-            solve's residual (the part before the plane is a free body held by that jaw).
-        middle: ``(K,)`` carried by the rod elements, contact pairs and friction anchors of the
-            middle half of the width (their nodes' mean y at rest within a quarter width of the
-            centre line): the strip's own pull where it is furthest from its cut sides.
+        quarters: ``(K, 4)`` carried by the rod elements, contact pairs and friction anchors of
+            each quarter of the width, from −y to +y (a term belongs to the quarter its nodes'
+            mean y at rest lies in; those beyond the strip's sides to the outer quarters).
     """
 
     plane_x: np.ndarray
-    whole: np.ndarray
-    middle: np.ndarray
+    quarters: np.ndarray
+
+    @property
+    def whole(self) -> np.ndarray:
+        """``(K,)`` over the whole width: the fixed jaw's pull wherever the plane lies, to the
+        solve's residual (the part before the plane is a free body held by that jaw)."""
+        return self.quarters.sum(axis=1)
+
+    @property
+    def middle(self) -> np.ndarray:
+        """``(K,)`` over the middle half of the width (the two inner quarters): the strip's own
+        pull where it is furthest from its cut sides."""
+        return self.quarters[:, 1] + self.quarters[:, 2]
 
 
 def cut_forces(swatch: Swatch, state: RodState, contacts: ContactSet, anchors: FrictionAnchors | None = None,
                planes: int = CUT_PLANES) -> CutForces:
     """The pull across ``planes`` planes over the middle half of the gauge at ``state`` (an
     equilibrium of the rods, the augmented-Lagrangian ``contacts`` it balances and the friction
-    ``anchors`` it was solved with), over the whole width and over its middle half
-    (:class:`CutForces`).
+    ``anchors`` it was solved with), per quarter of the width (:class:`CutForces`).
 
     The force a part of the strip receives across a cut is the sum, over the energy terms that
     join nodes on both sides, of minus their gradient at the part's nodes: the stretch–shear
@@ -480,35 +489,36 @@ def cut_forces(swatch: Swatch, state: RodState, contacts: ContactSet, anchors: F
         raise ValueError("cut forces are measured on a cut (non-periodic) swatch")
     position = np.ascontiguousarray(state.node_position, dtype=np.float64)
     rest_y = swatch.position[:, 1]
+    side = centre_line(swatch) - 0.5 * swatch.width
 
-    def in_middle(nodes: np.ndarray) -> np.ndarray:
-        return np.abs(rest_y[nodes].mean(axis=1) - centre_line(swatch)) <= 0.25 * swatch.width
+    def quarter(nodes: np.ndarray) -> np.ndarray:
+        """The quarter of the width (0–3) each term with ``nodes (T, k)`` belongs to."""
+        at = (rest_y[nodes].mean(axis=1) - side) / (0.25 * swatch.width)
+        return np.clip(np.floor(at), 0, 3).astype(np.int64)
 
-    gradients = {}
     element = element_forces(model, position, state.edge_quaternion)
     edge_nodes = model.edge_nodes
-    pair_nodes = edge_nodes[contacts.pairs.pairs].reshape(-1, 4)
-    for key, edges, pairs, held in (
-            ("whole", np.ones(model.n_edges, dtype=np.bool_), np.arange(len(contacts)), None if anchors is None
-             else np.ones(len(anchors), dtype=np.bool_)),
-            ("middle", in_middle(edge_nodes), np.flatnonzero(in_middle(pair_nodes)), None if anchors is None
-             else in_middle(anchors.nodes))):
-        gradient = np.zeros_like(position)
+    edge_quarter = quarter(edge_nodes)
+    pair_quarter = quarter(edge_nodes[contacts.pairs.pairs].reshape(-1, 4))
+    anchor_quarter = None if anchors is None else quarter(anchors.nodes)
+    gradients = np.zeros((4, *position.shape))
+    for band, gradient in enumerate(gradients):
+        edges = edge_quarter == band
         np.add.at(gradient, edge_nodes[edges, 0], -element[edges])
         np.add.at(gradient, edge_nodes[edges, 1], element[edges])
+        pairs = np.flatnonzero(pair_quarter == band)
         if len(pairs):
             part = contacts.subset(pairs)
             _contact_kernels.contact_energy_gradient(
                 position, edge_nodes, model.edge_radius, *part.kernel_args(), gradient, np.zeros(len(position)),
                 np.empty(part.start[-1]), np.empty(part.start[-1]))
-        if held is not None and held.any():
-            gradient += anchors.subset(held).energy_gradient(position)[1]
-        gradients[key] = gradient
+        if anchor_quarter is not None and np.any(anchor_quarter == band):
+            gradient += anchors.subset(anchor_quarter == band).energy_gradient(position)[1]
     mid, half = mid_length(swatch, position), 0.25 * float(position[swatch.moving, 0].min()
                                                           - position[swatch.fixed, 0].max())
     plane_x = mid + half * np.linspace(-1.0, 1.0, planes)
     before = position[:, 0][None, :] < plane_x[:, None]
-    return CutForces(plane_x, -(before @ gradients["whole"][:, 0]), -(before @ gradients["middle"][:, 0]))
+    return CutForces(plane_x, -(before @ gradients[:, :, 0].T))
 
 
 def _stretched_guess(swatch: Swatch, state: RodState, strain: float, previous: float) -> RodState:
@@ -556,6 +566,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     state = RodState.from_model(model)
     points = [{"strain": 0.0, "force_n_per_m": 0.0, "fixed_force_n_per_m": 0.0, "rod_force_n_per_m": 0.0,
                "cut_force_n_per_m": 0.0, "middle_force_n_per_m": 0.0, "middle_force_range_n_per_m": [0.0, 0.0],
+               "quarter_forces_n_per_m": [0.0] * 4,
                "compression_ratio": 1.0, "middle_compression_ratio": 1.0, "mid_strain": 0.0, "extent_ratio": 1.0,
                "width_m": width0,
                "edge_draw_in_m": 0.0 if len(free_side_ends(swatch)) else None, "converged": True, "iterations": 0,
@@ -606,6 +617,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "middle_force_n_per_m": float(cut.middle.mean()) / (0.5 * swatch.width),
             "middle_force_range_n_per_m": [float(cut.middle.min()) / (0.5 * swatch.width),
                                            float(cut.middle.max()) / (0.5 * swatch.width)],
+            "quarter_forces_n_per_m": (cut.quarters.mean(axis=0) / (0.25 * swatch.width)).tolist(),
             "compression_ratio": width / width0,
             "middle_compression_ratio": finite_or_none(middle_compression(swatch, state.node_position)),
             "mid_strain": finite_or_none(mid_strain(swatch, state.node_position)),
