@@ -120,7 +120,13 @@ def convergence_row(curve: dict) -> str:
             + " | ".join(_ratio(p.get("middle_compression_ratio")) for p in points) + " | "
             + " | ".join(_percent(p.get("mid_strain")) for p in points) + " | "
             + " | ".join(_micrometres(p.get("edge_draw_in_m")) for p in points) + " | "
+            + _quarters(points[-1].get("quarter_forces_n_per_m")) + " | "
             + f"{max(p['seconds'] for p in points):.1f} | {'yes' if curve['converged'] else 'NO'} |")
+
+
+def _quarters(values) -> str:
+    """The pull per quarter of the width (N/m, from −y), for the table; '—' for an older run."""
+    return "—" if values is None else " / ".join(f"{v:.3g}" for v in values)
 
 
 def _force(value) -> str:
@@ -322,9 +328,10 @@ def main(argv: list[str] | None = None) -> int:
     print_table("", ["direction", "repeats (gauge × width)", "nodes", f"N/m (jaws) at {strains}",
                      f"N/m (middle half) at {strains}", f"compression at {strains}",
                      f"middle half's compression at {strains}",
-                     f"middle's strain (%) at {strains}", f"edge draw-in (µm) at {strains}", "slowest strain (s)",
+                     f"middle's strain (%) at {strains}", f"edge draw-in (µm) at {strains}",
+                     f"N/m per quarter of the width at {100 * STRAINS[-1]:g} %", "slowest strain (s)",
                      "converged"],
-                [convergence_row(curve) for curve in order], columns=5 + 6 * len(STRAINS))
+                [convergence_row(curve) for curve in order], columns=6 + 6 * len(STRAINS))
     pulls = periodic_pulls(relaxed, sorted({curve["direction"] for curve in curves.values()}))
 
     def periodic(direction: str, strain: float):
