@@ -157,6 +157,23 @@ def _edge_end(pos, edge_nodes, edge_end_rotation, edge_offset, e):
     return (r[0] + edge_offset[e, 0], r[1] + edge_offset[e, 1], r[2] + edge_offset[e, 2])
 
 
+@njit(cache=True, inline="always")
+def _edge_stretch_shear(pos, quat, rod, e):
+    """:func:`stretch_shear_element` of edge ``e`` of the rods ``rod`` bundles at ``pos``, ``quat``."""
+    (edge_nodes, edge_end_rotation, edge_offset, edge_rest_length, edge_shear_stiffness, edge_stretch_stiffness,
+     edge_hardening, _, _, _, _, _) = rod
+    return stretch_shear_element(
+        row3(pos, edge_nodes[e, 0]),
+        _edge_end(pos, edge_nodes, edge_end_rotation, edge_offset, e),
+        row4(quat, e),
+        edge_rest_length[e],
+        edge_shear_stiffness[e],
+        edge_stretch_stiffness[e],
+        edge_hardening[e, 0],
+        edge_hardening[e, 1],
+    )
+
+
 # ---------------------------------------------------------------------------------------------
 # Whole-model energy and gradient
 # ---------------------------------------------------------------------------------------------
@@ -193,16 +210,7 @@ def rod_energy_gradient(
     for e in range(edge_nodes.shape[0]):
         i0 = edge_nodes[e, 0]
         i1 = edge_nodes[e, 1]
-        us, uh, n, tau = stretch_shear_element(
-            row3(pos, i0),
-            _edge_end(pos, edge_nodes, edge_end_rotation, edge_offset, e),
-            row4(quat, e),
-            edge_rest_length[e],
-            edge_shear_stiffness[e],
-            edge_stretch_stiffness[e],
-            edge_hardening[e, 0],
-            edge_hardening[e, 1],
-        )
+        us, uh, n, tau = _edge_stretch_shear(pos, quat, rod, e)
         u_stretch += us
         u_shear += uh
         nn = norm(n)
@@ -246,19 +254,8 @@ def stretch_shear_forces(pos, quat, rod, out):
     ``out (E, 3)``: the yarn's tension and shear resultant ``R σ`` carried along the edge (the
     element exerts ``−n``, mapped into the end node's tile, on its end node). Only these elements
     join nodes: a bend–twist element acts on frames alone."""
-    (edge_nodes, edge_end_rotation, edge_offset, edge_rest_length, edge_shear_stiffness, edge_stretch_stiffness,
-     edge_hardening, _, _, _, _, _) = rod
-    for e in range(edge_nodes.shape[0]):
-        _, _, n, _ = stretch_shear_element(
-            row3(pos, edge_nodes[e, 0]),
-            _edge_end(pos, edge_nodes, edge_end_rotation, edge_offset, e),
-            row4(quat, e),
-            edge_rest_length[e],
-            edge_shear_stiffness[e],
-            edge_stretch_stiffness[e],
-            edge_hardening[e, 0],
-            edge_hardening[e, 1],
-        )
+    for e in range(rod[0].shape[0]):
+        _, _, n, _ = _edge_stretch_shear(pos, quat, rod, e)
         for k in range(3):
             out[e, k] = n[k]
 
