@@ -17,6 +17,7 @@ from yarnfit.engine.contact_lagrangian import (
     STALL_PROGRESS,
     ContactLagrangian,
     ContactSet,
+    contact_gradient,
     contact_potential,
 )
 from yarnfit.engine import _contact_kernels
@@ -283,6 +284,7 @@ def test_a_subset_of_pairs_is_their_part_of_the_potential():
         energy = _contact_kernels.contact_energy_gradient(
             position, model.edge_nodes, model.edge_radius, *contacts.kernel_args(), out, np.zeros(model.n_nodes),
             np.empty(contacts.start[-1]), np.empty(contacts.start[-1]))
+        np.testing.assert_array_equal(contact_gradient(model, position, contacts), out)
         return energy, out
 
     part = swept.subset(some)

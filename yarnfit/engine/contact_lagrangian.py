@@ -195,6 +195,18 @@ def contact_potential(model: RodModel, position: np.ndarray, contacts: ContactSe
                                                model.edge_radius, *contacts.kernel_args(), which))
 
 
+def contact_gradient(model: RodModel, position: np.ndarray, contacts: ContactSet) -> np.ndarray:
+    """``(N, 3)`` the gradient (N) of :func:`contact_potential` of ``contacts`` at ``position``
+    ``(N, 3)`` (m): minus the contact forces on the nodes."""
+    position = np.ascontiguousarray(position, dtype=np.float64)
+    gradient = np.zeros_like(position)
+    if len(contacts.pairs):
+        _contact_kernels.contact_energy_gradient(
+            position, model.edge_nodes, model.edge_radius, *contacts.kernel_args(), gradient,
+            np.zeros(len(position)), np.empty(contacts.start[-1]), np.empty(contacts.start[-1]))
+    return gradient
+
+
 def exchanged_potential(model: RodModel, position: np.ndarray, new: ContactSet, old: ContactSet) -> float:
     """The contact potential (J) of ``new`` less that of ``old`` at ``position``, where both come
     from one solve's memory (the pairs they share carry the same multipliers and penalties, so

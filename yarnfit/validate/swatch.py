@@ -108,8 +108,7 @@ from ..engine import (
     RodState,
     energy_gradient,
 )
-from ..engine import _contact_kernels
-from ..engine.contact_lagrangian import ContactSet
+from ..engine.contact_lagrangian import ContactSet, contact_gradient
 from ..engine.energy import element_forces
 from ..engine.friction import FrictionAnchors
 from ..engine.lagged import lagged_solve
@@ -506,12 +505,7 @@ def cut_forces(swatch: Swatch, state: RodState, contacts: ContactSet, anchors: F
         edges = edge_quarter == band
         np.add.at(gradient, edge_nodes[edges, 0], -element[edges])
         np.add.at(gradient, edge_nodes[edges, 1], element[edges])
-        pairs = np.flatnonzero(pair_quarter == band)
-        if len(pairs):
-            part = contacts.subset(pairs)
-            _contact_kernels.contact_energy_gradient(
-                position, edge_nodes, model.edge_radius, *part.kernel_args(), gradient, np.zeros(len(position)),
-                np.empty(part.start[-1]), np.empty(part.start[-1]))
+        gradient += contact_gradient(model, position, contacts.subset(np.flatnonzero(pair_quarter == band)))
         if anchor_quarter is not None and np.any(anchor_quarter == band):
             gradient += anchors.subset(anchor_quarter == band).energy_gradient(position)[1]
     mid, half = mid_length(swatch, position), 0.25 * float(position[swatch.moving, 0].min()
