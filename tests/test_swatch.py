@@ -14,8 +14,8 @@ import yarnfit.validate.swatch as swatch_module
 from yarnfit.engine import QuasiStaticOptions, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState, energy
 from yarnfit.engine.model import quaternion_d3
 from yarnfit.engine.tiling import cut_rectangle
-from yarnfit.validate.readings import centre_line as middle_line
-from yarnfit.validate.readings import cut_forces, edge_draw_in, free_side_ends, mid_strain, middle_compression
+from yarnfit.validate.strip import centre_line as middle_line
+from yarnfit.validate.strip import cut_forces, edge_draw_in, free_side_ends, mid_strain, middle_compression
 from yarnfit.validate.swatch import (FRICTION_STRAIN_STEP, STRAIN_TIMELINE, SWATCH_OPTIONS, cut_swatch, stretch_repeat,
                                      stretch_swatch)
 

@@ -5,9 +5,9 @@ the larger repeat side; each jaw band half a repeat) along each direction, pull 
 10 % (:func:`yarnfit.validate.swatch.stretch_swatch`, converged solves warm-started one from the
 next) and print, per direction and size: nodes, force per width (N/m) on the jaws and carried by
 the strip's middle half of the width across its middle half of the gauge (where it is furthest
-from its cut sides and jaws: :func:`yarnfit.validate.readings.cut_forces`), compression ratio at each
+from its cut sides and jaws: :func:`yarnfit.validate.strip.cut_forces`), compression ratio at each
 strain, the strain of the strip's middle half read between two marks as an extensometer reads it
-(:func:`yarnfit.validate.readings.mid_strain`: where it differs from the nominal strain, the jaws
+(:func:`yarnfit.validate.strip.mid_strain`: where it differs from the nominal strain, the jaws
 constrain the strip), and the slowest strain's solve time (one core). The sizes are not shrunk to the suite's
 node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what says how large a strip
 has to be.
@@ -17,7 +17,7 @@ has to be.
 
 The force and width measured at mid-length converge as the cut loops at the long sides and the
 jaws' constraint become a smaller part of the strip; the table shows how fast. Its edge draw-in
-(:func:`yarnfit.validate.readings.edge_draw_in`) is how far the yarn ends cut at the long sides have
+(:func:`yarnfit.validate.strip.edge_draw_in`) is how far the yarn ends cut at the long sides have
 slid in beyond the strip's narrowing: yarn a frictionless cut strip feeds to its loops from its
 free ends, which a periodic repeat cannot. The strips are pulled with Coulomb friction at the yarn
 crossings, as the suite's yarn scene pulls them (the fibre's coefficient, lagged per strain:
@@ -141,7 +141,7 @@ def _ratio(value) -> str:
 
 def middle_compression(point: dict) -> float:
     """The strip's width ratio where it is uniform: its middle half's, between two material marks
-    (:func:`yarnfit.validate.readings.middle_compression`), or the whole width's at mid-length where
+    (:func:`yarnfit.validate.strip.middle_compression`), or the whole width's at mid-length where
     a mark held no node (or for curves written before it was measured)."""
     value = point.get("middle_compression_ratio")
     return point["compression_ratio"] if value is None else value
@@ -149,7 +149,7 @@ def middle_compression(point: dict) -> float:
 
 def middle_force(point: dict) -> float:
     """The strip's force per width where it is uniform: its middle half's pull across planes over
-    the middle half of the gauge (:func:`yarnfit.validate.readings.cut_forces`), or the jaws' for
+    the middle half of the gauge (:func:`yarnfit.validate.strip.cut_forces`), or the jaws' for
     curves written before it was measured."""
     value = point.get("middle_force_n_per_m")
     return point["force_n_per_m"] if value is None else value
@@ -196,7 +196,7 @@ def _against(value: float, reference: float) -> str:
 
 def middle_strain(point: dict) -> float:
     """The strain of the strip's middle as its extensometer reads it
-    (:func:`yarnfit.validate.readings.mid_strain`), or the nominal strain where no mark held a node
+    (:func:`yarnfit.validate.strip.mid_strain`), or the nominal strain where no mark held a node
     (or for curves written before it was measured)."""
     value = point.get("mid_strain")
     return point["strain"] if value is None else value

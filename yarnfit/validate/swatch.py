@@ -26,7 +26,7 @@ long sides are held by friction, as a real strip's are; frictionless, they slide
 the strip stays soft at any width (``docs/design.md`` §3).
 
 Outputs per direction and strain (what the test reads off the strip is
-:mod:`yarnfit.validate.readings`):
+:mod:`yarnfit.validate.strip`):
 
 - ``force_n_per_m``: the pull on the moving jaw (the x component of the sum over its pinned nodes
   of ∂Π/∂x, Π the rod energy plus the contact potential: the force the jaw must apply) divided by
@@ -34,8 +34,8 @@ Outputs per direction and strain (what the test reads off the strip is
   back), equal and opposite at equilibrium; ``rod_force_n_per_m`` the rods' part alone
   (``contact_share`` the rest).
 - ``middle_force_n_per_m``: the pull the middle half of the width carries across planes over the
-  middle half of the gauge (:func:`~yarnfit.validate.readings.cut_forces`: the rod elements, contact pairs and friction
-  anchors of that band crossing each plane), mean over :data:`~yarnfit.validate.readings.CUT_PLANES` planes, divided by half
+  middle half of the gauge (:func:`~yarnfit.validate.strip.cut_forces`: the rod elements, contact pairs and friction
+  anchors of that band crossing each plane), mean over :data:`~yarnfit.validate.strip.CUT_PLANES` planes, divided by half
   the initial width (``middle_force_range_n_per_m`` its least and largest plane); the force of
   the strip where it is furthest from its cut sides and jaws. ``cut_force_n_per_m`` the same over
   the whole width: the jaws' pull, to the solve's residual; ``quarter_forces_n_per_m`` each
@@ -43,19 +43,19 @@ Outputs per direction and strain (what the test reads off the strip is
   long sides carry little, so a strip's middle pulls more than its jaws say (a 4 × 3 repeat
   cotton jersey bias strip 1.7 times, 16 × 8 knit strips 1.4–1.9 times).
 - ``mid_strain``: the strain of the strip's middle half, where it is furthest from the jaws, read
-  between two material marks as an extensometer reads it (:func:`~yarnfit.validate.readings.mid_strain`; null where a mark
+  between two material marks as an extensometer reads it (:func:`~yarnfit.validate.strip.mid_strain`; null where a mark
   holds no node): beside ``compression_ratio`` (measured at mid-length too), the strip's own
   state where it is most nearly uniform, which a free pull at that strain should match.
-- ``middle_compression_ratio``: the width ratio of the strip's middle half (:func:`~yarnfit.validate.readings.middle_compression`:
+- ``middle_compression_ratio``: the width ratio of the strip's middle half (:func:`~yarnfit.validate.strip.middle_compression`:
   two material marks a half width apart, across the middle half of the gauge; null where a mark
   holds no node), the compression where the strip is uniform, beside ``middle_force_n_per_m``.
 - ``compression_ratio``: width at mid-length over the initial width, the width being the span
   across the strip of the points where yarn centrelines cross the mid-length plane (at more than
-  30° from it), plus one diameter (:func:`~yarnfit.validate.readings.mid_width`; yarns lying along the plane and their loose
+  30° from it), plus one diameter (:func:`~yarnfit.validate.strip.mid_width`; yarns lying along the plane and their loose
   cut ends at the long sides do not count);
   ``extent_ratio`` the same from every node within a quarter width of mid-length
-  (:func:`~yarnfit.validate.readings.extent_width`: cut ends splaying out count); ``edge_draw_in_m`` how far the yarn ends cut
-  at the long sides lie inside where the strip's narrowing puts them (:func:`~yarnfit.validate.readings.edge_draw_in`: yarn
+  (:func:`~yarnfit.validate.strip.extent_width`: cut ends splaying out count); ``edge_draw_in_m`` how far the yarn ends cut
+  at the long sides lie inside where the strip's narrowing puts them (:func:`~yarnfit.validate.strip.edge_draw_in`: yarn
   slid in from the sides; null where none is cut in the middle half of the gauge).
 - the solver's residuals, iterations and wall time, and ``load_steps``; with friction
   (``stretch_swatch(..., friction=μ)``, off by default), ``slowest_step_seconds``,
@@ -116,8 +116,8 @@ from ..jsonfile import finite_or_none
 from ..material_file import MaterialFile
 from ..record import Recording, folded_panels, markdown_table
 from . import DIRECTIONS, SceneResult
-from .readings import (cut_forces, edge_draw_in, extent_width, free_side_ends, mid_strain, mid_width,
-                       middle_compression)
+from .strip import (Swatch, cut_forces, edge_draw_in, extent_width, free_side_ends, mid_strain, mid_width,
+                    middle_compression)
 
 # The strains the FAB-style test reports (nominal engineering strain of the gauge).
 STRAINS = (0.02, 0.05, 0.10)
@@ -171,34 +171,6 @@ STEP_COUNT_SLACK = 1e-9
 # the force scale is still six digits on the reaction.
 SWATCH_OPTIONS = dict(force_tolerance=1e-6, torque_tolerance=1e-6, energy_tolerance=1e-10,
                       penetration_tolerance=1e-4, max_iterations=MAX_ITERATIONS)
-
-
-@dataclass(frozen=True)
-class Swatch:
-    """A strip cut from an unrolled repeat, in world coordinates (x pull, y across, z normal).
-
-    Attributes:
-        model: open rods (one per cut yarn piece), jaw nodes pinned.
-        position: ``(N, 3)`` the rest (relaxed, unstrained) positions (m).
-        moving: node indices of the +x jaw; ``fixed``: of the −x jaw.
-        length, width, gauge, clamp: strip length, width, free length between the jaws and the
-            band of each jaw (m).
-        radius: yarn radius (m).
-        direction: ``weft``, ``warp``, ``bias`` or an angle name.
-        angle_deg: angle of the pull from the weft (degrees).
-    """
-
-    model: RodModel
-    position: np.ndarray
-    moving: np.ndarray
-    fixed: np.ndarray
-    length: float
-    width: float
-    gauge: float
-    clamp: float
-    radius: float
-    direction: str
-    angle_deg: float
 
 
 def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | RodMaterial, *, direction: str = "weft",
@@ -351,7 +323,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     warm-started from the previous one. ``on_step(k, strain, position, point)`` is called after
     each solve (k = 0 for the unstrained state, then 1, 2, ...). ``width_band`` (m, default a
     quarter of the strip width) is the half-length of the mid-length slab the width is measured
-    in (:func:`~yarnfit.validate.readings.extent_width`). ``friction`` μ > 0: Coulomb friction at the yarn contacts, each
+    in (:func:`~yarnfit.validate.strip.extent_width`). ``friction`` μ > 0: Coulomb friction at the yarn contacts, each
     strain reached from the last in equal lagged frictional load steps of at most ``strain_step``
     (:data:`FRICTION_STRAIN_STEP`; :func:`yarnfit.engine.lagged.lagged_solve`; a point's
     ``load_steps`` says how many, its ``iterations``, ``friction_passes`` and ``seconds`` count

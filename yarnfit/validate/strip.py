@@ -1,24 +1,50 @@
-"""What a strip's tensile test reads off the yarn-level swatch (:mod:`yarnfit.validate.swatch`):
-its width at mid-length, the strain and the width of its middle between material marks (as an
-extensometer reads them), how far its cut yarn ends were drawn in, and the pull carried across
-planes by each quarter of its width. Each is a function of the swatch and its positions (or its
-equilibrium), in the swatch's world frame: x the pull, y across, z the fabric normal."""
+"""A strip cut from the yarn-level swatch (:class:`Swatch`, made by
+:func:`yarnfit.validate.swatch.cut_swatch`) and what its tensile test reads off it: its width at
+mid-length, the strain and the width of its middle between material marks (as an extensometer
+reads them), how far its cut yarn ends were drawn in, and the pull carried across planes by each
+quarter of its width. Each is a function of the strip and its positions (or its equilibrium), in
+the strip's world frame: x the pull, y across, z the fabric normal."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..engine import RodState
+from ..engine import RodModel, RodState
 from ..engine.contact_lagrangian import ContactSet, contact_gradient
 from ..engine.energy import element_forces
 from ..engine.friction import FrictionAnchors
 
-if TYPE_CHECKING:
-    from .swatch import Swatch
+
+@dataclass(frozen=True)
+class Swatch:
+    """A strip cut from an unrolled repeat, in world coordinates (x pull, y across, z normal).
+
+    Attributes:
+        model: open rods (one per cut yarn piece), jaw nodes pinned.
+        position: ``(N, 3)`` the rest (relaxed, unstrained) positions (m).
+        moving: node indices of the +x jaw; ``fixed``: of the −x jaw.
+        length, width, gauge, clamp: strip length, width, free length between the jaws and the
+            band of each jaw (m).
+        radius: yarn radius (m).
+        direction: ``weft``, ``warp``, ``bias`` or an angle name.
+        angle_deg: angle of the pull from the weft (degrees).
+    """
+
+    model: RodModel
+    position: np.ndarray
+    moving: np.ndarray
+    fixed: np.ndarray
+    length: float
+    width: float
+    gauge: float
+    clamp: float
+    radius: float
+    direction: str
+    angle_deg: float
+
 
 # Edges count towards the mid-length width only if they cross the mid-length plane at more than
 # 30° from it (|Δx| ≥ sin 30° |e|); see mid_width.
