@@ -297,3 +297,5 @@ def test_a_subset_of_pairs_is_their_part_of_the_potential():
     np.testing.assert_allclose(part_gradient + gradient(swept.subset(others))[1], whole_gradient,
                                rtol=REGROUPED_RTOL, atol=REGROUPED_RTOL * np.abs(whole_gradient).max())
     assert len(swept.subset(np.zeros(0, dtype=np.int64))) == 0
+    with pytest.raises(ValueError, match="ascending"):
+        swept.subset(some[::-1])

@@ -608,9 +608,10 @@ def bench_swatch(friction: bool = True) -> None:
     pass), the pull (N/m), and with friction the load steps it was reached in
     (:data:`yarnfit.validate.swatch.FRICTION_STRAIN_STEP` apart), the slowest step's wall time and
     the lagged passes, and the middle half's pull where the strip is uniform
-    (:func:`yarnfit.validate.strip.cut_forces`, with its middle's strain). Cotton jersey along the weft, cotton twill along
-    weft and warp (the warp strip, 1819 nodes, is the presets' largest; a satin is cut to the node
-    budget). ``validation/swatch_convergence.py`` gives the strips of other sizes."""
+    (:func:`yarnfit.validate.strip.cut_forces`, with its middle's strain). Cotton jersey along the
+    weft, cotton twill along weft and warp (the warp strip, 1819 nodes, is the presets' largest; a
+    satin is cut to the node budget). ``validation/swatch_convergence.py`` gives the strips of
+    other sizes."""
     import warnings
 
     from yarnfit.fabric import Fabric

@@ -224,7 +224,7 @@ READINGS = (
     # its middle strains more than their travel; a knit's cut sides, drawn in, carry little and
     # narrow the whole width far more).
     Reading("middle", "the middle half's pull at the strain of the strip's middle, the middle half's width",
-            lambda p: middle_force(p), lambda p: middle_strain(p), lambda p: middle_compression(p)),
+            middle_force, middle_strain, middle_compression),
 )
 
 

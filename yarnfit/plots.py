@@ -333,9 +333,9 @@ def validation_figures(summary: str | os.PathLike | Mapping, out_dir: str | os.P
     (N/cm) against engineering strain (%): each shell strip in MuJoCo (line with dots; crosses at
     levels that did not come to rest or met an unstable step), the yarn-level swatch (squares;
     crosses where a solve did not converge) and its middle half's pull against its middle's strain
-    (hollow squares, where the points carry them: where the swatch is uniform), the reference (black diamonds) and the shell's law
-    (thin grey line; the strips' clamped ends make them stiffer than it for a fabric with a large
-    Poisson ratio). CSV columns: ``series``, ``strain [%]``, ``force per width [N/cm]``,
+    (hollow squares, where the points carry them: where the swatch is uniform), the reference
+    (black diamonds) and the shell's law (thin grey line; the strips' clamped ends make them
+    stiffer than it for a fabric with a large Poisson ratio). CSV columns: ``series``, ``strain [%]``, ``force per width [N/cm]``,
     ``compression ratio [1]`` (empty where not measured) and ``converged`` (empty for the law).
 
     Returns:
@@ -417,8 +417,8 @@ def _stretch_series(direction: str, strips: Mapping, yarn: Mapping, reference: R
 def _middle_series(curve: Mapping, ok: np.ndarray) -> Series | None:
     """The swatch where it is uniform: its middle half's pull against the strain its middle
     reached (``middle_force_n_per_m`` and ``mid_strain`` of each point; its width ratio
-    ``middle_compression_ratio``), the pair a free pull of the shell's law should match; ``None`` for curves without them (older runs) or where a mark
-    held no node."""
+    ``middle_compression_ratio``), the pair a free pull of the shell's law should match; ``None``
+    for curves without them (older runs) or where a mark held no node."""
     points = curve.get("points")
     if not isinstance(points, list) or not points:
         return None

@@ -131,12 +131,12 @@ class ContactSet:
         """The pairs ``which`` selects (indices, ascending) with their constraints, multipliers and
         penalties: the part of the contact potential they contribute."""
         which = np.asarray(which, dtype=np.int64)
-        counts = self.counts[which]
-        constraints = np.concatenate([np.arange(self.start[p], self.start[p + 1]) for p in which]) \
-            if which.size else np.zeros(0, dtype=np.int64)
+        if np.any(np.diff(which) <= 0):
+            raise ValueError("subset takes ascending pair indices, each once")
+        kept = np.isin(self.per_constraint(np.arange(len(self))), which)  # in pair order, as ``which``
         return ContactSet(self.pairs.subset(which), self.edge_samples,
-                          np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
-                          self.multiplier[constraints], self.base_stiffness[which], self.stiffening[which],
+                          np.concatenate([[0], np.cumsum(self.counts[which])]).astype(np.int64),
+                          self.multiplier[kept], self.base_stiffness[which], self.stiffening[which],
                           self.radius_sum[which])
 
     def missing_from(self, other: "ContactSet", n_edges: int) -> np.ndarray:

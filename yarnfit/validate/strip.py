@@ -98,16 +98,9 @@ def mid_strain(swatch: Swatch, position: np.ndarray) -> float:
     strip is uniform it is the nominal strain (the jaws' travel over the gauge); near stiff or
     constraining jaws the middle strains more or less than that. NaN where a mark holds no node."""
     rest = swatch.position
-    mid = mid_length(swatch, rest)
     inner = np.abs(rest[:, 1] - centre_line(swatch)) <= 0.25 * swatch.width
-    marks = []
-    for side in (-1.0, 1.0):
-        near = inner & (np.abs(rest[:, 0] - (mid + side * 0.5 * EXTENSOMETER_SPAN * swatch.gauge))
-                        <= MARK_BAND * swatch.gauge)
-        if not near.any():
-            return math.nan
-        marks.append((float(rest[near, 0].mean()), float(position[near, 0].mean())))
-    return (marks[1][1] - marks[0][1]) / (marks[1][0] - marks[0][0]) - 1.0
+    return _between_marks(rest, position, 0, mid_length(swatch, rest), 0.5 * EXTENSOMETER_SPAN * swatch.gauge,
+                          MARK_BAND * swatch.gauge, inner) - 1.0
 
 
 def middle_compression(swatch: Swatch, position: np.ndarray) -> float:
@@ -119,13 +112,21 @@ def middle_compression(swatch: Swatch, position: np.ndarray) -> float:
     width more (:func:`mid_width`). NaN where a mark holds no node."""
     rest = swatch.position
     inner = np.abs(rest[:, 0] - mid_length(swatch, rest)) <= 0.25 * swatch.gauge
-    centre = centre_line(swatch)
+    return _between_marks(rest, position, 1, centre_line(swatch), 0.25 * swatch.width, MARK_BAND * swatch.width,
+                          inner)
+
+
+def _between_marks(rest: np.ndarray, position: np.ndarray, axis: int, centre: float, offset: float, band: float,
+                   inner: np.ndarray) -> float:
+    """The distance along ``axis`` between two material marks at ``centre ± offset`` (m, at
+    rest), each the mean coordinate of the ``inner`` nodes within ``band`` of it at rest, at
+    ``position`` over that at ``rest``; NaN where a mark holds no node."""
     marks = []
     for side in (-1.0, 1.0):
-        near = inner & (np.abs(rest[:, 1] - (centre + side * 0.25 * swatch.width)) <= MARK_BAND * swatch.width)
+        near = inner & (np.abs(rest[:, axis] - (centre + side * offset)) <= band)
         if not near.any():
             return math.nan
-        marks.append((float(rest[near, 1].mean()), float(position[near, 1].mean())))
+        marks.append((float(rest[near, axis].mean()), float(position[near, axis].mean())))
     return (marks[1][1] - marks[0][1]) / (marks[1][0] - marks[0][0])
 
 

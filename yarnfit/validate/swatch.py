@@ -34,29 +34,33 @@ Outputs per direction and strain (what the test reads off the strip is
   back), equal and opposite at equilibrium; ``rod_force_n_per_m`` the rods' part alone
   (``contact_share`` the rest).
 - ``middle_force_n_per_m``: the pull the middle half of the width carries across planes over the
-  middle half of the gauge (:func:`~yarnfit.validate.strip.cut_forces`: the rod elements, contact pairs and friction
-  anchors of that band crossing each plane), mean over :data:`~yarnfit.validate.strip.CUT_PLANES` planes, divided by half
-  the initial width (``middle_force_range_n_per_m`` its least and largest plane); the force of
-  the strip where it is furthest from its cut sides and jaws. ``cut_force_n_per_m`` the same over
-  the whole width: the jaws' pull, to the solve's residual; ``quarter_forces_n_per_m`` each
-  quarter's from −y to +y, per quarter width (the profile across the strip). Cut yarn ends at the
-  long sides carry little, so a strip's middle pulls more than its jaws say (a 4 × 3 repeat
-  cotton jersey bias strip 1.7 times, 16 × 8 knit strips 1.4–1.9 times).
+  middle half of the gauge (:func:`~yarnfit.validate.strip.cut_forces`: the rod elements, contact
+  pairs and friction anchors of that band crossing each plane), mean over
+  :data:`~yarnfit.validate.strip.CUT_PLANES` planes, divided by half the initial width
+  (``middle_force_range_n_per_m`` its least and largest plane); the force of the strip where it
+  is furthest from its cut sides and jaws. ``cut_force_n_per_m`` the same over the whole width:
+  the jaws' pull, to the solve's residual; ``quarter_forces_n_per_m`` each quarter's from −y to
+  +y, per quarter width (the profile across the strip). Cut yarn ends at the long sides carry
+  little, so a strip's middle pulls more than its jaws say (a 4 × 3 repeat cotton jersey bias
+  strip 1.7 times, 16 × 8 knit strips 1.3–1.9 times).
 - ``mid_strain``: the strain of the strip's middle half, where it is furthest from the jaws, read
-  between two material marks as an extensometer reads it (:func:`~yarnfit.validate.strip.mid_strain`; null where a mark
-  holds no node): beside ``compression_ratio`` (measured at mid-length too), the strip's own
-  state where it is most nearly uniform, which a free pull at that strain should match.
-- ``middle_compression_ratio``: the width ratio of the strip's middle half (:func:`~yarnfit.validate.strip.middle_compression`:
-  two material marks a half width apart, across the middle half of the gauge; null where a mark
-  holds no node), the compression where the strip is uniform, beside ``middle_force_n_per_m``.
+  between two material marks as an extensometer reads it
+  (:func:`~yarnfit.validate.strip.mid_strain`; null where a mark holds no node): beside
+  ``compression_ratio`` (measured at mid-length too), the strip's own state where it is most
+  nearly uniform, which a free pull at that strain should match.
+- ``middle_compression_ratio``: the width ratio of the strip's middle half
+  (:func:`~yarnfit.validate.strip.middle_compression`: two material marks a half width apart,
+  across the middle half of the gauge; null where a mark holds no node), the compression where
+  the strip is uniform, beside ``middle_force_n_per_m``.
 - ``compression_ratio``: width at mid-length over the initial width, the width being the span
   across the strip of the points where yarn centrelines cross the mid-length plane (at more than
-  30° from it), plus one diameter (:func:`~yarnfit.validate.strip.mid_width`; yarns lying along the plane and their loose
-  cut ends at the long sides do not count);
-  ``extent_ratio`` the same from every node within a quarter width of mid-length
-  (:func:`~yarnfit.validate.strip.extent_width`: cut ends splaying out count); ``edge_draw_in_m`` how far the yarn ends cut
-  at the long sides lie inside where the strip's narrowing puts them (:func:`~yarnfit.validate.strip.edge_draw_in`: yarn
-  slid in from the sides; null where none is cut in the middle half of the gauge).
+  30° from it), plus one diameter (:func:`~yarnfit.validate.strip.mid_width`; yarns lying along
+  the plane and their loose cut ends at the long sides do not count); ``extent_ratio`` the same
+  from every node within a quarter width of mid-length
+  (:func:`~yarnfit.validate.strip.extent_width`: cut ends splaying out count); ``edge_draw_in_m``
+  how far the yarn ends cut at the long sides lie inside where the strip's narrowing puts them
+  (:func:`~yarnfit.validate.strip.edge_draw_in`: yarn slid in from the sides; null where none is
+  cut in the middle half of the gauge).
 - the solver's residuals, iterations and wall time, and ``load_steps``; with friction
   (``stretch_swatch(..., friction=μ)``, off by default), ``slowest_step_seconds``,
   ``friction_passes`` and ``friction_change``, the slowest load step's wall time, the lagged passes
@@ -323,8 +327,8 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     warm-started from the previous one. ``on_step(k, strain, position, point)`` is called after
     each solve (k = 0 for the unstrained state, then 1, 2, ...). ``width_band`` (m, default a
     quarter of the strip width) is the half-length of the mid-length slab the width is measured
-    in (:func:`~yarnfit.validate.strip.extent_width`). ``friction`` μ > 0: Coulomb friction at the yarn contacts, each
-    strain reached from the last in equal lagged frictional load steps of at most ``strain_step``
+    in (:func:`~yarnfit.validate.strip.extent_width`). ``friction`` μ > 0: Coulomb friction at the
+    yarn contacts, each strain reached from the last in equal lagged frictional load steps of at most ``strain_step``
     (:data:`FRICTION_STRAIN_STEP`; :func:`yarnfit.engine.lagged.lagged_solve`; a point's
     ``load_steps`` says how many, its ``iterations``, ``friction_passes`` and ``seconds`` count
     all of them, ``slowest_step_seconds`` is the longest one's time, and it is converged only if
@@ -626,8 +630,7 @@ def blueprint():
 def summary_markdown(out: dict) -> str:
     """Markdown table of a run: per direction and strain, force per width on the jaws and in the
     middle half (with the middle's strain), compression ratio of the whole width and of the middle
-    half, edge draw-in, convergence,
-    iterations, residuals and wall time."""
+    half, edge draw-in, convergence, iterations, residuals and wall time."""
     rows = []
     for direction, curve in out["directions"].items():
         for p in curve["points"][1:]:
@@ -642,7 +645,8 @@ def summary_markdown(out: dict) -> str:
                          "—" if draw_in is None else f"{1e6 * draw_in:.3g}",
                          "yes" if p["converged"] else "**no**", p["iterations"], f"{res:.2e}", f"{p['seconds']:.1f}"))
     header = ("direction", "strain", "force (N/m)", "middle half's force (N/m)", "middle's strain",
-              "compression ratio", "middle half's compression ratio", "edge draw-in (µm)", "converged", "iterations", "force residual", "seconds")
+              "compression ratio", "middle half's compression ratio", "edge draw-in (µm)", "converged", "iterations",
+              "force residual", "seconds")
     mu = out.get("friction", 0.0)
     lines = [f"# yarn-level stretch: {out.get('name', '')}", "",
              f"Friction at the yarn contacts: μ = {mu:g}." if mu else "Frictionless yarn contacts.", "",
