@@ -27,6 +27,7 @@ from yarnfit.homogenize import (
     MAX_ITERATIONS,
     SurfaceMap,
     default_ranges,
+    frictional_periodic_pull,
     periodic_bias_pull,
     periodic_pull,
     solve_sample,
@@ -34,6 +35,7 @@ from yarnfit.homogenize import (
     tile_repeat,
     transfer_fluctuation,
 )
+from yarnfit.engine.friction import anchor_contacts
 from yarnfit.homogenize.bias import _search_bias
 from yarnfit.homogenize.equilibrium import CONTINUATION_HALVINGS, _green_slope, _solve_with_continuation
 from yarnfit.homogenize.surface import _spd_sqrt
@@ -102,6 +104,18 @@ BIAS_ENERGY_RTOL = 0.01
 # Straight yarns on the bias: force over the weft pull's, 1e-12 and 3e-7 measured (round-off of a
 # flat energy); anything the yarns resisted would be O(1).
 BIAS_FREE_RATIO = 1e-5
+# A frictionless pull followed in load steps against the direct periodic pull: both searches stop
+# with their free strain within FREE_SLOPE_RTOL's reach of the root, from different sides (the
+# path from the last step's width, the direct one from the pure stretch), which the weave's
+# Poisson coupling carries into the force (measured on the plain weave: +1.4 % at 1 %, -0.3 % at
+# 3 %; widths 1.6e-4 and 2.2e-5 apart).
+PATH_PULL_RTOL = 0.03
+PATH_WIDTH_ATOL = 5e-4
+# An anchor's friction force over its bound at no slip but the round-off of maps mapped there and
+# back (2 y / ε with y ~ 1e-19 m, ε ~ 1e-7 m: ~1e-12), against ~1 for a slip of a period's change.
+UNSLIPPED_RATIO = 1e-9
+# Friction at 0.2 and 0.4 stiffens the plain weave's pull at 1 % by 11 % and 25 % (measured),
+# far beyond PATH_PULL_RTOL's noise: the ordering is a property of the path, not of round-off.
 # A square plain weave: weft and warp constants "equal within 5 %".
 SYMMETRY_RTOL = 0.05
 # The undeformed sample against a 1 % weft stretch: touching contacts without multipliers push with
@@ -560,6 +574,75 @@ def test_a_periodic_pull_refuses_bad_input():
     for strain in (0.0, -0.01, math.nan):
         with pytest.raises(ValueError, match="strain"):
             periodic_pull(relaxed, 0, strain)
+
+
+def test_a_frictional_periodic_pull_of_straight_yarns_is_their_tensile_rigidity():
+    # Nothing touches: friction has nothing to act on, and the pull is E A ε / d at the width it
+    # started with, as the frictionless pull's.
+    r, d, E = 1e-4, 3e-4, 2e9
+    relaxed = straight_yarns(E, r, d)
+    for pull, strain in zip(frictional_periodic_pull(relaxed, 0, (0.01, 0.02), 0.3), (0.01, 0.02)):
+        assert pull.converged and pull.strain == strain
+        assert pull.force_n_per_m == pytest.approx(E * math.pi * r**2 * strain / d, rel=STRAIGHT_PULL_RTOL)
+        assert pull.width_ratio == 1.0
+
+
+def test_a_frictionless_pull_along_a_path_lands_on_the_periodic_pull():
+    relaxed = fitted().relaxed
+    pulls = frictional_periodic_pull(relaxed, 0, (0.01, 0.03), 0.0)
+    for pull in pulls:
+        direct = periodic_pull(relaxed, 0, pull.strain)
+        assert pull.converged
+        assert pull.force_n_per_m == pytest.approx(direct.force_n_per_m, rel=PATH_PULL_RTOL)
+        assert pull.width_ratio == pytest.approx(direct.width_ratio, abs=PATH_WIDTH_ATOL)
+
+
+def test_friction_stiffens_a_periodic_pull_with_its_coefficient():
+    relaxed = fitted().relaxed
+    forces = []
+    for mu in (0.0, 0.2, 0.4):
+        pull, = frictional_periodic_pull(relaxed, 0, (0.01,), mu)
+        assert pull.converged
+        forces.append(pull.force_n_per_m)
+    assert forces[0] * (1.0 + PATH_PULL_RTOL) < forces[1] < forces[2]
+
+
+def test_friction_anchors_of_a_stretched_tiling_slip_from_where_the_reference_tiling_had_them():
+    # Anchors set on a tiling stretched since the reference measure slip under the reference's
+    # maps: mapped back there, at the reference positions, nothing has slipped. Measured with the
+    # stretched tiling's maps instead, a pair across a tile border slips by the change of a period.
+    relaxed = fitted().relaxed
+    tiled = tile_repeat(relaxed, np.eye(2), np.zeros((2, 2)))
+    rest = QuasiStaticSolver(tiled.model, QuasiStaticOptions(max_iterations=600)).solve(
+        tiled.state, constraints=tiled.constraints)
+    assert np.any(rest.contacts.pairs.images != 0)  # some pairs reach across a border
+    matrix = np.diag([1.02, 0.99, 1.0])
+    model = transform_images(tiled.model, matrix)
+    position = rest.state.node_position @ matrix.T
+    contacts = dataclasses.replace(rest.contacts, pairs=rest.contacts.pairs.transformed(matrix))
+    reference = rest.state.node_position
+    right = anchor_contacts(model, position, contacts, reference, 0.3, reference_pairs=rest.contacts.pairs)
+    wrong = anchor_contacts(model, position, contacts, reference, 0.3)
+    back = np.linalg.inv(matrix)
+    assert len(right) > 0
+    # Each anchor's friction force over its bound μ N is 2 y / ε while the slip y is within ε:
+    # round-off of the maps mapped back (~1e-19 m against ε ~ 1e-7 m) leaves ~1e-12.
+    assert np.max(right.transformed(back).energy_gradient(reference)[2] / right.bound) <= UNSLIPPED_RATIO
+    assert np.max(wrong.transformed(back).energy_gradient(reference)[2] / wrong.bound) > 0.5
+    with pytest.raises(ValueError, match="reference_pairs"):
+        anchor_contacts(model, position, contacts, reference, 0.3, reference_pairs=rest.contacts.pairs.subset([0]))
+
+
+def test_a_frictional_periodic_pull_refuses_bad_input():
+    relaxed = straight_yarns()
+    with pytest.raises(ValueError, match="axis"):
+        frictional_periodic_pull(relaxed, 2, (0.01,), 0.2)
+    for strains in ((), (0.02, 0.01), (0.01, 0.01), (0.0,), (math.nan,)):
+        with pytest.raises(ValueError, match="strain"):
+            frictional_periodic_pull(relaxed, 0, strains, 0.2)
+    for mu in (-0.1, math.inf):
+        with pytest.raises(ValueError, match="friction"):
+            frictional_periodic_pull(relaxed, 0, (0.01,), mu)
 
 
 def test_a_square_plain_weave_is_as_stiff_along_weft_as_along_warp():

@@ -606,7 +606,7 @@ def bench_swatch(friction: bool = True) -> None:
     as the suite pulls them (:mod:`yarnfit.engine.friction`; section ``swatch_frictionless``
     without): nodes, and per strain the solve's wall time, Newton iterations (over every lagged
     pass), the pull (N/m), and with friction the load steps it was reached in
-    (:data:`yarnfit.validate.swatch.FRICTION_STRAIN_STEP` apart), the slowest step's wall time and
+    (:data:`yarnfit.engine.lagged.FRICTION_STRAIN_STEP` apart), the slowest step's wall time and
     the lagged passes, and the middle half's pull where the strip is uniform
     (:func:`yarnfit.validate.strip.cut_forces`, with its middle's strain). Cotton jersey along the
     weft, cotton twill along weft and warp (the warp strip, 1819 nodes, is the presets' largest; a

@@ -33,8 +33,11 @@ two ways (READINGS): at its jaws (their pull over the whole width at their trave
 width at mid-length) and where it is uniform, as issue 14 asks it measured (the middle half's pull
 at the strain the strip's middle reached, the middle half's width). Beside them the periodic
 repeat pulled the same way along weft, warp and bias (:func:`yarnfit.homogenize.periodic_pull`:
-the limit a strip tends to as it widens), and then the shell against that pull at the nominal
-strains: the fit's own error, told apart from the strip's size. ``--from-json`` reads curves
+the limit a frictionless strip would tend to as it widens, and what the shell is fitted to), the
+same pull along weft and warp with the fibre's friction, in load steps as the strip is pulled
+(:func:`yarnfit.homogenize.frictional_periodic_pull`: what a frictional strip tends to; its own
+count says how many points it meets with the shell's criteria), and then the shell against the
+frictionless pull at the nominal strains: the fit's own error, told apart from the strip's size. ``--from-json`` reads curves
 written by earlier runs instead of solving (runs of several sizes or directions made in
 parallel).
 """
@@ -54,7 +57,7 @@ import numba
 
 from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
-from yarnfit.homogenize import periodic_bias_pull, periodic_pull
+from yarnfit.homogenize import frictional_periodic_pull, periodic_bias_pull, periodic_pull
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, stretch_swatch
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
@@ -178,6 +181,23 @@ def periodic_pull_along(relaxed, direction: str, strain: float):
     return None
 
 
+def frictional_pulls(relaxed, curves: dict, reading: "Reading", coefficient: float) -> dict:
+    """``{(direction, strain): PeriodicPull}``: the periodic repeat pulled along weft and warp
+    with the fibre's friction ``coefficient`` to each strain ``reading`` takes the largest strip's
+    points to, along one load path per direction as a strip is pulled
+    (:func:`yarnfit.homogenize.frictional_periodic_pull`); none for the bias or without friction."""
+    pulls = {}
+    if coefficient <= 0.0:
+        return pulls
+    for direction, curve in largest_strips(curves).items():
+        if direction not in ("weft", "warp"):
+            continue
+        strains = sorted({reading.strain(point) for point in curve["points"][1:]})
+        for pull in frictional_periodic_pull(relaxed, 0 if direction == "weft" else 1, strains, coefficient):
+            pulls[direction, pull.strain] = pull
+    return pulls
+
+
 def periodic_pulls(relaxed, directions) -> dict:
     """``{(direction, strain): PeriodicPull}`` at each of STRAINS (:func:`periodic_pull_along`)."""
     pulls = {}
@@ -237,13 +257,15 @@ def largest_strips(curves: dict) -> dict:
     return largest
 
 
-def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Callable) -> tuple[list[str], int, int]:
-    """Table rows of the shell (nonlinear and linear) and of the periodic repeat's pull
-    (``periodic(direction, strain)``, a :class:`PeriodicPull` or None) against the largest strip
-    per direction read by ``reading``, the number of converged points and of those where the
-    nonlinear shell meets both criteria."""
+def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Callable,
+               frictional: dict) -> tuple[list[str], int, int, int, int]:
+    """Table rows of the shell (nonlinear and linear), the periodic repeat's pull
+    (``periodic(direction, strain)``, a :class:`PeriodicPull` or None) and its frictional pull
+    (``frictional[direction, strain]``, :func:`frictional_pulls`) against the largest strip per
+    direction read by ``reading``; the number of converged points and of those where the nonlinear
+    shell meets both criteria; the number of converged frictional pulls and of those that do."""
     shells = {"nonlinear": file.shell, "linear": file.linear_shell}  # the linear (StVK) fit from the same samples
-    rows, judged, within = [], 0, 0
+    rows, judged, within, rubbed, rubbed_within = [], 0, 0, 0, 0
     for direction, curve in largest_strips(curves).items():
         angle = math.radians(curve["angle_deg"])
         gauge, width = curve["repeats"]
@@ -251,6 +273,13 @@ def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Cal
             force, strain, narrowing = reading.force(point), reading.strain(point), reading.compression(point)
             pull = periodic(direction, strain)
             cells = ["— | —" if pull is None else f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}"]
+            pull = frictional.get((direction, strain))
+            cells.append("— | —" if pull is None else f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}"
+                         + ("" if pull.converged else " (not converged)"))
+            if pull is not None and pull.converged and point["converged"]:
+                rubbed += 1
+                rubbed_within += (abs(pull.force_n_per_m / force - 1.0) <= SHELL_FORCE_RTOL
+                                  and abs(pull.width_ratio - narrowing) <= SHELL_COMPRESSION_ATOL)
             verdicts = {}
             for name, shell in shells.items():
                 pull = shell.uniaxial_pull(angle, 1.0 + strain)
@@ -265,7 +294,7 @@ def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Cal
                        "within" if verdicts["nonlinear"] else "MISSED")
             rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * point['strain']:g} % | {force:.4g} | "
                         f"{100 * strain:.3g} % | {narrowing:.3f} | " + " | ".join(cells) + f" | {verdict} |")
-    return rows, judged, within
+    return rows, judged, within, rubbed, rubbed_within
 
 
 def fit_rows(file: MaterialFile, curves: dict, pulls: dict) -> list[str]:
@@ -339,15 +368,18 @@ def main(argv: list[str] | None = None) -> int:
         return pulls[direction, strain] if (direction, strain) in pulls else periodic_pull_along(relaxed, direction,
                                                                                                    strain)
 
+    coefficient = 0.0 if args.frictionless else relaxed.fiber.friction
     counts = {}
     for reading in READINGS:
-        rows, judged, within = shell_rows(file, curves, reading, periodic)
-        counts[reading.name] = (within, judged)
+        rubbing = frictional_pulls(relaxed, curves, reading, coefficient)
+        rows, judged, within, rubbed, rubbed_within = shell_rows(file, curves, reading, periodic, rubbing)
+        counts[reading.name] = (within, judged, rubbed_within, rubbed)
         print_table(f"{name}: shell and periodic repeat against the largest strip per direction, read as "
                     f"{reading.title} (force within {SHELL_FORCE_RTOL:.0%}, compression within "
                     f"{SHELL_COMPRESSION_ATOL}; % against the strip)",
                     ["direction", "repeats", "level", "swatch N/m", "strain pulled to", "swatch compression",
-                     "periodic N/m", "periodic compression", "nonlinear N/m", "nonlinear compression", "linear N/m",
+                     "periodic N/m", "periodic compression", f"periodic with friction μ {coefficient:g} N/m",
+                     "its compression", "nonlinear N/m", "nonlinear compression", "linear N/m",
                      "linear compression", "verdict (nonlinear)"], rows)
     rows = fit_rows(file, curves, pulls)
     if rows:
@@ -357,9 +389,12 @@ def main(argv: list[str] | None = None) -> int:
                      "nonlinear N/m", "nonlinear compression"], rows)
     print()
     for reading in READINGS:
-        within, judged = counts[reading.name]
+        within, judged, rubbed_within, rubbed = counts[reading.name]
         print(f"shell (nonlinear) vs largest swatch, {reading.name}: within at {within} of {judged} converged points: "
               f"{'within' if within == judged else 'MISSED'}")
+        if rubbed:
+            print(f"periodic pull with friction vs largest swatch, {reading.name}: within at {rubbed_within} of "
+                  f"{rubbed} converged points")
     if args.json:
         with open(args.json, "w") as out:
             json.dump({"material": name, "curves": curves}, out, indent=1)

@@ -62,12 +62,14 @@ def _relative(pos, nodes, weight, rotation, translation, k):
 
 @njit(cache=True)
 def anchor_constraints(pos, reference_pos, edge_nodes, edge_samples, pairs, pair_rotation, pair_translation,
-                       constraint_start, force, out_nodes, out_weight, out_rotation, out_translation, out_tangent,
-                       out_origin, out_normal_force):
+                       reference_rotation, reference_translation, constraint_start, force, out_nodes, out_weight,
+                       out_rotation, out_translation, out_tangent, out_origin, out_normal_force):
     """Anchor every sampled constraint with a normal force ``force[c] > 0`` (N): its contact points
     and normal at ``pos (N, 3)``, its slip measured from where those points are at
-    ``reference_pos (N, 3)`` (m). Writes anchors from 0 (outputs sized for every constraint) and
-    returns their count."""
+    ``reference_pos (N, 3)`` (m) under the pairs' maps there, ``reference_rotation``,
+    ``reference_translation`` (the pair maps' shapes; the current ones unless the tiling itself
+    was deformed since). Writes anchors from 0 (outputs sized for every constraint) and returns
+    their count."""
     k = 0
     for p in range(pairs.shape[0]):
         nodes = _pair_nodes(edge_nodes, pairs, p)
@@ -83,9 +85,17 @@ def anchor_constraints(pos, reference_pos, edge_nodes, edge_samples, pairs, pair
                 out_rotation[k, m] = pair_rotation[p, m]
                 out_translation[k, m] = pair_translation[p, m]
             _tangent_basis(n, out_tangent, k)
-            r = _relative(reference_pos, out_nodes, out_weight, out_rotation, out_translation, k)
+            r0 = 0.0
+            r1 = 0.0
+            r2 = 0.0
+            for m in range(4):
+                x = _map(reference_rotation[p, m], reference_translation[p, m], row3(reference_pos, nodes[m]))
+                w = out_weight[k, m]
+                r0 += w * x[0]
+                r1 += w * x[1]
+                r2 += w * x[2]
             for i in range(2):
-                out_origin[k, i] = dot(row3(out_tangent[k], i), r)
+                out_origin[k, i] = out_tangent[k, i, 0] * r0 + out_tangent[k, i, 1] * r1 + out_tangent[k, i, 2] * r2
             out_normal_force[k] = force[constraint_start[p] + c]
             k += 1
     return k

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _contact_kernels, _friction_kernels
+from .contact import ContactPairs
 from .contact_lagrangian import ContactSet
 from .model import RodModel
 
@@ -79,6 +80,20 @@ class FrictionAnchors:
         return FrictionAnchors(self.nodes[which], self.weight[which], self.rotation[which], self.translation[which],
                                self.tangent[which], self.origin[which], self.bound[which], self.slip_length)
 
+    def transformed(self, matrix: np.ndarray) -> "FrictionAnchors":
+        """The anchors with their nodes' tile maps where they are when the whole tiled
+        configuration is mapped by the linear ``matrix`` (``(3, 3)``): the translations map, the
+        rotations, tangent planes and origins stay (the slip is still measured from the same
+        reference). Only for maps that turn nothing, as
+        :meth:`~yarnfit.engine.contact.ContactPairs.transformed`: a periodic sample whose free
+        strain changes within a frictional load step."""
+        matrix = np.asarray(matrix, dtype=np.float64)
+        if matrix.shape != (3, 3):
+            raise ValueError(f"matrix must be (3, 3), got {matrix.shape}")
+        return FrictionAnchors(self.nodes, self.weight, self.rotation,
+                               np.ascontiguousarray(self.translation @ matrix.T), self.tangent, self.origin,
+                               self.bound, self.slip_length)
+
     def energy_gradient(self, position: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """Friction energy (J) at node positions ``position (N, 3)``, its gradient ``(N, 3)``
         (N) and each anchor's friction force magnitude ``(K,)`` (N)."""
@@ -100,11 +115,15 @@ def constraint_forces(model: RodModel, position: np.ndarray, contacts: ContactSe
 
 
 def anchor_contacts(model: RodModel, position: np.ndarray, contacts: ContactSet, reference: np.ndarray,
-                    coefficient: float, slip_length: float | None = None) -> FrictionAnchors:
+                    coefficient: float, slip_length: float | None = None,
+                    reference_pairs: ContactPairs | None = None) -> FrictionAnchors:
     """Anchor the loaded constraints of ``contacts`` at ``position (N, 3)`` (m): their contact
     points, tangent planes and normal forces there, their slip measured from where those contact
     points are at ``reference (N, 3)`` (the load step's start). ``coefficient`` μ; ``slip_length``
-    ε (m), by default :data:`FRICTION_SLIP` of the mean sum of radii."""
+    ε (m), by default :data:`FRICTION_SLIP` of the mean sum of radii. ``reference_pairs``:
+    ``contacts.pairs`` with the tile maps they had at ``reference``, for a periodic sample whose
+    tiling was deformed since (its images moved with the macroscopic strain: measured with today's
+    maps, a pair across a tile border would slip by the change of a period); default: today's."""
     if not (math.isfinite(coefficient) and coefficient >= 0.0):
         raise ValueError(f"friction coefficient must be finite and non-negative, got {coefficient!r}")
     position = np.ascontiguousarray(position, dtype=np.float64)
@@ -124,10 +143,15 @@ def anchor_contacts(model: RodModel, position: np.ndarray, contacts: ContactSet,
     tangent = np.empty((n, 2, 3))
     origin = np.empty((n, 2))
     normal = np.empty(n)
+    if reference_pairs is None:
+        reference_pairs = contacts.pairs
+    elif reference_pairs.rotation.shape != contacts.pairs.rotation.shape or not np.array_equal(
+            reference_pairs.pairs, contacts.pairs.pairs):
+        raise ValueError("reference_pairs must be the contacts' own pairs with the maps they had at the reference")
     if n:
         written = _friction_kernels.anchor_constraints(
             position, reference, model.edge_nodes, contacts.edge_samples, *contacts.pairs.kernel_args(),
-            contacts.start, force, nodes, weight, rotation, translation, tangent, origin, normal)
+            reference_pairs.rotation, reference_pairs.translation, contacts.start, force, nodes, weight, rotation, translation, tangent, origin, normal)
         assert written == n
     return FrictionAnchors(nodes, weight, rotation, translation, tangent, origin, coefficient * normal,
                            float(slip_length))

@@ -5,6 +5,7 @@ the other."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,7 +15,7 @@ from .friction import FrictionAnchors, anchor_contacts
 from .quasistatic import QuasiStaticResult, QuasiStaticSolver
 from .state import RodState
 
-__all__ = ["LAG_TOLERANCE", "MAX_LAG_PASSES", "LaggedSolve", "lagged_solve"]
+__all__ = ["FRICTION_STRAIN_STEP", "LAG_TOLERANCE", "MAX_LAG_PASSES", "LaggedSolve", "lagged_solve", "load_step_count"]
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,23 @@ class LaggedSolve:
 # not kept: the multipliers are the normal forces only to the contact tolerance, so such a bound
 # never matched its solution's forces (0.76 % apart on the dragged rod of tests/test_friction.py),
 # and on that wool strip it took 326 / 2210 Newton iterations at 2 / 5 % against 241 / 503.
+# Largest strain increment of a frictional load step: a pull with friction (a cut strip,
+# :func:`yarnfit.validate.swatch.stretch_swatch`; the periodic repeat,
+# :func:`yarnfit.homogenize.frictional_periodic_pull`) reaches each reported strain in equal steps
+# no larger than this. Lagged friction (IPC) charges each contact the net
+# slip of its whole step against normal forces frozen per pass, so a large step slides contacts
+# that the path would have held, and the frictional strip comes out soft and step-dependent: the
+# cotton twill's warp strip (1819 nodes) at 2 % pulls at 815 / 821 / 1235 / 1227 N/m reached in
+# 1 / 2 / 4 / 8 steps, and 0.5 % steps agree with 0.25 % ones to 0.7 % up to 3 % (2177 against
+# 2167 N/m) at ~8 s a step (session 33). Beyond 3 % that strip slips in events (its pull falls
+# 2177 → 1575 N/m in one 0.5 % step at 3.5 %, 2075 → 1159 at 6 %; 9–12 lagged passes, ~65 s each
+# such step), whose timing depends on the path: at 10 % it pulls 1796 N/m in steps of 0.5 % and
+# 2142 in steps of 0.25 % (645 in one step from 5 %), so a strip that small has no sharper figure
+# there. A frictionless pull has no path and takes each strain in one step.
+FRICTION_STRAIN_STEP = 0.005
+# Round-off allowance in counting a pull's load steps: 0.05 − 0.02 is 0.030000000000000002, which
+# must be six steps of 0.5 %, not seven.
+STEP_COUNT_SLACK = 1e-9
 LAG_TOLERANCE = 1e-2
 MAX_LAG_PASSES = 20
 
@@ -86,3 +104,9 @@ def lagged_solve(solver: QuasiStaticSolver, guess: RodState, reference: np.ndarr
         if change < tolerance or passes >= max_passes or coefficient == 0.0:
             return LaggedSolve(result, anchors, change < tolerance, passes, iterations, change)
         anchors, guess, contacts = updated, result.state, result.contacts
+
+
+def load_step_count(start: float, end: float, largest: float) -> int:
+    """Equal load steps from the strain ``start`` to ``end`` (> ``start``) no larger than
+    ``largest`` (:data:`FRICTION_STRAIN_STEP`): at least one."""
+    return max(1, math.ceil((end - start) / largest - STEP_COUNT_SLACK))

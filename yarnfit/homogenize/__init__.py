@@ -26,11 +26,13 @@ area) with its residual is the sample's result. Samples are independent and run 
 Modules, in the order data flows through them: :mod:`.surface` (the repeat on the mid-surface),
 :mod:`.equilibrium` (one solve, its continuation and warm starts, Ū's slope along a strain),
 :mod:`.uniaxial` and :mod:`.bias` (the free-strain searches of the uniaxial samples),
-:mod:`.sample` (any sample, the default ranges, many samples in parallel) and :mod:`.pull` (the
-periodic pull a cut strip converges to).
+:mod:`.sample` (any sample, the default ranges, many samples in parallel), :mod:`.pull` (the
+periodic pull a cut strip converges to) and :mod:`.frictional` (the same pull along a load path
+with the fibre's friction, as a strip is pulled: not a sample the fit uses).
 """
 
 from .equilibrium import MAX_ITERATIONS
+from .frictional import frictional_periodic_pull
 from .pull import PeriodicPull, periodic_bias_pull, periodic_pull
 from .sample import MAX_TURN_PER_REPEAT, default_ranges, sample_tasks, solve_sample, solve_samples
 from .surface import SurfaceMap, TiledRepeat, tile_repeat, transfer_fluctuation
@@ -42,6 +44,7 @@ __all__ = [
     "SurfaceMap",
     "TiledRepeat",
     "default_ranges",
+    "frictional_periodic_pull",
     "periodic_bias_pull",
     "periodic_pull",
     "sample_tasks",

@@ -13,6 +13,7 @@ from ..engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticResult, 
 from ..engine.contact import TilingReachError
 from ..engine.contact_lagrangian import contact_potential
 from ..engine.energy import internal_forces
+from ..engine.friction import FrictionAnchors
 from ..engine.model import aligned_frames
 from ..engine.tiling import transform_images
 from ..relax import RelaxedRepeat
@@ -103,12 +104,13 @@ def _solve_with_continuation(relaxed: RelaxedRepeat, I, II, options: QuasiStatic
 
 
 def _solve_from(relaxed: RelaxedRepeat, form: np.ndarray, II: np.ndarray, options: QuasiStaticOptions,
-                previous: tuple | None = None) -> tuple[TiledRepeat, QuasiStaticResult]:
+                previous: tuple | None = None, **solve_args) -> tuple[TiledRepeat, QuasiStaticResult]:
     """``relaxed`` tiled at ``(form, II)`` (a flat sample's) and solved, warnings of a solve that
     does not converge silenced (a search's trial: its caller judges it), from the affine start or,
     with ``previous = (state, its form)``, from that equilibrium mapped by :func:`_form_map` (exact
     for its affine part, and it keeps C_RVE's values, which are linear in the
-    positions). Raises :class:`TilingReachError` when the steps leave the tiles mapped."""
+    positions). Other keywords go to the solve (``friction``, ``contacts``). Raises
+    :class:`TilingReachError` when the steps leave the tiles mapped."""
     tiled = tile_repeat(relaxed, form, II)
     state = tiled.state
     if previous is not None:
@@ -118,7 +120,7 @@ def _solve_from(relaxed: RelaxedRepeat, form: np.ndarray, II: np.ndarray, option
         state.edge_quaternion[:] = aligned_frames(tiled.model, state.node_position, prior.edge_quaternion)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        result = QuasiStaticSolver(tiled.model, options).solve(state, constraints=tiled.constraints)
+        result = QuasiStaticSolver(tiled.model, options).solve(state, constraints=tiled.constraints, **solve_args)
     return tiled, result
 
 
@@ -131,12 +133,14 @@ def _solve_from(relaxed: RelaxedRepeat, form: np.ndarray, II: np.ndarray, option
 STRAIN_SLOPE_STEP = 1e-7
 
 
-def _green_slope(model: RodModel, result, form: np.ndarray, change: np.ndarray, area: float) -> float:
+def _green_slope(model: RodModel, result, form: np.ndarray, change: np.ndarray, area: float,
+                 friction: FrictionAnchors | None = None) -> float:
     """dŪ/dh (J/m²) at ``result``, the equilibrium on ``model`` (a flat sample's tiling, first form
     ``form`` ``(2, 2)``), along the Green strain ``E + h change`` (``change`` ``(2, 2)``
     symmetric: ``e_a e_aᵀ`` gives dŪ/dE_aa, the off-diagonal ``½ (e_0 e_1ᵀ + e_1 e_0ᵀ)`` dŪ/d(2 E01)).
     By the envelope theorem it is the derivative of the potential the solve balanced (rods, plus
-    the contacts' augmented Lagrangian with the multipliers and penalties it ended with) along any
+    the contacts' augmented Lagrangian with the multipliers and penalties it ended with, plus the
+    ``friction`` anchors' potential when it was solved with them, their maps at ``form``) along any
     path of configurations that keeps C_RVE; here the affine one, every node and image mapped by
     ``√(I + 2 h change) √I⁻¹`` in the plane (the flat surface's own map is ``√I``: :func:`_form_map`,
     :func:`~yarnfit.engine.tiling.transform_images`,
@@ -150,7 +154,8 @@ def _green_slope(model: RodModel, result, form: np.ndarray, change: np.ndarray, 
         position = result.state.node_position @ matrix.T
         contacts = replace(result.contacts, pairs=result.contacts.pairs.transformed(matrix))
         rods = sum(internal_forces(mapped, position, result.state.edge_quaternion).terms)
-        values.append(rods + contact_potential(mapped, position, contacts))
+        slip = 0.0 if friction is None else friction.transformed(matrix).energy_gradient(position)[0]
+        values.append(rods + contact_potential(mapped, position, contacts) + slip)
     return (values[0] - values[1]) / (2.0 * STRAIN_SLOPE_STEP * area)
 
 

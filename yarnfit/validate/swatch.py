@@ -21,7 +21,7 @@ residuals, energy change and contact penetration; never a fixed iteration count,
 between the jaws (an x-stretch never brings two segments closer, so the guess adds no overlap).
 The validation scene (:func:`run_yarn`) pulls with Coulomb friction at the yarn contacts, the
 fibre's coefficient, each strain reached in lagged frictional load steps of at most
-:data:`FRICTION_STRAIN_STEP` (:mod:`yarnfit.engine.friction`): the yarn ends cut at a strip's
+:data:`~yarnfit.engine.lagged.FRICTION_STRAIN_STEP` (:mod:`yarnfit.engine.friction`): the yarn ends cut at a strip's
 long sides are held by friction, as a real strip's are; frictionless, they slide in freely and
 the strip stays soft at any width (``docs/design.md`` §3).
 
@@ -113,7 +113,7 @@ from ..engine import (
     RodState,
     energy_gradient,
 )
-from ..engine.lagged import lagged_solve
+from ..engine.lagged import FRICTION_STRAIN_STEP, lagged_solve, load_step_count
 from ..engine.rotations import as_frames, as_rotations, quaternion_between
 from ..engine.tiling import YarnPiece, cut_rectangle
 from ..jsonfile import finite_or_none
@@ -152,24 +152,9 @@ CLAMP_SLACK = 1e-9
 # 1835 iterations, ~60 ms each on one core (session 29): 800 lets its 5 % converge (45 s) and keeps
 # a solve that will not within about a minute.
 MAX_ITERATIONS = 800
-# Largest strain increment of a frictional load step: a pull with friction reaches each reported
-# strain in equal steps no larger than this. Lagged friction (IPC) charges each contact the net
-# slip of its whole step against normal forces frozen per pass, so a large step slides contacts
-# that the path would have held, and the frictional strip comes out soft and step-dependent: the
-# cotton twill's warp strip (1819 nodes) at 2 % pulls at 815 / 821 / 1235 / 1227 N/m reached in
-# 1 / 2 / 4 / 8 steps, and 0.5 % steps agree with 0.25 % ones to 0.7 % up to 3 % (2177 against
-# 2167 N/m) at ~8 s a step (session 33). Beyond 3 % that strip slips in events (its pull falls
-# 2177 → 1575 N/m in one 0.5 % step at 3.5 %, 2075 → 1159 at 6 %; 9–12 lagged passes, ~65 s each
-# such step), whose timing depends on the path: at 10 % it pulls 1796 N/m in steps of 0.5 % and
-# 2142 in steps of 0.25 % (645 in one step from 5 %), so a strip that small has no sharper figure
-# there. A frictionless pull has no path and takes each strain in one step.
-FRICTION_STRAIN_STEP = 0.005
 # The load step of a quick run (``stretch_repeat(quick=True)``, ``yarnfit validate --quick``): one
 # step per strain level (2, 3 and 5 %), as a smoke run affords; its strips are small anyway.
 QUICK_FRICTION_STRAIN_STEP = 0.05
-# Round-off allowance in counting a pull's load steps: 0.05 − 0.02 is 0.030000000000000002, which
-# must be six steps of 0.5 %, not seven.
-STEP_COUNT_SLACK = 1e-9
 # Tolerances of the swatch solves: the solver's defaults except the force and torque imbalance,
 # which at 1e-8 sat below the round-off floor of a cut swatch (many contacts, ~1e4 nodes); 1e-6 of
 # the force scale is still six digits on the reaction.
@@ -361,7 +346,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     contacts = None
     for k, strain in enumerate(strains, start=1):
         start = time.perf_counter()
-        steps = max(1, math.ceil((strain - previous) / strain_step - STEP_COUNT_SLACK)) if friction > 0.0 else 1
+        steps = load_step_count(previous, strain, strain_step) if friction > 0.0 else 1
         iterations, passes, settled, converged, reached, slowest = 0, 0, True, True, previous, 0.0
         for j in range(1, steps + 1):
             step_start = time.perf_counter()

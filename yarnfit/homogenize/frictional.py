@@ -1,0 +1,287 @@
+"""The periodic pull with the fibre's friction: the infinite fabric pulled along weft or warp from
+rest as a cut strip is pulled, in lagged frictional load steps.
+
+The samples the shell is fitted to are frictionless minimisers (the paper's homogenization): a
+minimiser has no friction path. A cut strip is pulled with the fibre's friction, and a frictional
+knit strip does not tend to the frictionless periodic pull as it widens (docs/design.md §3,
+session 40). This is the periodic reference a frictional strip should tend to instead, so that the
+two can be told apart: the strip's size from the fabric's friction.
+
+The repeat is pulled from rest in equal load steps of at most
+:data:`~yarnfit.engine.lagged.FRICTION_STRAIN_STEP`, each a lagged frictional step as a strip's
+(:mod:`yarnfit.engine.friction`, IPC's lagged iterations): every loaded contact of the step's
+start becomes an anchor with a frozen normal force, and each pass minimises the yarn potential
+plus the anchors' friction potential over the fluctuations *and* the free transverse Green strain
+E⊥, then re-anchors at its solution until the anchored normal forces settle. A pass finds E⊥ by
+the frictionless search's secants (:func:`~yarnfit.homogenize.uniaxial._next_free_strain`) on the
+envelope-theorem slope of that sum (:func:`~yarnfit.homogenize.equilibrium._green_slope` with the
+anchors), each trial warm-started from the nearest equilibrium found.
+
+Two things are periodic-specific. The slip of an anchor is measured from where its contact points
+were at the step's start *under the tile maps of the step's start*: a pair across a tile border
+has its second edge in an image whose translation grows with the macroscopic strain, and measured
+with today's maps it would slip by the change of a period. And the anchors' own maps follow each
+trial's tiling (:meth:`~yarnfit.engine.friction.FrictionAnchors.transformed`).
+
+What it cannot represent: as lagged friction (static above kinetic friction, contacts that appear
+within a pass), and only weft and warp (the bias search has two free strains).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..checks import positive_number
+from ..engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticResult, QuasiStaticSolver, Residual
+from ..engine.contact import TilingReachError
+from ..engine.contact_lagrangian import ContactSet
+from ..engine.friction import FrictionAnchors, anchor_contacts
+from ..engine.lagged import FRICTION_STRAIN_STEP, LAG_TOLERANCE, MAX_LAG_PASSES, load_step_count
+from ..relax import RelaxedRepeat
+from .equilibrium import MAX_ITERATIONS, _axis_change, _green_slope, _solve_from
+from .pull import PeriodicPull
+from .surface import TiledRepeat, _form_map, tile_repeat
+from .uniaxial import (FREE_STRAIN_GUESS, FREE_STRAIN_HALVINGS, FREE_STRAIN_PROBE, FREE_STRAIN_RANGE,
+                       FREE_STRAIN_SOLVES, FREE_STRAIN_TOLERANCE, SEARCH_ENERGY_RTOL, SMALLEST_FREE_STRETCH,
+                       _FreeStrainPoint, _next_free_strain)
+
+__all__ = ["frictional_periodic_pull"]
+
+_NO_RESIDUAL = Residual(math.nan, math.nan, math.nan, math.nan)
+
+
+@dataclass(frozen=True)
+class _Trial:
+    """One solve of a pass at the free Green strain ``free``: the first form, the tiled repeat
+    (``None`` when the solve left the tiles mapped), its result (``None`` likewise), the anchors
+    with their maps at this form, and the search's point (``None`` unless converged)."""
+
+    free: float
+    form: np.ndarray
+    tiled: TiledRepeat | None
+    result: QuasiStaticResult | None
+    anchors: FrictionAnchors | None
+    point: _FreeStrainPoint | None
+
+
+@dataclass(frozen=True)
+class _Pass:
+    """One lagged pass: the trial of least (potential + friction) chosen, every trial's Newton
+    iterations, and the search's verdict (``"minimum"``, ``"upper end"`` and ``"plateau"`` are
+    converged)."""
+
+    trial: _Trial
+    iterations: int
+    verdict: str
+
+
+def _uniaxial_form(axis: int, stretch: float, free: float) -> np.ndarray:
+    """The first form ``(2, 2)`` of a pull to ``stretch`` along ``axis`` at the free Green strain
+    ``free`` across it."""
+    diagonal = [0.0, 0.0]
+    diagonal[axis], diagonal[1 - axis] = stretch**2, 1.0 + 2.0 * free
+    return np.diag(diagonal)
+
+
+def _solve_trial(relaxed: RelaxedRepeat, axis: int, stretch: float, free: float, anchors: FrictionAnchors,
+                 anchor_form: np.ndarray, warm: _Trial, contacts: ContactSet, options: QuasiStaticOptions) -> _Trial:
+    """Solve the pull at ``free`` with ``anchors`` (their maps at ``anchor_form``) mapped to its
+    tiling, warm-started from ``warm``'s equilibrium and ``contacts``' multipliers."""
+    form = _uniaxial_form(axis, stretch, free)
+    mapped = anchors.transformed(_form_map(form, anchor_form))
+    try:
+        tiled, result = _solve_from(relaxed, form, np.zeros((2, 2)), options, (warm.result.state, warm.form),
+                                    friction=mapped, contacts=contacts)
+    except TilingReachError:
+        return _Trial(free, form, None, None, mapped, None)
+    point = None
+    if result.converged:
+        slip = mapped.energy_gradient(result.state.node_position)[0]
+        point = _FreeStrainPoint(free, (result.energy.internal + slip) / tiled.area,
+                                 _green_slope(tiled.model, result, form, _axis_change(1 - axis), tiled.area, mapped))
+    return _Trial(free, form, tiled, result, mapped, point)
+
+
+def _search_pass(relaxed: RelaxedRepeat, axis: int, stretch: float, anchors: FrictionAnchors, anchor_form: np.ndarray,
+                 warm: _Trial, contacts: ContactSet, guess: float, probe: float, options: QuasiStaticOptions) -> _Pass:
+    """One lagged pass: the free Green strain E⊥ where the potential plus the friction of
+    ``anchors`` is least, first tried at ``guess`` and then ``probe`` (> 0) away downhill, then by
+    :func:`_next_free_strain`'s secants; a trial that does not converge is approached by halves
+    from the nearest equilibrium (:data:`FREE_STRAIN_HALVINGS` at most)."""
+    strain = 0.5 * (stretch**2 - 1.0)
+    low = max(0.5 * (SMALLEST_FREE_STRETCH**2 - 1.0), -FREE_STRAIN_RANGE * strain)
+    trials: list[_Trial] = []
+    iterations = 0
+
+    def nearest(free: float) -> _Trial:
+        usable = [t for t in trials if t.point is not None]
+        return min(usable, key=lambda t: abs(t.free - free)) if usable else warm
+
+    def solve(free: float, depth: int = 0) -> None:
+        nonlocal iterations
+        start = nearest(free)
+        trial = _solve_trial(relaxed, axis, stretch, free, anchors, anchor_form, start, contacts, options)
+        iterations += 0 if trial.result is None else trial.result.iterations
+        halfway = 0.5 * (start.free + free)
+        if trial.point is None and depth < FREE_STRAIN_HALVINGS and abs(halfway - start.free) > FREE_STRAIN_TOLERANCE:
+            solve(halfway, depth + 1)
+            if nearest(free).free == halfway:
+                trial = _solve_trial(relaxed, axis, stretch, free, anchors, anchor_form, nearest(free), contacts,
+                                     options)
+                iterations += 0 if trial.result is None else trial.result.iterations
+        trials.append(trial)
+
+    solve(min(max(guess, low), 0.0))
+    verdict = "search"
+    for _ in range(FREE_STRAIN_SOLVES):
+        points = [t.point for t in trials if t.point is not None]
+        if not points:
+            verdict = "failed"
+            break
+        trial, verdict = _next_free_strain(points, low, strain)
+        if trial is None:
+            break
+        if len(points) == 1:
+            # The second trial: downhill by the step's expected change of E⊥ (the secants need two;
+            # the frictionless search's first guess is for a pull from rest).
+            only = points[0]
+            trial = min(max(only.free - math.copysign(probe, only.slope), low), 0.0)
+            if trial == only.free:
+                verdict = "lower end"
+                break
+        if any(t.free == trial for t in trials):
+            verdict = "failed"  # the secants came back to a trial that did not converge
+            break
+        solve(trial)
+    else:
+        verdict = "out of solves"
+    usable = [t for t in trials if t.point is not None]
+    if not usable:
+        return _Pass(trials[-1], iterations, "failed")
+    if verdict in ("upper end", "plateau", "lower end"):
+        chosen = max(usable, key=lambda t: t.free) if verdict == "upper end" else min(usable, key=lambda t: t.free)
+    else:
+        least = min(t.point.energy for t in usable)
+        chosen = min((t for t in usable if t.point.energy <= least + SEARCH_ENERGY_RTOL * abs(least)),
+                     key=lambda t: abs(t.point.slope))
+    return _Pass(chosen, iterations, verdict)
+
+
+@dataclass(frozen=True)
+class _Step:
+    """One frictional load step: its equilibrium, the anchors it was solved with, whether every
+    pass's search converged, whether the anchored normal forces settled, passes and iterations."""
+
+    trial: _Trial
+    converged: bool
+    settled: bool
+    passes: int
+    iterations: int
+
+
+def _frictional_step(relaxed: RelaxedRepeat, axis: int, stretch: float, start: _Trial, coefficient: float,
+                     guess: float, probe: float, options: QuasiStaticOptions) -> _Step:
+    """A lagged frictional load step from the equilibrium ``start`` to ``stretch``: anchored at
+    ``start`` (its contacts' normal forces, slip from its positions under its maps), each pass a
+    free-strain search (:func:`_search_pass`), re-anchored at its solution until the anchored
+    normal force changes by less than :data:`~yarnfit.engine.lagged.LAG_TOLERANCE`."""
+    reference, reference_form = start.result.state.node_position, start.form
+    anchors = anchor_contacts(start.tiled.model, reference, start.result.contacts, reference, coefficient)
+    anchor_form, warm = reference_form, start
+    contacts = start.result.contacts.with_base_penalties()
+    iterations, converged = 0, True
+    for passes in range(1, MAX_LAG_PASSES + 1):
+        searched = _search_pass(relaxed, axis, stretch, anchors, anchor_form, warm, contacts, guess, probe, options)
+        iterations += searched.iterations
+        converged &= searched.verdict in ("minimum", "upper end", "plateau")
+        best = searched.trial
+        if best.result is None:
+            return _Step(best, False, False, passes, iterations)
+        back = best.result.contacts.pairs.transformed(_form_map(reference_form, best.form))
+        updated = anchor_contacts(best.tiled.model, best.result.state.node_position, best.result.contacts, reference,
+                                  coefficient, reference_pairs=back)
+        before, after = float(best.anchors.bound.sum()), float(updated.bound.sum())
+        change = abs(after - before) / max(after, before) if max(after, before) > 0.0 else 0.0
+        if change < LAG_TOLERANCE or coefficient == 0.0:
+            return _Step(best, converged, True, passes, iterations)
+        anchors, anchor_form, warm, contacts = updated, best.form, best, best.result.contacts
+        guess, probe = best.free, max(FREE_STRAIN_PROBE, abs(best.free - guess))
+    return _Step(best, converged, False, MAX_LAG_PASSES, iterations)
+
+
+def frictional_periodic_pull(relaxed: RelaxedRepeat, axis: int, strains: Sequence[float], coefficient: float,
+                             options: QuasiStaticOptions | None = None, strain_step: float = FRICTION_STRAIN_STEP,
+                             progress: Callable[[str], None] | None = None) -> list[PeriodicPull]:
+    """The infinite fabric of ``relaxed`` pulled along ``axis`` (0 weft, 1 warp) to each of
+    ``strains`` (engineering, ascending, > 0) with the other direction free and Coulomb friction
+    of ``coefficient`` μ at the yarn contacts (see the module docstring), one
+    :class:`~yarnfit.homogenize.PeriodicPull` per strain: force per reference width ``λ dŪ/dE``
+    of the potential plus the friction potential (the pull a strip's jaws would feel: the yarns'
+    and the friction's), width ``√(1 + 2 E⊥)``; converged when every load step's passes found
+    their free strain and the normal forces settled. ``μ = 0`` follows the frictionless
+    equilibria along the same path. ``progress(line)`` gets one line per load step. Warns
+    :class:`~yarnfit.engine.ConvergenceWarning` for a strain that did not converge."""
+    if axis not in (0, 1):
+        raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
+    strains = [positive_number(e, "strain") for e in strains]
+    if not strains or strains != sorted(set(strains)):
+        raise ValueError(f"strains must be positive and ascending, got {strains!r}")
+    if not (math.isfinite(coefficient) and coefficient >= 0.0):
+        raise ValueError(f"friction coefficient must be finite and non-negative, got {coefficient!r}")
+    strain_step = positive_number(strain_step, "strain_step")
+    options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
+    direction = ("weft", "warp")[axis]
+
+    tiled = tile_repeat(relaxed, np.eye(2), np.zeros((2, 2)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)  # judged below with the first strain
+        rest = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
+    state = _Trial(0.0, np.eye(2), tiled, rest, None, None)
+    pulls, reached, change = [], 0.0, None
+    for strain in strains:
+        clock = time.perf_counter()
+        if pulls and reached != pulls[-1].strain:
+            # An earlier load step failed: the path stops there.
+            pulls.append(PeriodicPull(direction, strain, math.nan, math.nan, False, _NO_RESIDUAL, 0, 0.0))
+            continue
+        steps = load_step_count(reached, strain, strain_step)
+        converged, iterations, begin = bool(rest.converged) if not pulls else True, 0, reached
+        for j in range(1, steps + 1):
+            target = strain if j == steps else begin + (strain - begin) * j / steps
+            step_green = 0.5 * ((1.0 + target) ** 2 - (1.0 + reached) ** 2)
+            # E⊥ changes per step about as it did in the last one; the first step tries the width
+            # it starts at (where nothing holds the width, it stays) and probes a woven's Poisson ratio.
+            predicted = 0.0 if change is None else change * step_green
+            probe = max(FREE_STRAIN_PROBE, abs(predicted), abs(FREE_STRAIN_GUESS * step_green))
+            step = _frictional_step(relaxed, axis, 1.0 + target, state, coefficient, state.free + predicted, probe,
+                                    options)
+            converged &= step.converged and step.settled
+            iterations += step.iterations
+            if step.trial.point is None:
+                converged = False
+                break
+            change = (step.trial.free - state.free) / step_green
+            state, reached = step.trial, target
+            if progress is not None:
+                progress(f"{direction} {100 * target:.2f} %: E⊥ {state.free:.5f}, {step.passes} passes, "
+                         f"{step.iterations} iterations, {'settled' if step.settled else 'not settled'}")
+        stretch = 1.0 + strain
+        if reached != strain:
+            force, width = math.nan, math.nan
+            residual = step.trial.result.residual if step.trial.result is not None else _NO_RESIDUAL
+        else:
+            force = stretch * _green_slope(state.tiled.model, state.result, state.form, _axis_change(axis),
+                                           state.tiled.area, state.anchors)
+            width, residual = math.sqrt(1.0 + 2.0 * state.free), state.result.residual
+        if not converged:
+            warnings.warn(f"frictional periodic pull along {direction} to {strain:g} did not converge "
+                          f"({iterations} iterations)", ConvergenceWarning, stacklevel=2)
+        pulls.append(PeriodicPull(direction, strain, force, width, converged, residual, iterations,
+                                  time.perf_counter() - clock))
+    return pulls
