@@ -27,6 +27,7 @@ from yarnfit.homogenize import (
     MAX_ITERATIONS,
     SurfaceMap,
     default_ranges,
+    frictional_periodic_bias_pull,
     frictional_periodic_pull,
     periodic_bias_pull,
     periodic_pull,
@@ -595,6 +596,22 @@ def test_a_frictionless_pull_along_a_path_lands_on_the_periodic_pull():
         assert pull.converged
         assert pull.force_n_per_m == pytest.approx(direct.force_n_per_m, rel=PATH_PULL_RTOL)
         assert pull.width_ratio == pytest.approx(direct.width_ratio, abs=PATH_WIDTH_ATOL)
+
+
+def test_a_frictionless_bias_pull_along_a_path_lands_on_the_periodic_bias_pull():
+    relaxed = fitted().relaxed
+    for pull in frictional_periodic_bias_pull(relaxed, (0.01, 0.03), 0.0):
+        direct = periodic_bias_pull(relaxed, pull.strain)
+        assert pull.converged and pull.direction == "bias"
+        assert pull.force_n_per_m == pytest.approx(direct.force_n_per_m, rel=BIAS_PULL_RTOL)
+        assert pull.width_ratio == pytest.approx(direct.width_ratio, abs=PATH_WIDTH_ATOL)
+
+
+def test_a_frictional_bias_pull_of_straight_yarns_meets_no_resistance():
+    relaxed = straight_yarns()
+    for pull in frictional_periodic_bias_pull(relaxed, (0.01, 0.02), 0.3):
+        assert pull.converged
+        assert abs(pull.force_n_per_m) <= BIAS_FREE_RATIO * periodic_pull(relaxed, 0, pull.strain).force_n_per_m
 
 
 def test_friction_stiffens_a_periodic_pull_with_its_coefficient():

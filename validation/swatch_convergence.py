@@ -34,7 +34,7 @@ width at mid-length) and where it is uniform, as issue 14 asks it measured (the 
 at the strain the strip's middle reached, the middle half's width). Beside them the periodic
 repeat pulled the same way along weft, warp and bias (:func:`yarnfit.homogenize.periodic_pull`:
 the limit a frictionless strip would tend to as it widens, and what the shell is fitted to), the
-same pull along weft and warp with the fibre's friction, in load steps as the strip is pulled
+same pull with the fibre's friction, in load steps as the strip is pulled
 (:func:`yarnfit.homogenize.frictional_periodic_pull`: what a frictional strip tends to; its own
 count says how many points it meets with the shell's criteria), and then the shell against the
 frictionless pull at the nominal strains: the fit's own error, told apart from the strip's size. ``--from-json`` reads curves
@@ -57,7 +57,7 @@ import numba
 
 from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
-from yarnfit.homogenize import frictional_periodic_pull, periodic_bias_pull, periodic_pull
+from yarnfit.homogenize import frictional_periodic_bias_pull, frictional_periodic_pull, periodic_bias_pull, periodic_pull
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, stretch_swatch
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
@@ -182,18 +182,23 @@ def periodic_pull_along(relaxed, direction: str, strain: float):
 
 
 def frictional_pulls(relaxed, curves: dict, reading: "Reading", coefficient: float) -> dict:
-    """``{(direction, strain): PeriodicPull}``: the periodic repeat pulled along weft and warp
-    with the fibre's friction ``coefficient`` to each strain ``reading`` takes the largest strip's
-    points to, along one load path per direction as a strip is pulled
-    (:func:`yarnfit.homogenize.frictional_periodic_pull`); none for the bias or without friction."""
+    """``{(direction, strain): PeriodicPull}``: the periodic repeat pulled along weft, warp or
+    the bias with the fibre's friction ``coefficient`` to each strain ``reading`` takes the largest
+    strip's points to, along one load path per direction as a strip is pulled
+    (:func:`yarnfit.homogenize.frictional_periodic_pull`,
+    :func:`~yarnfit.homogenize.frictional_periodic_bias_pull`); none without friction."""
     pulls = {}
     if coefficient <= 0.0:
         return pulls
     for direction, curve in largest_strips(curves).items():
-        if direction not in ("weft", "warp"):
-            continue
         strains = sorted({reading.strain(point) for point in curve["points"][1:]})
-        for pull in frictional_periodic_pull(relaxed, 0 if direction == "weft" else 1, strains, coefficient):
+        if direction == "bias":
+            path = frictional_periodic_bias_pull(relaxed, strains, coefficient)
+        elif direction in ("weft", "warp"):
+            path = frictional_periodic_pull(relaxed, 0 if direction == "weft" else 1, strains, coefficient)
+        else:
+            continue
+        for pull in path:
             pulls[direction, pull.strain] = pull
     return pulls
 

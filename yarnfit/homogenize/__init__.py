@@ -32,7 +32,7 @@ with the fibre's friction, as a strip is pulled: not a sample the fit uses).
 """
 
 from .equilibrium import MAX_ITERATIONS
-from .frictional import frictional_periodic_pull
+from .frictional import frictional_periodic_bias_pull, frictional_periodic_pull
 from .pull import PeriodicPull, periodic_bias_pull, periodic_pull
 from .sample import MAX_TURN_PER_REPEAT, default_ranges, sample_tasks, solve_sample, solve_samples
 from .surface import SurfaceMap, TiledRepeat, tile_repeat, transfer_fluctuation
@@ -44,6 +44,7 @@ __all__ = [
     "SurfaceMap",
     "TiledRepeat",
     "default_ranges",
+    "frictional_periodic_bias_pull",
     "frictional_periodic_pull",
     "periodic_bias_pull",
     "periodic_pull",

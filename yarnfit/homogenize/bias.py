@@ -13,10 +13,13 @@ import numpy as np
 
 from ..engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticResult, Residual
 from ..engine.contact import TilingReachError
+from ..engine.contact_lagrangian import ContactSet
+from ..engine.energy import internal_forces
+from ..engine.friction import FrictionAnchors
 from ..relax import RelaxedRepeat
 from ..samples import SampleResult, SampleSpec, stretch_share
 from .equilibrium import _green_slope, _solve_from, _solve_with_continuation
-from .surface import TiledRepeat
+from .surface import TiledRepeat, _form_map, tile_repeat
 from .uniaxial import FLAT_ENERGY_RTOL, FREE_SLOPE_RTOL, FREE_STRAIN_SOLVES, SEARCH_ENERGY_RTOL, SMALLEST_FREE_STRETCH
 
 
@@ -54,10 +57,13 @@ class _BiasSearch:
     iterations: int
     failure: str | None
     slopes: np.ndarray
+    anchors: FrictionAnchors | None = None
 
 
 def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOptions,
-                 angle: float = BIAS_ANGLE) -> _BiasSearch:
+                 angle: float = BIAS_ANGLE, start: tuple | None = None,
+                 friction: tuple[FrictionAnchors, np.ndarray] | None = None,
+                 contacts: ContactSet | None = None) -> _BiasSearch:
     """The periodic repeat pulled to the engineering ``strain`` at ``angle`` from weft with every
     other stress free: in the pull's frame ``q`` the Green strain is ``[[e, g], [g, f]]``, ``e``
     prescribed and ``(f, g)`` where Ū is least. Off the yarn axes the two couple (a fabric pulled
@@ -69,7 +75,13 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
     the positions). It starts from the pure stretch along the pull and stops when the Newton step
     is below :data:`BIAS_STEP_TOLERANCE`, or when no step lowers Ū any more and the slopes are below
     :data:`FREE_SLOPE_RTOL` of the pure stretch's with the decrease of Ū they promise below
-    :data:`SEARCH_ENERGY_RTOL` of Ū; not converged otherwise or after :data:`FREE_STRAIN_SOLVES`."""
+    :data:`SEARCH_ENERGY_RTOL` of Ū; not converged otherwise or after :data:`FREE_STRAIN_SOLVES`.
+
+    A frictional load step's pass (:mod:`.frictional`) starts instead from ``start = (free (2,),
+    state, its first form)``, an equilibrium of the path warm-started at those free strains, and
+    minimises Ū plus the friction potential of ``friction = (anchors, the form their maps are
+    at)``, the anchors following each trial's tiling, each solve starting from ``contacts``'
+    multipliers; its scales are then the pull's own slope and the affine pure stretch's Ū."""
     c, s = math.cos(angle), math.sin(angle)
     q = np.array([[c, -s], [s, c]])
     pulled = 0.5 * ((1.0 + strain) ** 2 - 1.0)
@@ -89,38 +101,61 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
     def solve_at(free: np.ndarray):
         nonlocal iterations
         first = form(free)
-        if not solved:
+        anchors, solve_args = None, {}
+        if friction is not None:
+            anchors = friction[0].transformed(_form_map(first, friction[1]))
+            solve_args = {"friction": anchors, "contacts": contacts}
+        if not solved and start is None:
             tiled, result, count = _solve_with_continuation(relaxed, first, flat, options)
             iterations += count
         else:
-            nearest = min(solved, key=lambda point: float(np.abs(point[0] - free).max()))
+            if solved:
+                nearest = min(solved, key=lambda point: float(np.abs(point[0] - free).max()))
+                warm = (nearest[1].state, form(nearest[0]))
+            else:
+                warm = (start[1], start[2])
             try:
-                tiled, result = _solve_from(relaxed, first, flat, options, (nearest[1].state, form(nearest[0])))
+                tiled, result = _solve_from(relaxed, first, flat, options, warm, **solve_args)
                 iterations += result.iterations
             except TilingReachError:
                 return None
         if result is None or not result.converged:
             return None
-        slopes = np.array([_green_slope(tiled.model, result, first, change, tiled.area) for change in changes])
-        point = (np.array(free, dtype=np.float64), result, tiled, result.energy.internal / tiled.area, slopes)
+        slopes = np.array([_green_slope(tiled.model, result, first, change, tiled.area, anchors)
+                           for change in changes])
+        slip = 0.0 if anchors is None else anchors.energy_gradient(result.state.node_position)[0]
+        point = (np.array(free, dtype=np.float64), result, tiled, (result.energy.internal + slip) / tiled.area, slopes,
+                 anchors)
         solved.append(point)
         return point
 
-    current = solve_at(np.zeros(2))  # the pure stretch along the pull
+    origin = np.zeros(2) if start is None else np.asarray(start[0], dtype=np.float64)
+    current = solve_at(origin)  # the pure stretch along the pull, or the path's start
     if current is None:
-        return _BiasSearch(np.zeros(2), form(np.zeros(2)), None, None, iterations,
-                           "the pure stretch along the pull did not converge", np.full(2, math.nan))
+        return _BiasSearch(origin, form(origin), None, None, iterations,
+                           "the pure stretch along the pull did not converge" if start is None else
+                           "the path's start did not converge", np.full(2, math.nan))
     scale, start_energy = float(np.abs(current[4]).max()), current[3]
+    if start is not None:
+        # Started on the path, the start's slopes and Ū are nearly balanced already: the scales
+        # are the pull's own slope and the affine pure stretch's Ū instead (an upper bound of the
+        # solved pure stretch's, which the search from rest takes; no solve needed).
+        along = np.outer(q[:, 0], q[:, 0])
+        scale = max(scale, abs(_green_slope(current[2].model, current[1], form(origin), along, current[2].area,
+                                            current[5])))
+        affine = tile_repeat(relaxed, form(np.zeros(2)), flat)
+        rods = internal_forces(affine.model, affine.state.node_position, affine.state.edge_quaternion).terms
+        start_energy = max(abs(start_energy), sum(rods) / affine.area)
     # The Hessian from two probes of the slopes from the pure stretch, one per free strain,
     # towards where each points, BIAS_PROBE_FRACTION of the pull's strain long.
     base, hessian = current, np.zeros((2, 2))
     for k in range(2):
-        probe = np.zeros(2)
-        probe[k] = -math.copysign(BIAS_PROBE_FRACTION * pulled, base[4][k] or 1.0)
+        probe = origin.copy()
+        probe[k] -= math.copysign(BIAS_PROBE_FRACTION * pulled, base[4][k] or 1.0)
         if not admissible(probe) or (point := solve_at(probe)) is None:
             return _BiasSearch(current[0], form(current[0]), current[1], current[2], iterations,
                                "a probe of the free strains did not converge", current[4])
-        hessian[:, k] = (point[4] - base[4]) / probe[k]
+        hessian[:, k] = (point[4] - base[4]) / (probe[k] - origin[k])
         if point[3] < current[3]:
             current = point
     hessian = 0.5 * (hessian + hessian.T)
@@ -172,7 +207,8 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
             hs = hessian @ moved
             hessian = hessian - np.outer(hs, hs) / float(moved @ hs) + np.outer(change, change) / float(moved @ change)
         current = accepted
-    return _BiasSearch(current[0], form(current[0]), current[1], current[2], iterations, failure, current[4])
+    return _BiasSearch(current[0], form(current[0]), current[1], current[2], iterations, failure, current[4],
+                       current[5])
 
 
 def _solve_bias(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:

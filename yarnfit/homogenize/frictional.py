@@ -23,8 +23,11 @@ has its second edge in an image whose translation grows with the macroscopic str
 with today's maps it would slip by the change of a period. And the anchors' own maps follow each
 trial's tiling (:meth:`~yarnfit.engine.friction.FrictionAnchors.transformed`).
 
+On the bias a pass is the bias search (two free strains: across the pull and the pull frame's
+shear, :func:`~yarnfit.homogenize.bias._search_bias`) started from the path's last equilibrium.
+
 What it cannot represent: as lagged friction (static above kinetic friction, contacts that appear
-within a pass), and only weft and warp (the bias search has two free strains).
+within a pass).
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ from ..engine.contact_lagrangian import ContactSet
 from ..engine.friction import FrictionAnchors, anchor_contacts
 from ..engine.lagged import FRICTION_STRAIN_STEP, LAG_TOLERANCE, MAX_LAG_PASSES, load_step_count
 from ..relax import RelaxedRepeat
+from .bias import BIAS_ANGLE, _search_bias
 from .equilibrium import MAX_ITERATIONS, _axis_change, _green_slope, _solve_from
 from .pull import PeriodicPull
 from .surface import TiledRepeat, _form_map, tile_repeat
@@ -51,7 +55,7 @@ from .uniaxial import (FREE_STRAIN_GUESS, FREE_STRAIN_HALVINGS, FREE_STRAIN_PROB
                        FREE_STRAIN_SOLVES, FREE_STRAIN_TOLERANCE, SEARCH_ENERGY_RTOL, SMALLEST_FREE_STRETCH,
                        _FreeStrainPoint, _next_free_strain)
 
-__all__ = ["frictional_periodic_pull"]
+__all__ = ["frictional_periodic_bias_pull", "frictional_periodic_pull"]
 
 _NO_RESIDUAL = Residual(math.nan, math.nan, math.nan, math.nan)
 
@@ -108,7 +112,7 @@ def _solve_trial(relaxed: RelaxedRepeat, axis: int, stretch: float, free: float,
     return _Trial(free, form, tiled, result, mapped, point)
 
 
-def _search_pass(relaxed: RelaxedRepeat, axis: int, stretch: float, anchors: FrictionAnchors, anchor_form: np.ndarray,
+def _axis_pass(relaxed: RelaxedRepeat, axis: int, stretch: float, anchors: FrictionAnchors, anchor_form: np.ndarray,
                  warm: _Trial, contacts: ContactSet, guess: float, probe: float, options: QuasiStaticOptions) -> _Pass:
     """One lagged pass: the free Green strain E⊥ where the potential plus the friction of
     ``anchors`` is least, first tried at ``guess`` and then ``probe`` (> 0) away downhill, then by
@@ -185,11 +189,11 @@ class _Step:
     iterations: int
 
 
-def _frictional_step(relaxed: RelaxedRepeat, axis: int, stretch: float, start: _Trial, coefficient: float,
-                     guess: float, probe: float, options: QuasiStaticOptions) -> _Step:
-    """A lagged frictional load step from the equilibrium ``start`` to ``stretch``: anchored at
-    ``start`` (its contacts' normal forces, slip from its positions under its maps), each pass a
-    free-strain search (:func:`_search_pass`), re-anchored at its solution until the anchored
+def _frictional_step(search: Callable[..., _Pass], start: _Trial, coefficient: float, guess, probe: float) -> _Step:
+    """A lagged frictional load step from the equilibrium ``start``: anchored at ``start`` (its
+    contacts' normal forces, slip from its positions under its maps), each pass a free-strain
+    search ``search(anchors, their form, warm trial, contacts, guess, probe)``
+    (:func:`_axis_pass`, :func:`_bias_pass`), re-anchored at its solution until the anchored
     normal force changes by less than :data:`~yarnfit.engine.lagged.LAG_TOLERANCE`."""
     reference, reference_form = start.result.state.node_position, start.form
     anchors = anchor_contacts(start.tiled.model, reference, start.result.contacts, reference, coefficient)
@@ -197,11 +201,11 @@ def _frictional_step(relaxed: RelaxedRepeat, axis: int, stretch: float, start: _
     contacts = start.result.contacts.with_base_penalties()
     iterations, converged = 0, True
     for passes in range(1, MAX_LAG_PASSES + 1):
-        searched = _search_pass(relaxed, axis, stretch, anchors, anchor_form, warm, contacts, guess, probe, options)
+        searched = search(anchors, anchor_form, warm, contacts, guess, probe)
         iterations += searched.iterations
         converged &= searched.verdict in ("minimum", "upper end", "plateau")
         best = searched.trial
-        if best.result is None:
+        if best.result is None or not best.result.converged:
             return _Step(best, False, False, passes, iterations)
         back = best.result.contacts.pairs.transformed(_form_map(reference_form, best.form))
         updated = anchor_contacts(best.tiled.model, best.result.state.node_position, best.result.contacts, reference,
@@ -211,8 +215,20 @@ def _frictional_step(relaxed: RelaxedRepeat, axis: int, stretch: float, start: _
         if change < LAG_TOLERANCE or coefficient == 0.0:
             return _Step(best, converged, True, passes, iterations)
         anchors, anchor_form, warm, contacts = updated, best.form, best, best.result.contacts
-        guess, probe = best.free, max(FREE_STRAIN_PROBE, abs(best.free - guess))
+        guess, probe = best.free, max(FREE_STRAIN_PROBE, float(np.max(np.abs(np.subtract(best.free, guess)))))
     return _Step(best, converged, False, MAX_LAG_PASSES, iterations)
+
+
+def _bias_pass(relaxed: RelaxedRepeat, stretch: float, anchors: FrictionAnchors, anchor_form: np.ndarray,
+               warm: _Trial, contacts: ContactSet, guess: np.ndarray, probe: float,
+               options: QuasiStaticOptions) -> _Pass:
+    """One lagged pass of a bias pull: the bias search's two free strains (:func:`_search_bias`)
+    from ``guess`` with ``warm``'s equilibrium, minimising Ū plus the friction of ``anchors``
+    (``probe`` unused: the search probes its own Hessian)."""
+    search = _search_bias(relaxed, stretch - 1.0, options, BIAS_ANGLE, start=(guess, warm.result.state, warm.form),
+                          friction=(anchors, anchor_form), contacts=contacts)
+    trial = _Trial(search.free, search.form, search.tiled, search.result, search.anchors, None)
+    return _Pass(trial, search.iterations, "minimum" if search.failure is None else "failed")
 
 
 def frictional_periodic_pull(relaxed: RelaxedRepeat, axis: int, strains: Sequence[float], coefficient: float,
@@ -229,6 +245,23 @@ def frictional_periodic_pull(relaxed: RelaxedRepeat, axis: int, strains: Sequenc
     :class:`~yarnfit.engine.ConvergenceWarning` for a strain that did not converge."""
     if axis not in (0, 1):
         raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
+    return _frictional_path(relaxed, ("weft", "warp")[axis], strains, coefficient, options, strain_step, progress)
+
+
+def frictional_periodic_bias_pull(relaxed: RelaxedRepeat, strains: Sequence[float], coefficient: float,
+                                  options: QuasiStaticOptions | None = None, strain_step: float = FRICTION_STRAIN_STEP,
+                                  progress: Callable[[str], None] | None = None) -> list[PeriodicPull]:
+    """As :func:`frictional_periodic_pull` on the bias (45° from weft), each pass the bias search
+    with the transverse strain and the pull frame's shear both free (:func:`_search_bias`); width
+    ``√det I / λ``."""
+    return _frictional_path(relaxed, "bias", strains, coefficient, options, strain_step, progress)
+
+
+def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[float], coefficient: float,
+                     options: QuasiStaticOptions | None, strain_step: float,
+                     progress: Callable[[str], None] | None) -> list[PeriodicPull]:
+    """The frictional pull along ``direction`` (``"weft"``, ``"warp"``, ``"bias"``) from rest
+    through ``strains`` (:func:`frictional_periodic_pull`)."""
     strains = [positive_number(e, "strain") for e in strains]
     if not strains or strains != sorted(set(strains)):
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
@@ -236,13 +269,25 @@ def frictional_periodic_pull(relaxed: RelaxedRepeat, axis: int, strains: Sequenc
         raise ValueError(f"friction coefficient must be finite and non-negative, got {coefficient!r}")
     strain_step = positive_number(strain_step, "strain_step")
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
-    direction = ("weft", "warp")[axis]
+    if direction == "bias":
+        pull_direction = np.array([math.cos(BIAS_ANGLE), math.sin(BIAS_ANGLE)])
+
+        def search(stretch):
+            return lambda *args: _bias_pass(relaxed, stretch, *args, options)
+        free = np.zeros(2)
+    else:
+        axis = ("weft", "warp").index(direction)
+        pull_direction = np.eye(2)[axis]
+
+        def search(stretch):
+            return lambda *args: _axis_pass(relaxed, axis, stretch, *args, options)
+        free = 0.0
 
     tiled = tile_repeat(relaxed, np.eye(2), np.zeros((2, 2)))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)  # judged below with the first strain
         rest = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
-    state = _Trial(0.0, np.eye(2), tiled, rest, None, None)
+    state = _Trial(free, np.eye(2), tiled, rest, None, None)
     pulls, reached, change = [], 0.0, None
     for strain in strains:
         clock = time.perf_counter()
@@ -255,33 +300,34 @@ def frictional_periodic_pull(relaxed: RelaxedRepeat, axis: int, strains: Sequenc
         for j in range(1, steps + 1):
             target = strain if j == steps else begin + (strain - begin) * j / steps
             step_green = 0.5 * ((1.0 + target) ** 2 - (1.0 + reached) ** 2)
-            # E⊥ changes per step about as it did in the last one; the first step tries the width
-            # it starts at (where nothing holds the width, it stays) and probes a woven's Poisson ratio.
-            predicted = 0.0 if change is None else change * step_green
-            probe = max(FREE_STRAIN_PROBE, abs(predicted), abs(FREE_STRAIN_GUESS * step_green))
-            step = _frictional_step(relaxed, axis, 1.0 + target, state, coefficient, state.free + predicted, probe,
-                                    options)
+            # The free strains change per step about as they did in the last one; the first step
+            # tries the width it starts at (where nothing holds the width, it stays) and probes a
+            # woven's Poisson ratio.
+            predicted = 0.0 * np.asarray(free) if change is None else change * step_green
+            probe = max(FREE_STRAIN_PROBE, float(np.max(np.abs(predicted))), abs(FREE_STRAIN_GUESS * step_green))
+            step = _frictional_step(search(1.0 + target), state, coefficient, state.free + predicted, probe)
             converged &= step.converged and step.settled
             iterations += step.iterations
-            if step.trial.point is None:
+            if step.trial.result is None or not step.trial.result.converged:
                 converged = False
                 break
-            change = (step.trial.free - state.free) / step_green
+            change = np.subtract(step.trial.free, state.free) / step_green
             state, reached = step.trial, target
             if progress is not None:
-                progress(f"{direction} {100 * target:.2f} %: E⊥ {state.free:.5f}, {step.passes} passes, "
-                         f"{step.iterations} iterations, {'settled' if step.settled else 'not settled'}")
+                progress(f"{direction} {100 * target:.2f} %: free strains {np.round(state.free, 5)}, "
+                         f"{step.passes} passes, {step.iterations} iterations, "
+                         f"{'settled' if step.settled else 'not settled'}")
         stretch = 1.0 + strain
         if reached != strain:
             force, width = math.nan, math.nan
             residual = step.trial.result.residual if step.trial.result is not None else _NO_RESIDUAL
         else:
-            force = stretch * _green_slope(state.tiled.model, state.result, state.form, _axis_change(axis),
-                                           state.tiled.area, state.anchors)
-            width, residual = math.sqrt(1.0 + 2.0 * state.free), state.result.residual
+            force = stretch * _green_slope(state.tiled.model, state.result, state.form,
+                                           np.outer(pull_direction, pull_direction), state.tiled.area, state.anchors)
+            width, residual = math.sqrt(float(np.linalg.det(state.form))) / stretch, state.result.residual
         if not converged:
             warnings.warn(f"frictional periodic pull along {direction} to {strain:g} did not converge "
-                          f"({iterations} iterations)", ConvergenceWarning, stacklevel=2)
+                          f"({iterations} iterations)", ConvergenceWarning, stacklevel=3)
         pulls.append(PeriodicPull(direction, strain, force, width, converged, residual, iterations,
                                   time.perf_counter() - clock))
     return pulls
