@@ -98,6 +98,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "fitting the coupling s01 or b01 at the positive-definite bound |rho| = 0.99")
     fit.add_argument("--workers", type=int, default=None, metavar="N",
                      help="processes solving samples (default: every core)")
+    fit.add_argument("--friction", action="store_true",
+                     help="load the membrane samples from rest with the fibre's friction (the fabric's loading "
+                          "response, as a tensile test measures it) instead of the paper's frictionless minimisers; "
+                          "slower: every sample family is a path of 0.5 %% steps")
     fit.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                      help="solve the samples on this Dask scheduler's workers instead of local processes")
     fit.add_argument("--name", help="label for the output files (default: preset, pattern or file name)")
@@ -490,7 +494,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
     with make_backend(args.scheduler, args.workers) as backend, announce_compilation(line):
         fitted = fit_fabric(fabric, samples=samples, model=args.model, on_relaxed=on_relaxed, on_sample=on_sample,
                             on_relax_iteration=line, on_relax_start=line.start_relaxation,
-                            coupling_limit=None if args.strict else COUPLING_LIMIT, backend=backend)
+                            coupling_limit=None if args.strict else COUPLING_LIMIT, backend=backend,
+                            friction=args.friction)
     line.close()
     fitted.write(output)
     recording = FitRecording(fabric.name, path)
@@ -615,6 +620,9 @@ def fit_summary(fitted, output, recording_path) -> str:
         lines.append(f"  rest state      {stress}moments {r['m0']:.3g} / {r['m1']:.3g} N (from ±κ), rest energy "
                      f"{fit.reference_energy:.3g} J/m²: left out of the shell")
     lines += [f"  note            {note}" for note in fit.notes]
+    lines.append("  samples         " + (f"membrane loaded from rest with friction μ {fitted.sample_friction:g} "
+                                         "(--friction); bends frictionless" if fitted.sample_friction > 0.0 else
+                                         "frictionless minimisers (the paper's; --friction loads them)"))
     t = fitted.seconds
     lines.append(f"  time            relax {t['relax']:.1f} s, samples {t['homogenize']:.1f} s, fit {t['fit']:.2f} s "
                  f"(total {sum(t.values()):.1f} s)")

@@ -19,7 +19,7 @@ from typing import Callable
 
 from .fabric import Fabric
 from .fit import COUPLING_LIMIT, ShellFit, fit_shell
-from .homogenize import default_ranges, solve_sample, solve_samples
+from .homogenize import default_ranges, solve_loading_samples, solve_sample, solve_samples
 from .material_file import MaterialFile
 from .relax import RelaxedRepeat, relax
 from .samples import SampleRanges, SampleResult, SampleSpec, design_size, levels_for, sample_design
@@ -56,6 +56,9 @@ class FabricFit:
         samples: every solved sample, in design order.
         fit: the shell fit (its material has thickness :func:`shell_thickness`).
         seconds: wall time per stage, ``{"relax", "homogenize", "fit"}``.
+        sample_friction: the friction coefficient μ the membrane samples were loaded with (0: the
+            paper's frictionless minimisers; > 0: loading paths with the fibre's friction,
+            :mod:`yarnfit.homogenize.loading`).
     """
 
     fabric: Fabric
@@ -64,6 +67,7 @@ class FabricFit:
     samples: list[SampleResult]
     fit: ShellFit
     seconds: dict
+    sample_friction: float = 0.0
 
     @property
     def material(self) -> ShellMaterial:
@@ -109,13 +113,14 @@ def solve_design_sample(relaxed: RelaxedRepeat, samples: int, index: int) -> Sam
 
 def fit_solved(fabric: Fabric, relaxed: RelaxedRepeat, results: list[SampleResult], model: str = "full",
                coupling_limit: float | None = COUPLING_LIMIT, ranges: SampleRanges | None = None,
-               seconds: dict | None = None) -> FabricFit:
-    """The shell fitted to the solved samples ``results`` (see :func:`fit_fabric`)."""
+               seconds: dict | None = None, sample_friction: float = 0.0) -> FabricFit:
+    """The shell fitted to the solved samples ``results`` (see :func:`fit_fabric`; their membrane
+    samples loaded with friction ``sample_friction``)."""
     seconds = dict(seconds or {})
     start = time.perf_counter()
     shell = fit_shell(results, shell_thickness(relaxed), model=model, coupling_limit=coupling_limit)
     seconds["fit"] = time.perf_counter() - start
-    return FabricFit(fabric, relaxed, ranges or default_ranges(relaxed), results, shell, seconds)
+    return FabricFit(fabric, relaxed, ranges or default_ranges(relaxed), results, shell, seconds, sample_friction)
 
 
 def fit_fabric(
@@ -131,6 +136,7 @@ def fit_fabric(
     on_relax_start: Callable | None = None,
     coupling_limit: float | None = COUPLING_LIMIT,
     backend: Backend | None = None,
+    friction: bool = False,
 ) -> FabricFit:
     """Relax ``fabric`` (unless ``relaxed`` is given), solve about ``samples`` samples over
     ``ranges`` (default :func:`yarnfit.homogenize.default_ranges`) on ``workers`` processes, and fit
@@ -139,6 +145,10 @@ def fit_fabric(
     ``on_sample(done, total, result)`` after each sample. ``backend`` runs the samples instead of
     a pool of ``workers`` (:mod:`yarnfit.tasks`: a Dask cluster). ``coupling_limit`` bounds the couplings
     (see :func:`yarnfit.fit.fit_shell`; ``None``: unbounded, an indefinite fit raises).
+    ``friction``: load the membrane samples from rest with the fibre's friction
+    (:func:`yarnfit.homogenize.solve_loading_samples`: the fabric's loading response, what a
+    tensile test and a cut strip measure) instead of the paper's frictionless minimisers; bends
+    stay frictionless.
 
     Raises ``ValueError`` for bad options, :class:`UnusableRelaxation` for a relaxation that did
     not converge or leaves overlaps, :class:`yarnfit.fit.IndefiniteFitError` (only with
@@ -157,6 +167,11 @@ def fit_fabric(
     ranges = ranges or default_ranges(relaxed)
     specs = design_specs(relaxed, samples, ranges)
     start = time.perf_counter()
-    results = solve_samples(relaxed, specs, workers=workers, on_sample=on_sample, backend=backend)
+    coefficient = relaxed.fiber.friction if friction else 0.0
+    if friction:
+        results = solve_loading_samples(relaxed, specs, coefficient, workers=workers, on_sample=on_sample,
+                                        backend=backend)
+    else:
+        results = solve_samples(relaxed, specs, workers=workers, on_sample=on_sample, backend=backend)
     seconds["homogenize"] = time.perf_counter() - start
-    return fit_solved(fabric, relaxed, results, model, coupling_limit, ranges, seconds)
+    return fit_solved(fabric, relaxed, results, model, coupling_limit, ranges, seconds, coefficient)

@@ -143,7 +143,7 @@ class MaterialFile:
             "shell": fit.material.to_dict(),
             "engineering": fit.material.engineering(),
             "fit": {**fit.fit.quality_dict(), "stretch_range": fit.ranges.stretch,
-                    "curvature_range_per_m": fit.ranges.curvature},
+                    "curvature_range_per_m": fit.ranges.curvature, "sample_friction": fit.sample_friction},
             "samples": [s.to_dict() for s in fit.samples],
             "seconds": dict(fit.seconds),
             "relaxed_repeat": {"pyp": format_pyp(relaxed.relaxed_pattern())},

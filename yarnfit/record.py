@@ -370,7 +370,7 @@ class FitRecording(Recording):
     def sample(self, index: int, relaxed, result) -> None:
         """Log sample ``index`` (0-based, in design order) at that step of the ``sample`` timeline:
         its equilibrium ``result.position`` ``(N, 3)`` m in 3 × 3 tiles of the curved tiling that
-        ``tile_repeat(relaxed, I, II)`` builds for it, its Ū (J/m²) and its numbers.
+        ``tile_repeat(relaxed, I, II)`` builds for it (where known), its Ū (J/m²) and its numbers.
 
         Args:
             index: the sample's index in ``FabricFit.samples`` (design order).
@@ -380,16 +380,19 @@ class FitRecording(Recording):
         if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 0:
             raise ValueError(f"a sample index must be a non-negative integer, got {index!r}")
         spec = result.spec
-        # The solver's model is rebuilt rather than shipped back from the (worker) process: it is
-        # deterministic in (relaxed, I, II) and cheap next to the solve.
-        model = tile_repeat(relaxed, spec.I, spec.II).model
-        position = np.asarray(result.position, dtype=np.float64)
-        if position.shape != (model.n_nodes, 3):
-            raise ValueError(f"expected sample positions of shape ({model.n_nodes}, 3), got {position.shape}")
-        strips = [strip for tile in _TILE_OFFSETS for strip in yarn_strips(model, position, tile)]
         self.stream.set_time(SAMPLE_TIMELINE, sequence=int(index))
-        self.stream.log("fit/sample/yarns", rr.LineStrips3D(strips, radii=np.float32(relaxed.radius),
-                                                          colors=_tiling_colors(model.n_rods)))
+        if result.position is not None:
+            # Without positions (a sample that did not converge, a frictional pull's: docs/design.md
+            # §3) only its numbers are logged. The solver's model is rebuilt rather than shipped
+            # back from the (worker) process: it is deterministic in (relaxed, I, II) and cheap
+            # next to the solve.
+            model = tile_repeat(relaxed, spec.I, spec.II).model
+            position = np.asarray(result.position, dtype=np.float64)
+            if position.shape != (model.n_nodes, 3):
+                raise ValueError(f"expected sample positions of shape ({model.n_nodes}, 3), got {position.shape}")
+            strips = [strip for tile in _TILE_OFFSETS for strip in yarn_strips(model, position, tile)]
+            self.stream.log("fit/sample/yarns", rr.LineStrips3D(strips, radii=np.float32(relaxed.radius),
+                                                              colors=_tiling_colors(model.n_rods)))
         self.stream.log("fit/sample/energy", rr.Scalars(float(result.energy_density)))
         self.log_markdown("fit/sample/info", sample_summary(int(index), result))
 

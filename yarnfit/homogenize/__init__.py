@@ -27,12 +27,14 @@ Modules, in the order data flows through them: :mod:`.surface` (the repeat on th
 :mod:`.equilibrium` (one solve, its continuation and warm starts, Ū's slope along a strain),
 :mod:`.uniaxial` and :mod:`.bias` (the free-strain searches of the uniaxial samples),
 :mod:`.sample` (any sample, the default ranges, many samples in parallel), :mod:`.pull` (the
-periodic pull a cut strip converges to) and :mod:`.frictional` (the same pull along a load path
-with the fibre's friction, as a strip is pulled: not a sample the fit uses).
+periodic pull a cut strip converges to), :mod:`.frictional` (the same pull along a load path
+with the fibre's friction, as a strip is pulled) and :mod:`.loading` (the membrane samples along
+such paths, for a shell fitted to the fabric's loading response: ``yarnfit fit --friction``).
 """
 
 from .equilibrium import MAX_ITERATIONS
 from .frictional import frictional_periodic_bias_pull, frictional_periodic_pull
+from .loading import loading_path_samples, solve_loading_samples
 from .pull import PeriodicPull, periodic_bias_pull, periodic_pull
 from .sample import MAX_TURN_PER_REPEAT, default_ranges, sample_tasks, solve_sample, solve_samples
 from .surface import SurfaceMap, TiledRepeat, tile_repeat, transfer_fluctuation
@@ -46,10 +48,12 @@ __all__ = [
     "default_ranges",
     "frictional_periodic_bias_pull",
     "frictional_periodic_pull",
+    "loading_path_samples",
     "periodic_bias_pull",
     "periodic_pull",
     "sample_tasks",
     "solve_sample",
+    "solve_loading_samples",
     "solve_samples",
     "tile_repeat",
     "transfer_fluctuation",

@@ -81,7 +81,8 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
     state, its first form)``, an equilibrium of the path warm-started at those free strains, and
     minimises Ū plus the friction potential of ``friction = (anchors, the form their maps are
     at)``, the anchors following each trial's tiling, each solve starting from ``contacts``'
-    multipliers; its scales are then the pull's own slope and the affine pure stretch's Ū."""
+    multipliers; its scales are then the probes' slopes over a change of the free strains of the
+    pull's size and the affine pure stretch's Ū."""
     c, s = math.cos(angle), math.sin(angle)
     q = np.array([[c, -s], [s, c]])
     pulled = 0.5 * ((1.0 + strain) ** 2 - 1.0)
@@ -137,12 +138,9 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
                            "the path's start did not converge", np.full(2, math.nan))
     scale, start_energy = float(np.abs(current[4]).max()), current[3]
     if start is not None:
-        # Started on the path, the start's slopes and Ū are nearly balanced already: the scales
-        # are the pull's own slope and the affine pure stretch's Ū instead (an upper bound of the
-        # solved pure stretch's, which the search from rest takes; no solve needed).
-        along = np.outer(q[:, 0], q[:, 0])
-        scale = max(scale, abs(_green_slope(current[2].model, current[1], form(origin), along, current[2].area,
-                                            current[5])))
+        # Started on the path, the start's slopes and Ū are nearly balanced already: the energy's
+        # scale is the affine pure stretch's Ū instead (an upper bound of the solved pure
+        # stretch's, which the search from rest takes; no solve needed), the slopes' below.
         affine = tile_repeat(relaxed, form(np.zeros(2)), flat)
         rods = internal_forces(affine.model, affine.state.node_position, affine.state.edge_quaternion).terms
         start_energy = max(abs(start_energy), sum(rods) / affine.area)
@@ -156,6 +154,11 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
             return _BiasSearch(current[0], form(current[0]), current[1], current[2], iterations,
                                "a probe of the free strains did not converge", current[4])
         hessian[:, k] = (point[4] - base[4]) / (probe[k] - origin[k])
+        if start is not None:
+            # The slopes' scale on the path: what the probes' slopes grow to over a change of the
+            # free strains as large as the pull's, as the pure stretch's are off its free strains
+            # by about that much.
+            scale = max(scale, float(np.abs(point[4]).max()) / BIAS_PROBE_FRACTION)
         if point[3] < current[3]:
             current = point
     hessian = 0.5 * (hessian + hessian.T)

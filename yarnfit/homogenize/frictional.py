@@ -288,7 +288,7 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
         warnings.simplefilter("ignore", ConvergenceWarning)  # judged below with the first strain
         rest = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
     state = _Trial(free, np.eye(2), tiled, rest, None, None)
-    pulls, reached, change = [], 0.0, None
+    pulls, reached, change, dissipated = [], 0.0, None, 0.0
     for strain in strains:
         clock = time.perf_counter()
         if pulls and reached != pulls[-1].strain:
@@ -313,11 +313,17 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
                 break
             change = np.subtract(step.trial.free, state.free) / step_green
             state, reached = step.trial, target
+            # The step's friction potential at its end is the work its friction dissipated: each
+            # anchor beyond its slip length ε pulls μ N along a slip of |u| − ε/3 (a step's slip is
+            # a straight line from its start, as the anchors measure it).
+            dissipated += state.anchors.energy_gradient(state.result.state.node_position)[0] / state.tiled.area
             if progress is not None:
                 progress(f"{direction} {100 * target:.2f} %: free strains {np.round(state.free, 5)}, "
                          f"{step.passes} passes, {step.iterations} iterations, "
                          f"{'settled' if step.settled else 'not settled'}")
         stretch = 1.0 + strain
+        form = None if reached != strain else state.form
+        energy = math.nan if reached != strain else state.result.energy.internal / state.tiled.area
         if reached != strain:
             force, width = math.nan, math.nan
             residual = step.trial.result.residual if step.trial.result is not None else _NO_RESIDUAL
@@ -329,5 +335,5 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
             warnings.warn(f"frictional periodic pull along {direction} to {strain:g} did not converge "
                           f"({iterations} iterations)", ConvergenceWarning, stacklevel=3)
         pulls.append(PeriodicPull(direction, strain, force, width, converged, residual, iterations,
-                                  time.perf_counter() - clock))
+                                  time.perf_counter() - clock, form, energy, dissipated))
     return pulls

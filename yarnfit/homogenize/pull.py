@@ -34,6 +34,13 @@ class PeriodicPull:
         residual: the solve's residuals at the result.
         iterations: Newton iterations over every trial of the search.
         seconds: wall time (s).
+        form: ``(2, 2)`` the first form found (the pull and its free strains); ``None`` where
+            nothing converged.
+        energy_density: Ū (J/m²) of the yarns at the result (NaN where nothing converged).
+        friction_work: work the friction at the yarn contacts dissipated on the way (J/m² of
+            reference area; 0 without friction): a pull with friction
+            (:func:`~yarnfit.homogenize.frictional_periodic_pull`) has done ``Ū − Ū(rest) +
+            friction_work`` of work on the fabric.
     """
 
     direction: str
@@ -44,6 +51,9 @@ class PeriodicPull:
     residual: Residual
     iterations: int
     seconds: float
+    form: np.ndarray | None = None
+    energy_density: float = math.nan
+    friction_work: float = 0.0
 
 
 def periodic_pull(relaxed: RelaxedRepeat, axis: int, strain: float,
@@ -76,7 +86,8 @@ def _periodic_pull(relaxed: RelaxedRepeat, family: Family, direction: str, strai
     else:
         width = math.sqrt(float(np.linalg.det(sample.I))) / stretch
     return PeriodicPull(direction, strain, stretch * sample.pull_slope, width, sample.converged, sample.residual,
-                        sample.iterations, time.perf_counter() - start)
+                        sample.iterations, time.perf_counter() - start,
+                        sample.spec.I if math.isfinite(sample.pull_slope) else None, sample.energy_density)
 
 
 def periodic_bias_pull(relaxed: RelaxedRepeat, strain: float,

@@ -1,0 +1,218 @@
+"""Membrane samples along frictional load paths: what a tensile or shear test of the yarn-level
+fabric measures on loading, for a shell fitted to the fabric's loading response.
+
+The paper's samples are frictionless minimisers: Ū(I, II) is the least yarn energy at each
+deformation. A cut strip, and a real fabric in a tensile tester, is loaded with the fibre's
+friction at the crossings, which holds loops that a frictionless path lets trade yarn: the
+periodic pull with friction is 1.3–1.9 times the frictionless one on the jerseys and is what
+their frictional strips tend to as they widen (docs/design.md §3, session 41). Here each membrane
+family is loaded from rest along its ray, as its pull would be, in lagged frictional load steps
+of at most :data:`~yarnfit.engine.lagged.FRICTION_STRAIN_STEP` (:mod:`.frictional`), one path per
+family and sign for all its magnitudes, and each sample's "energy" is the work done on the repeat
+along the path, ``W = Ū + D``: the yarns' energy at the sample plus the work ``D`` the friction
+dissipated on the way (each step's friction potential at its end: its anchors beyond their slip
+length pull μ N along their slip), which without friction is the frictionless sample's Ū
+exactly. ``W`` is the potential of a hyperelastic model that loads as the fabric does (a
+deformation theory: one path per ray, so ``W`` is a function of the deformation). A uniaxial family's path is the frictional pull
+(:func:`~yarnfit.homogenize.frictional_periodic_pull`), its samples' ``pull_slope`` the pull's
+``dW/dE`` and their form the free strains found.
+
+Bends stay frictionless minimisers: a curved tiling's maps turn, which lagged anchors do not
+follow (:meth:`~yarnfit.engine.friction.FrictionAnchors.transformed`).
+
+What it cannot represent: unloading (a fabric's hysteresis; the shell is elastic), and the path
+dependence of a deformation reached other than along its ray.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+import warnings
+from dataclasses import replace
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticSolver
+from ..engine.lagged import FRICTION_STRAIN_STEP
+from ..relax import RelaxedRepeat
+from ..samples import Family, Group, SampleResult, SampleSpec, stretch_share
+from ..tasks import Backend, LocalPool, Task, run_tasks
+from .equilibrium import MAX_ITERATIONS, _solve_from
+from .frictional import _frictional_step, _Pass, _Trial, frictional_periodic_bias_pull, frictional_periodic_pull
+from .sample import sample_tasks
+from .surface import _form_map, tile_repeat
+
+__all__ = ["loading_path_samples", "solve_loading_samples"]
+
+# Two magnitudes of a path count as the same sample when closer than this (a sample's parameter
+# is also a step's end; round-off of the grid).
+PARAMETER_MATCH = 1e-12
+
+
+def _path_grid(magnitudes: Sequence[float], strain_step: float) -> list[float]:
+    """The steps' ends of a path through ``magnitudes`` (> 0): every multiple of ``strain_step``
+    below the largest and the magnitudes themselves, ascending (no step longer than
+    ``strain_step``)."""
+    top = max(magnitudes)
+    grid = {float(v) for v in np.arange(strain_step, top, strain_step)} | {float(v) for v in magnitudes}
+    merged = []
+    for value in sorted(grid):
+        if merged and value - merged[-1] <= PARAMETER_MATCH:
+            continue
+        merged.append(value)
+    return merged
+
+
+def loading_path_samples(relaxed: RelaxedRepeat, family: Family, parameters: Sequence[float], coefficient: float,
+                         options: QuasiStaticOptions | None = None,
+                         strain_step: float = FRICTION_STRAIN_STEP) -> list[SampleResult]:
+    """The membrane ``family``'s samples at ``parameters`` (all of one sign), loaded from rest
+    along one frictional path with friction ``coefficient`` μ (see the module docstring), in the
+    order given. ``energy_density`` is the work ``W`` done along the path (J/m²); a sample is
+    converged when every step since the last sample's solved and settled its normal forces."""
+    family = Family.named(family)
+    if family.group is not Group.MEMBRANE:
+        raise ValueError(f"{family} is not a membrane family: bends are sampled frictionless")
+    parameters = [float(p) for p in parameters]
+    if not parameters or any(not math.isfinite(p) or p == 0.0 for p in parameters):
+        raise ValueError(f"parameters must be finite and non-zero, got {parameters!r}")
+    sign = math.copysign(1.0, parameters[0])
+    if any(math.copysign(1.0, p) != sign for p in parameters):
+        raise ValueError(f"a path's parameters share one sign, got {parameters!r}")
+    options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
+    magnitudes = sorted({abs(p) for p in parameters})
+    grid = _path_grid(magnitudes, strain_step)
+    if family.uniaxial_angle is not None:
+        samples = _uniaxial_path(relaxed, family, grid, coefficient, options, strain_step)
+    else:
+        samples = _fixed_path(relaxed, family, sign, grid, coefficient, options)
+    # A sample carries the verdict of its own segment of the path: every step since the last
+    # sample's (a step that did not converge or settle between two samples leaves the later one's
+    # path off, though its own solves converged).
+    by_magnitude, segment = {}, True
+    for magnitude, sample in zip(grid, samples):
+        segment &= sample.converged
+        if any(abs(magnitude - m) <= PARAMETER_MATCH for m in magnitudes):
+            by_magnitude[magnitude] = replace(sample, converged=segment)
+            segment = True
+    out = []
+    for p in parameters:
+        match = min(by_magnitude, key=lambda m: abs(m - abs(p)))
+        sample = by_magnitude[match]
+        out.append(replace(sample, spec=SampleSpec(family, sample.spec.I, sample.spec.II, p)))
+    return out
+
+
+def _rest(relaxed: RelaxedRepeat, options: QuasiStaticOptions) -> _Trial:
+    """The undeformed repeat solved frictionless: every path's start."""
+    tiled = tile_repeat(relaxed, np.eye(2), np.zeros((2, 2)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)  # judged with the path's samples
+        rest = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
+    return _Trial(0.0, np.eye(2), tiled, rest, None, None)
+
+
+def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Sequence[float], coefficient: float,
+                options: QuasiStaticOptions) -> list[SampleResult]:
+    """One sample per step of ``grid`` (magnitudes) of a family without free strains: each a
+    lagged frictional step at the family's form (:func:`_frictional_step`, one solve a pass), its
+    work the yarns' energy there plus the friction's dissipation so far."""
+    flat = np.zeros((2, 2))
+    state = _rest(relaxed, options)
+    dissipated, samples = 0.0, []
+    for magnitude in grid:
+        clock = time.perf_counter()
+        form = family.deformation(sign * magnitude)[0]
+
+        def solve_pass(anchors, anchor_form, warm, contacts, guess, probe, form=form) -> _Pass:
+            mapped = anchors.transformed(_form_map(form, anchor_form))
+            tiled, result = _solve_from(relaxed, form, flat, options, (warm.result.state, warm.form), friction=mapped,
+                                        contacts=contacts)
+            return _Pass(_Trial(0.0, form, tiled, result, mapped, None), result.iterations,
+                         "minimum" if result.converged else "failed")
+
+        step = _frictional_step(solve_pass, state, coefficient, 0.0, 0.0)
+        trial, result = step.trial, step.trial.result
+        dissipated += trial.anchors.energy_gradient(result.state.node_position)[0] / trial.tiled.area
+        state = trial
+        samples.append(SampleResult(
+            spec=SampleSpec(family, form, flat, sign * magnitude),
+            energy_density=result.energy.internal / trial.tiled.area + dissipated,
+            converged=bool(step.converged and step.settled), residual=result.residual, iterations=step.iterations,
+            seconds=time.perf_counter() - clock, position=result.state.node_position,
+            stretch_share=stretch_share(result.energy)))
+    return samples
+
+
+def _uniaxial_path(relaxed: RelaxedRepeat, family: Family, grid: Sequence[float], coefficient: float,
+                   options: QuasiStaticOptions, strain_step: float) -> list[SampleResult]:
+    """One sample per step of ``grid`` (strains) of a uniaxial family: the frictional pull's
+    (:func:`frictional_periodic_pull`), its work the yarns' energy plus the pull's friction work,
+    its ``pull_slope`` the pull's force over λ (``dW/dE`` along the pull: the free strains' slopes
+    vanish at each pass's minimum)."""
+    flat = np.zeros((2, 2))
+    if family.uniaxial_axis is not None:
+        pulls = frictional_periodic_pull(relaxed, family.uniaxial_axis, grid, coefficient, options, strain_step)
+    else:
+        pulls = frictional_periodic_bias_pull(relaxed, grid, coefficient, options, strain_step)
+    return [SampleResult(
+        spec=SampleSpec(family, pull.form if pull.form is not None else np.full((2, 2), math.nan), flat, pull.strain),
+        energy_density=pull.energy_density + pull.friction_work, converged=pull.converged, residual=pull.residual,
+        iterations=pull.iterations, seconds=pull.seconds, pull_slope=pull.force_n_per_m / (1.0 + pull.strain),
+        across_slope=0.0) for pull in pulls]
+
+
+def solve_loading_samples(relaxed: RelaxedRepeat, specs: Sequence[SampleSpec], coefficient: float,
+                          workers: int | None = None,
+                          on_sample: Callable[[int, int, SampleResult], None] | None = None,
+                          backend: Backend | None = None) -> list[SampleResult]:
+    """Every sample of ``specs``: the membrane ones along frictional load paths with friction
+    ``coefficient`` μ (:func:`loading_path_samples`, one task per family and sign), the others
+    (bends, the undeformed sample) as :func:`~yarnfit.homogenize.solve_samples` solves them. Run
+    on ``backend`` (default a :class:`~yarnfit.tasks.LocalPool` of ``workers`` processes);
+    ``on_sample(done, total, result)`` as each sample is known; results in the order of
+    ``specs``."""
+    if not (math.isfinite(coefficient) and coefficient >= 0.0):
+        raise ValueError(f"friction coefficient must be finite and non-negative, got {coefficient!r}")
+    if backend is None:
+        workers = (os.cpu_count() or 1) if workers is None else int(workers)
+        if workers < 1:
+            raise ValueError(f"workers must be at least 1, got {workers}")
+        with LocalPool(min(workers, max(1, len(specs)))) as pool:
+            return solve_loading_samples(relaxed, specs, coefficient, on_sample=on_sample, backend=pool)
+    paths: dict[tuple, list[int]] = {}
+    single = []
+    for i, spec in enumerate(specs):
+        if spec.is_membrane and spec.parameter != 0.0:
+            paths.setdefault((spec.family, spec.parameter > 0.0), []).append(i)
+        else:
+            single.append(i)
+    tasks = sample_tasks(relaxed, [specs[i] for i in single], key=lambda k: ("sample", single[k]))
+    for (family, positive), indices in paths.items():
+        # Paths first: each is several samples' worth of solves, the longest work there is.
+        tasks.append(Task(("path", family, positive), loading_path_samples,
+                          (relaxed, family, [specs[i].parameter for i in indices], coefficient),
+                          cost=len(specs) + len(indices),
+                          label=f"load path {family} {'+' if positive else '-'} ({len(indices)} samples)"))
+    results: list[SampleResult | None] = [None] * len(specs)
+    known = 0
+
+    def done(task, outcome, count, total):
+        nonlocal known
+        if isinstance(outcome, BaseException):
+            return
+        found = [(task.key[1], outcome)] if task.key[0] == "sample" else list(zip(paths[task.key[1:]], outcome))
+        for i, sample in found:
+            results[i] = sample
+            known += 1
+            if on_sample is not None:
+                on_sample(known, len(specs), sample)
+
+    outcomes = run_tasks(tasks, backend, on_done=done)
+    for outcome in outcomes.values():
+        if isinstance(outcome, BaseException):
+            raise outcome
+    return results
