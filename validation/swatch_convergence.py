@@ -303,8 +303,9 @@ def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Cal
 
 
 def fit_rows(file: MaterialFile, curves: dict, pulls: dict) -> list[str]:
-    """Rows of the nonlinear shell against the periodic pulls at STRAINS (``pulls``): the fit's
-    own error, apart from any strip's size."""
+    """Rows of the nonlinear shell against the periodic pulls at STRAINS (``pulls``, of the kind
+    its samples were: frictionless, or with the friction they were loaded with): the fit's own
+    error, apart from any strip's size."""
     rows = []
     for direction, curve in largest_strips(curves).items():
         angle = math.radians(curve["angle_deg"])
@@ -386,10 +387,15 @@ def main(argv: list[str] | None = None) -> int:
                      "periodic N/m", "periodic compression", f"periodic with friction μ {coefficient:g} N/m",
                      "its compression", "nonlinear N/m", "nonlinear compression", "linear N/m",
                      "linear compression", "verdict (nonlinear)"], rows)
-    rows = fit_rows(file, curves, pulls)
+    fitted_to = pulls
+    if file.sample_friction > 0.0:
+        # A shell fitted to loading paths: its own error is against the frictional pull.
+        fitted_to = frictional_pulls(relaxed, curves, READINGS[0], file.sample_friction)
+    rows = fit_rows(file, curves, fitted_to)
     if rows:
-        print_table(f"{name}: nonlinear shell against the periodic repeat's pull (the fit's own error; % against "
-                    f"the periodic pull)",
+        kind = f"with friction μ {file.sample_friction:g}, as its samples" if file.sample_friction > 0.0 else "frictionless"
+        print_table(f"{name}: nonlinear shell against the periodic repeat's pull ({kind}: the fit's own error; "
+                    f"% against the periodic pull)",
                     ["direction", "strain", "periodic N/m", "periodic compression", "periodic converged",
                      "nonlinear N/m", "nonlinear compression"], rows)
     print()

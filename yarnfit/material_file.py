@@ -218,6 +218,16 @@ class MaterialFile:
         except ValueError as exc:
             raise ValueError(f"{where}: {exc}") from None
 
+    @property
+    def sample_friction(self) -> float:
+        """The friction coefficient the membrane samples were loaded with (``fit.sample_friction``:
+        0 for the paper's frictionless minimisers, and for a file written before it was kept)."""
+        value = self._block("fit").get("sample_friction", 0.0)
+        value = finite_number(value, f"{self.where}: fit.sample_friction")
+        if value < 0.0:
+            raise ValueError(f"{self.where}: fit.sample_friction must be non-negative, got {value!r}")
+        return value
+
     def samples(self) -> "list[SampleResult]":
         """The yarn-level samples (``samples``) as :class:`~yarnfit.samples.SampleResult`, in file
         order, those that did not converge included (their Ū NaN where none was reached; no node
