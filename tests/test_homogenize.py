@@ -730,6 +730,10 @@ def test_a_fit_with_friction_loads_its_membrane_samples_and_says_so():
     plain_fit = fit_fabric(plain(), samples=design_size(1), workers=1, relaxed=relaxed, ranges=ranges)
     assert loaded.sample_friction == relaxed.fiber.friction > 0.0 and plain_fit.sample_friction == 0.0
     assert loaded.to_dict()["fit"]["sample_friction"] == relaxed.fiber.friction
+    assert MaterialFile.read(loaded.to_dict()).sample_friction == relaxed.fiber.friction
+    older = plain_fit.to_dict()
+    del older["fit"]["sample_friction"]  # a file written before the samples' friction was kept
+    assert MaterialFile.read(older).sample_friction == 0.0
     # Friction holds the weave's crossings: its loading pull along weft is stiffer.
     assert (loaded.material.uniaxial_pull(0.0, 1.02).force_n_per_m
             > plain_fit.material.uniaxial_pull(0.0, 1.02).force_n_per_m)
