@@ -85,10 +85,13 @@ def loading_path_samples(relaxed: RelaxedRepeat, family: Family, parameters: Seq
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
     magnitudes = sorted({abs(p) for p in parameters})
     grid = _path_grid(magnitudes, strain_step)
-    if family.uniaxial_angle is not None:
-        samples = _uniaxial_path(relaxed, family, grid, coefficient, options, strain_step)
-    else:
-        samples = _fixed_path(relaxed, family, sign, grid, coefficient, options)
+    with warnings.catch_warnings():
+        # A step's own warning is not the verdict: each sample carries its segment's, warned below.
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        if family.uniaxial_angle is not None:
+            samples = _uniaxial_path(relaxed, family, grid, coefficient, options, strain_step)
+        else:
+            samples = _fixed_path(relaxed, family, sign, grid, coefficient, options)
     # A sample carries the verdict of its own segment of the path: every step since the last
     # sample's (a step that did not converge or settle between two samples leaves the later one's
     # path off, though its own solves converged).
@@ -103,6 +106,9 @@ def loading_path_samples(relaxed: RelaxedRepeat, family: Family, parameters: Seq
         match = min(by_magnitude, key=lambda m: abs(m - abs(p)))
         sample = by_magnitude[match]
         out.append(replace(sample, spec=SampleSpec(family, sample.spec.I, sample.spec.II, p)))
+        if not sample.converged:
+            warnings.warn(f"loading path {family} {p:+.3g} did not converge: a step since the last sample's did not "
+                          f"solve or settle its normal forces ({sample.residual})", ConvergenceWarning, stacklevel=2)
     return out
 
 
