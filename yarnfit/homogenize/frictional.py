@@ -113,7 +113,7 @@ def _solve_trial(relaxed: RelaxedRepeat, axis: int, stretch: float, free: float,
 
 
 def _axis_pass(relaxed: RelaxedRepeat, axis: int, stretch: float, anchors: FrictionAnchors, anchor_form: np.ndarray,
-                 warm: _Trial, contacts: ContactSet, guess: float, probe: float, options: QuasiStaticOptions) -> _Pass:
+               warm: _Trial, contacts: ContactSet, guess: float, probe: float, options: QuasiStaticOptions) -> _Pass:
     """One lagged pass: the free Green strain E⊥ where the potential plus the friction of
     ``anchors`` is least, first tried at ``guess`` and then ``probe`` (> 0) away downhill, then by
     :func:`_next_free_strain`'s secants; a trial that does not converge is approached by halves
