@@ -189,6 +189,16 @@ class _Step:
     iterations: int
 
 
+def _rest(relaxed: RelaxedRepeat, options: QuasiStaticOptions, free=0.0) -> _Trial:
+    """The undeformed repeat solved frictionless, at free strains ``free`` (0): every frictional
+    path's start. Its convergence is judged with the path's first sample."""
+    tiled = tile_repeat(relaxed, np.eye(2), np.zeros((2, 2)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        rest = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
+    return _Trial(free, np.eye(2), tiled, rest, None, None)
+
+
 def _frictional_step(search: Callable[..., _Pass], start: _Trial, coefficient: float, guess, probe: float) -> _Step:
     """A lagged frictional load step from the equilibrium ``start``: anchored at ``start`` (its
     contacts' normal forces, slip from its positions under its maps), each pass a free-strain
@@ -283,11 +293,8 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
             return lambda *args: _axis_pass(relaxed, axis, stretch, *args, options)
         free = 0.0
 
-    tiled = tile_repeat(relaxed, np.eye(2), np.zeros((2, 2)))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)  # judged below with the first strain
-        rest = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
-    state = _Trial(free, np.eye(2), tiled, rest, None, None)
+    state = _rest(relaxed, options, free)
+    rest = state.result
     pulls, reached, change, dissipated = [], 0.0, None, 0.0
     for strain in strains:
         clock = time.perf_counter()

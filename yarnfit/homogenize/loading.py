@@ -35,15 +35,16 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticSolver
+from ..engine import ConvergenceWarning, QuasiStaticOptions
 from ..engine.lagged import FRICTION_STRAIN_STEP
 from ..relax import RelaxedRepeat
 from ..samples import Family, Group, SampleResult, SampleSpec, stretch_share
 from ..tasks import Backend, LocalPool, Task, run_tasks
 from .equilibrium import MAX_ITERATIONS, _solve_from
-from .frictional import _frictional_step, _Pass, _Trial, frictional_periodic_bias_pull, frictional_periodic_pull
+from .frictional import (_frictional_step, _Pass, _rest, _Trial, frictional_periodic_bias_pull,
+                         frictional_periodic_pull)
 from .sample import sample_tasks
-from .surface import _form_map, tile_repeat
+from .surface import _form_map
 
 __all__ = ["loading_path_samples", "solve_loading_samples"]
 
@@ -110,15 +111,6 @@ def loading_path_samples(relaxed: RelaxedRepeat, family: Family, parameters: Seq
             warnings.warn(f"loading path {family} {p:+.3g} did not converge: a step since the last sample's did not "
                           f"solve or settle its normal forces ({sample.residual})", ConvergenceWarning, stacklevel=2)
     return out
-
-
-def _rest(relaxed: RelaxedRepeat, options: QuasiStaticOptions) -> _Trial:
-    """The undeformed repeat solved frictionless: every path's start."""
-    tiled = tile_repeat(relaxed, np.eye(2), np.zeros((2, 2)))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)  # judged with the path's samples
-        rest = QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
-    return _Trial(0.0, np.eye(2), tiled, rest, None, None)
 
 
 def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Sequence[float], coefficient: float,
