@@ -45,19 +45,26 @@ def _tangent_basis(n, out, k):
         out[k, 1, i] = t2[i]
 
 
-@njit(cache=True)
-def _relative(pos, nodes, weight, rotation, translation, k):
-    """The anchor ``k``'s relative vector ``r = Σ_m w_m (R_m x_m + t_m)`` (m)."""
+@njit(cache=True, inline="always")
+def _weighted_sum(pos, nodes, weight, rotation, translation):
+    """``r = Σ_m w_m (R_m x_m + t_m)`` (m) over four nodes ``nodes (4,)`` with weights ``(4,)``
+    and maps ``rotation (4, 3, 3)``, ``translation (4, 3)``."""
     r0 = 0.0
     r1 = 0.0
     r2 = 0.0
     for m in range(4):
-        x = _map(rotation[k, m], translation[k, m], row3(pos, nodes[k, m]))
-        w = weight[k, m]
+        x = _map(rotation[m], translation[m], row3(pos, nodes[m]))
+        w = weight[m]
         r0 += w * x[0]
         r1 += w * x[1]
         r2 += w * x[2]
     return r0, r1, r2
+
+
+@njit(cache=True, inline="always")
+def _relative(pos, nodes, weight, rotation, translation, k):
+    """The anchor ``k``'s relative vector ``r = Σ_m w_m (R_m x_m + t_m)`` (m)."""
+    return _weighted_sum(pos, nodes[k], weight[k], rotation[k], translation[k])
 
 
 @njit(cache=True)
@@ -85,17 +92,10 @@ def anchor_constraints(pos, reference_pos, edge_nodes, edge_samples, pairs, pair
                 out_rotation[k, m] = pair_rotation[p, m]
                 out_translation[k, m] = pair_translation[p, m]
             _tangent_basis(n, out_tangent, k)
-            r0 = 0.0
-            r1 = 0.0
-            r2 = 0.0
-            for m in range(4):
-                x = _map(reference_rotation[p, m], reference_translation[p, m], row3(reference_pos, nodes[m]))
-                w = out_weight[k, m]
-                r0 += w * x[0]
-                r1 += w * x[1]
-                r2 += w * x[2]
+            r = _weighted_sum(reference_pos, out_nodes[k], out_weight[k], reference_rotation[p],
+                              reference_translation[p])
             for i in range(2):
-                out_origin[k, i] = out_tangent[k, i, 0] * r0 + out_tangent[k, i, 1] * r1 + out_tangent[k, i, 2] * r2
+                out_origin[k, i] = dot(row3(out_tangent[k], i), r)
             out_normal_force[k] = force[constraint_start[p] + c]
             k += 1
     return k
