@@ -701,7 +701,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be at least 1, got {args.workers}")
-    with LocalPool(min(args.workers or os.cpu_count() or 1, len(scenes))) as backend:
+    with LocalPool(args.workers, tasks=len(scenes)) as backend:
         summary, path = run_suite(args.material, scenes, quick=args.quick, logs=args.logs, reference=reference,
                                   progress=progress, backend=backend)
     print(f"validated {summary['material']['name']}: {path}")
@@ -794,8 +794,6 @@ def _view_recording(path: Path) -> int:
 
 
 def _has_display() -> bool:
-    import os
-
     return sys.platform in ("darwin", "win32") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 

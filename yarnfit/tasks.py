@@ -210,14 +210,14 @@ class _Done:
 
 
 class LocalPool(Backend):
-    """``workers`` processes on this machine (default: every core); with one, calls run in this
-    process, one at a time."""
+    """``workers`` processes on this machine (default: every core), no more than ``tasks`` when
+    given (the work there is to share); with one, calls run in this process, one at a time."""
 
-    def __init__(self, workers: int | None = None):
+    def __init__(self, workers: int | None = None, tasks: int | None = None):
         workers = (os.cpu_count() or 1) if workers is None else int(workers)
         if workers < 1:
             raise ValueError(f"workers must be at least 1, got {workers}")
-        self.workers = workers
+        self.workers = workers if tasks is None else min(workers, max(1, int(tasks)))
         self._pool: ProcessPoolExecutor | None = None
 
     def _executor(self) -> ProcessPoolExecutor:

@@ -27,7 +27,6 @@ dependence of a deformation reached other than along its ray.
 from __future__ import annotations
 
 import math
-import os
 import time
 import warnings
 from dataclasses import replace
@@ -176,10 +175,7 @@ def solve_loading_samples(relaxed: RelaxedRepeat, specs: Sequence[SampleSpec], c
     if not (math.isfinite(coefficient) and coefficient >= 0.0):
         raise ValueError(f"friction coefficient must be finite and non-negative, got {coefficient!r}")
     if backend is None:
-        workers = (os.cpu_count() or 1) if workers is None else int(workers)
-        if workers < 1:
-            raise ValueError(f"workers must be at least 1, got {workers}")
-        with LocalPool(min(workers, max(1, len(specs)))) as pool:
+        with LocalPool(workers, tasks=len(specs)) as pool:
             return solve_loading_samples(relaxed, specs, coefficient, on_sample=on_sample, backend=pool)
     paths: dict[tuple, list[int]] = {}
     single = []

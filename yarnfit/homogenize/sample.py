@@ -4,7 +4,6 @@ solved in parallel."""
 from __future__ import annotations
 
 import math
-import os
 import time
 from typing import Callable, Sequence
 
@@ -98,10 +97,7 @@ def solve_samples(
     A sample whose solve raises makes this raise it (after the others finished); Ctrl-C stops the
     workers and raises ``KeyboardInterrupt`` (:mod:`yarnfit.tasks`)."""
     if backend is None:
-        workers = (os.cpu_count() or 1) if workers is None else int(workers)
-        if workers < 1:
-            raise ValueError(f"workers must be at least 1, got {workers}")
-        with LocalPool(min(workers, max(1, len(specs)))) as pool:
+        with LocalPool(workers, tasks=len(specs)) as pool:
             return solve_samples(relaxed, specs, on_sample=on_sample, backend=pool)
 
     def done(task, outcome, count, total):
