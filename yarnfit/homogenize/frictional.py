@@ -329,15 +329,14 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
                          f"{step.passes} passes, {step.iterations} iterations, "
                          f"{'settled' if step.settled else 'not settled'}")
         stretch = 1.0 + strain
-        form = None if reached != strain else state.form
-        energy = math.nan if reached != strain else state.result.energy.internal / state.tiled.area
         if reached != strain:
-            force, width = math.nan, math.nan
+            force, width, form, energy = math.nan, math.nan, None, math.nan
             residual = step.trial.result.residual if step.trial.result is not None else _NO_RESIDUAL
         else:
             force = stretch * _green_slope(state.tiled.model, state.result, state.form,
                                            np.outer(pull_direction, pull_direction), state.tiled.area, state.anchors)
             width, residual = math.sqrt(float(np.linalg.det(state.form))) / stretch, state.result.residual
+            form, energy = state.form, state.result.energy.internal / state.tiled.area
         if not converged:
             warnings.warn(f"frictional periodic pull along {direction} to {strain:g} did not converge "
                           f"({iterations} iterations)", ConvergenceWarning, stacklevel=3)
