@@ -37,9 +37,9 @@ the limit a frictionless strip would tend to as it widens, and what the shell is
 same pull with the fibre's friction, in load steps as the strip is pulled
 (:func:`yarnfit.homogenize.frictional_periodic_pull`: what a frictional strip tends to; its own
 count says how many points it meets with the shell's criteria), and then the shell against the
-frictionless pull at the nominal strains: the fit's own error, told apart from the strip's size. ``--from-json`` reads curves
-written by earlier runs instead of solving (runs of several sizes or directions made in
-parallel).
+frictionless pull at the nominal strains: the fit's own error, told apart from the strip's size.
+``--from-json`` reads curves written by earlier runs instead of solving (runs of several sizes or
+directions made in parallel).
 """
 
 from __future__ import annotations
@@ -57,7 +57,8 @@ import numba
 
 from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
-from yarnfit.homogenize import frictional_periodic_bias_pull, frictional_periodic_pull, periodic_bias_pull, periodic_pull
+from yarnfit.homogenize import (frictional_periodic_bias_pull, frictional_periodic_pull, periodic_bias_pull,
+                                periodic_pull)
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, stretch_swatch
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
@@ -279,7 +280,8 @@ def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Cal
             pull = periodic(direction, strain)
             cells = ["— | —" if pull is None else f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}"]
             pull = frictional.get((direction, strain))
-            cells.append("— | —" if pull is None else f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}"
+            cells.append("— | —" if pull is None else
+                         f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}"
                          + ("" if pull.converged else " (not converged)"))
             if pull is not None and pull.converged and point["converged"]:
                 rubbed += 1
@@ -393,7 +395,8 @@ def main(argv: list[str] | None = None) -> int:
         fitted_to = frictional_pulls(relaxed, curves, READINGS[0], file.sample_friction)
     rows = fit_rows(file, curves, fitted_to)
     if rows:
-        kind = f"with friction μ {file.sample_friction:g}, as its samples" if file.sample_friction > 0.0 else "frictionless"
+        kind = (f"with friction μ {file.sample_friction:g}, as its samples" if file.sample_friction > 0.0
+                else "frictionless")
         print_table(f"{name}: nonlinear shell against the periodic repeat's pull ({kind}: the fit's own error; "
                     f"% against the periodic pull)",
                     ["direction", "strain", "periodic N/m", "periodic compression", "periodic converged",

@@ -335,8 +335,9 @@ def validation_figures(summary: str | os.PathLike | Mapping, out_dir: str | os.P
     crosses where a solve did not converge) and its middle half's pull against its middle's strain
     (hollow squares, where the points carry them: where the swatch is uniform), the reference
     (black diamonds) and the shell's law (thin grey line; the strips' clamped ends make them
-    stiffer than it for a fabric with a large Poisson ratio). CSV columns: ``series``, ``strain [%]``, ``force per width [N/cm]``,
-    ``compression ratio [1]`` (empty where not measured) and ``converged`` (empty for the law).
+    stiffer than it for a fabric with a large Poisson ratio). CSV columns: ``series``,
+    ``strain [%]``, ``force per width [N/cm]``, ``compression ratio [1]`` (empty where not
+    measured) and ``converged`` (empty for the law).
 
     Returns:
         the paths written.

@@ -151,7 +151,8 @@ def anchor_contacts(model: RodModel, position: np.ndarray, contacts: ContactSet,
     if n:
         written = _friction_kernels.anchor_constraints(
             position, reference, model.edge_nodes, contacts.edge_samples, *contacts.pairs.kernel_args(),
-            reference_pairs.rotation, reference_pairs.translation, contacts.start, force, nodes, weight, rotation, translation, tangent, origin, normal)
+            reference_pairs.rotation, reference_pairs.translation, contacts.start, force, nodes, weight, rotation,
+            translation, tangent, origin, normal)
         assert written == n
     return FrictionAnchors(nodes, weight, rotation, translation, tangent, origin, coefficient * normal,
                            float(slip_length))

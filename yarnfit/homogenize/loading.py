@@ -13,9 +13,9 @@ along the path, ``W = Ū + D``: the yarns' energy at the sample plus the work ``
 dissipated on the way (each step's friction potential at its end: its anchors beyond their slip
 length pull μ N along their slip), which without friction is the frictionless sample's Ū
 exactly. ``W`` is the potential of a hyperelastic model that loads as the fabric does (a
-deformation theory: one path per ray, so ``W`` is a function of the deformation). A uniaxial family's path is the frictional pull
-(:func:`~yarnfit.homogenize.frictional_periodic_pull`), its samples' ``pull_slope`` the pull's
-``dW/dE`` and their form the free strains found.
+deformation theory: one path per ray, so ``W`` is a function of the deformation). A uniaxial
+family's path is the frictional pull (:func:`~yarnfit.homogenize.frictional_periodic_pull`), its
+samples' ``pull_slope`` the pull's ``dW/dE`` and their form the free strains found.
 
 Bends stay frictionless minimisers: a curved tiling's maps turn, which lagged anchors do not
 follow (:meth:`~yarnfit.engine.friction.FrictionAnchors.transformed`).
