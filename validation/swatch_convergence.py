@@ -377,9 +377,9 @@ def main(argv: list[str] | None = None) -> int:
                                                                                                    strain)
 
     coefficient = 0.0 if args.frictionless else relaxed.fiber.friction
-    counts = {}
+    counts, rubbings = {}, {}
     for reading in READINGS:
-        rubbing = frictional_pulls(relaxed, curves, reading, coefficient)
+        rubbing = rubbings[reading.name] = frictional_pulls(relaxed, curves, reading, coefficient)
         rows, judged, within, rubbed, rubbed_within = shell_rows(file, curves, reading, periodic, rubbing)
         counts[reading.name] = (within, judged, rubbed_within, rubbed)
         print_table(f"{name}: shell and periodic repeat against the largest strip per direction, read as "
@@ -391,8 +391,11 @@ def main(argv: list[str] | None = None) -> int:
                      "linear compression", "verdict (nonlinear)"], rows)
     fitted_to = pulls
     if file.sample_friction > 0.0:
-        # A shell fitted to loading paths: its own error is against the frictional pull.
-        fitted_to = frictional_pulls(relaxed, curves, READINGS[0], file.sample_friction)
+        # A shell fitted to loading paths: its own error is against the frictional pull at the
+        # nominal strains (the jaws' reading's, solved above when the friction is the same).
+        jaws = READINGS[0]
+        fitted_to = (rubbings[jaws.name] if file.sample_friction == coefficient
+                     else frictional_pulls(relaxed, curves, jaws, file.sample_friction))
     rows = fit_rows(file, curves, fitted_to)
     if rows:
         kind = (f"with friction μ {file.sample_friction:g}, as its samples" if file.sample_friction > 0.0
