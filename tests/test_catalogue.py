@@ -15,6 +15,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from yarnfit.catalogue import TABLE_COLUMNS, Label, fabric_of, read_labels, run_catalogue
+from yarnfit.fabric_fit import fit_fabric
+from yarnfit.fibers import get_fiber
+from yarnfit.material_file import MaterialFile
 from yarnfit.tasks import DaskBackend, LocalPool
 
 from test_tasks import checkout_env, default_sigint
@@ -102,6 +105,24 @@ def test_a_catalogue_on_a_dask_cluster(tmp_path):
     assert time.perf_counter() - start < RERUN_SECONDS
     assert sorted(k[0] for k in ran) == ["export"] * 3 + ["fit"] * 3
     assert [e.engineering for e in again.entries] == [e.engineering for e in run.entries]
+
+
+def test_a_catalogue_with_friction_fits_what_yarnfit_fit_friction_fits(tmp_path):
+    """With friction the membrane samples run as load paths (one task each) and are put back in the
+    design's order: the material is the one `fit_fabric(friction=True)` makes, to the bit (the
+    design's smallest paths are one sample long, the case a count of samples per task misreads)."""
+    labels = write_labels(tmp_path, "name,fibre,pattern,gsm,counts\nplain-200,cotton,plain,200,25x25\n")
+    with LocalPool(2) as pool:
+        run = run_catalogue(labels, tmp_path / "out", pool, samples=SAMPLES, friction=True)
+    entry, = run.entries
+    assert entry.status == "ok", entry.reason
+    assert entry.sample_friction == get_fiber("cotton").friction > 0.0
+    with open(run.table_csv, newline="") as f:
+        assert float(next(csv.DictReader(f))["sample_friction"]) == entry.sample_friction
+    material = json.loads((tmp_path / "out" / "plain-200.json").read_text())
+    fitted = fit_fabric(fabric_of(read_labels(labels)[0]), samples=SAMPLES, workers=2, friction=True)
+    assert material["shell"] == MaterialFile.from_fit(fitted).data["shell"]
+    assert material["fit"]["sample_friction"] == entry.sample_friction
 
 
 def test_an_interrupted_catalogue_resumes(tmp_path):

@@ -7,9 +7,11 @@ yarn-construction columns ``yarn_model``, ``yarn_spinning``, ``yarn_packing``, `
 is refused (a misspelt column would otherwise be silently ignored).
 
 Work: per fabric, a graph of tasks (:mod:`yarnfit.tasks`) — relax the repeat; solve each sample of
-the design; fit the shell; export the MuJoCo scene; with ``validate``, run the validation scenes —
-on a local pool or a Dask cluster. Results are cached in ``DIR/.cache`` by a hash of every input and
-the yarnfit version, so a rerun, or a run after an interrupted one, recomputes nothing it has.
+the design (with ``friction``, each membrane family's samples as one load path with the fibre's
+friction, as ``yarnfit fit --friction``); fit the shell; export the MuJoCo scene; with
+``validate``, run the validation scenes — on a local pool or a Dask cluster. Results are cached in
+``DIR/.cache`` by a hash of every input and the yarnfit version, so a rerun, or a run after an
+interrupted one, recomputes nothing it has.
 
 Output ``DIR``:
 
@@ -17,8 +19,8 @@ Output ``DIR``:
 - ``<name>-cloth.xml``: the hanging-cloth scene (``yarnfit export --scene cloth``);
 - ``logs/<name>/``: with ``validate``, the validation recordings and ``summary.json``;
 - ``catalogue.csv`` and ``catalogue.parquet``: one row per fabric, its inputs, status (``ok`` or
-  ``failed``, the stage and the one-line reason), engineering constants, fit quality and verdicts
-  (:data:`TABLE_COLUMNS`).
+  ``failed``, the stage and the one-line reason), engineering constants, the samples' friction, fit
+  quality and verdicts (:data:`TABLE_COLUMNS`).
 
 Every file is written whole or not at all (:func:`yarnfit.outputs.write_atomically`).
 """
@@ -35,7 +37,8 @@ from typing import Callable
 
 from .fabric import DEFAULT_COUNTS_PER_CM, Fabric, counts_from_label
 from .checks import error_line
-from .fabric_fit import DEFAULT_SAMPLES, fit_solved, relax_for_fit, solve_design_sample
+from .fabric_fit import (DEFAULT_SAMPLES, design_loading_groups, fit_solved, relax_for_fit, solve_design_path,
+                         solve_design_sample)
 from .fibers import get_fiber
 from .material_file import MaterialFile
 from .outputs import write_atomically
@@ -64,8 +67,8 @@ ENGINEERING_KEYS = ("weft_stretch_n_per_m", "warp_stretch_n_per_m", "poisson_wef
                     "bending_weft_nm", "bending_warp_nm", "bending_bias_nm")
 # The table's columns, in order (inputs, outcome, engineering constants, fit quality, verdicts).
 TABLE_COLUMNS = (("row", *REQUIRED_COLUMNS, *YARN_COLUMNS, "status", "stage", "reason", "material")
-                 + ENGINEERING_KEYS + ("fit_min_r2", "fit_worst_family", "fit_max_relative_rms", "verdicts_passed",
-                                       "verdicts_failed"))
+                 + ENGINEERING_KEYS + ("sample_friction", "fit_min_r2", "fit_worst_family", "fit_max_relative_rms",
+                                       "verdicts_passed", "verdicts_failed"))
 
 
 @dataclass(frozen=True)
@@ -180,6 +183,8 @@ class CatalogueEntry:
         reason: the failure in one line, empty when ok.
         material: the material file written (path), or None.
         engineering: the small-strain engineering constants (SI, the material file's keys).
+        sample_friction: the friction coefficient its membrane samples were loaded with (0: the
+            paper's frictionless samples; NaN without a fit).
         fit_min_r2: the least R² of a family of at least :data:`R2_MIN_SAMPLES` samples (NaN if none);
         fit_worst_family, fit_max_relative_rms: the family with the largest relative RMS error, and it.
         verdicts_passed: validation checks passed (None without validation);
@@ -192,6 +197,7 @@ class CatalogueEntry:
     reason: str = ""
     material: str | None = None
     engineering: dict[str, float] = field(default_factory=dict)
+    sample_friction: float = math.nan
     fit_min_r2: float = math.nan
     fit_worst_family: str = ""
     fit_max_relative_rms: float = math.nan
@@ -204,9 +210,9 @@ class CatalogueEntry:
         row.update({c: self.label.cells.get(c, "") for c in (*REQUIRED_COLUMNS, *YARN_COLUMNS)})
         row.update({"status": self.status, "stage": self.stage, "reason": self.reason, "material": self.material or ""})
         row.update({k: self.engineering.get(k, math.nan) for k in ENGINEERING_KEYS})
-        row.update({"fit_min_r2": self.fit_min_r2, "fit_worst_family": self.fit_worst_family,
-                    "fit_max_relative_rms": self.fit_max_relative_rms, "verdicts_passed": self.verdicts_passed,
-                    "verdicts_failed": ";".join(self.verdicts_failed)})
+        row.update({"sample_friction": self.sample_friction, "fit_min_r2": self.fit_min_r2,
+                    "fit_worst_family": self.fit_worst_family, "fit_max_relative_rms": self.fit_max_relative_rms,
+                    "verdicts_passed": self.verdicts_passed, "verdicts_failed": ";".join(self.verdicts_failed)})
         return row
 
 
@@ -226,9 +232,17 @@ class CatalogueRun:
 # -- tasks (module-level: they are pickled to the workers) ----------------------------------------
 
 
-def fit_task(fabric: Fabric, relaxed, model: str, *results) -> dict:
-    """The material file's contents of the shell fitted to ``results``."""
-    return MaterialFile.from_fit(fit_solved(fabric, relaxed, list(results), model)).data
+def fit_task(fabric: Fabric, relaxed, model: str, friction: bool, layout: tuple[tuple[int, ...], ...],
+             *outcomes) -> dict:
+    """The material file's contents of the shell fitted to the design's samples: ``outcomes[j]``
+    carries the samples ``layout[j]`` of the design (one sample, or a load path's list), loaded
+    with the fibre's friction if ``friction``."""
+    results: list = [None] * sum(len(indices) for indices in layout)
+    for indices, outcome in zip(layout, outcomes, strict=True):
+        for i, sample in zip(indices, outcome if isinstance(outcome, list) else [outcome], strict=True):
+            results[i] = sample
+    return MaterialFile.from_fit(fit_solved(fabric, relaxed, results, model,
+                                            sample_friction=relaxed.fiber.friction if friction else 0.0)).data
 
 
 def export_task(material_data: dict) -> str:
@@ -268,9 +282,12 @@ def run_catalogue(
     scenes: tuple[str, ...] = VALIDATION_SCENES,
     quick: bool = True,
     on_done: Callable[[Task, object, int, int], None] | None = None,
+    friction: bool = False,
 ) -> CatalogueRun:
     """Fit, export and (with ``validate``) validate every row of the labels file into ``out_dir``
     (see the module docstring) on ``backend``; ``on_done`` as for :func:`yarnfit.tasks.run_tasks`.
+    With ``friction`` the membrane samples are loaded from rest with the fibre's friction (as
+    ``yarnfit fit --friction``), one task per load path.
 
     A row's failure (bad input, or any stage) is its entry's; the other rows still complete.
 
@@ -285,6 +302,10 @@ def run_catalogue(
         raise ValueError(f"model must be 'full' or 'paper', got {model!r}")
     out = Path(out_dir)
     count = design_size(levels_for(samples))
+    # Each sample task's design indices: one sample alone, or (with friction) a load path's samples.
+    single, paths = design_loading_groups(samples) if friction else (list(range(count)), {})
+    paths = [tuple(indices) for indices in paths.values()]
+    layout = tuple((k,) for k in single) + tuple(paths)
     entries: dict[int, CatalogueEntry] = {}
     fabrics: dict[int, Fabric] = {}
     seen: dict[str, int] = {}
@@ -303,12 +324,17 @@ def run_catalogue(
     for i, fabric in fabrics.items():
         name = fabric.name
         tasks.append(Task(("relax", i), relax_for_fit, (fabric,), cost=3.0, label=f"{name}: relax"))
-        for k in range(count):
-            tasks.append(Task(("samples", i, k), solve_design_sample, (Result(("relax", i)), samples, k), cost=2.0,
+        for j, k in enumerate(single):
+            tasks.append(Task(("samples", i, j), solve_design_sample, (Result(("relax", i)), samples, k), cost=2.0,
                               label=f"{name}: sample {k + 1}/{count}"))
-        results = tuple(Result(("samples", i, k)) for k in range(count))
-        tasks.append(Task(("fit", i), fit_task, (fabric, Result(("relax", i)), model, *results), cost=1.0,
-                          label=f"{name}: fit"))
+        for j, indices in enumerate(paths, start=len(single)):
+            # A load path: a few samples' worth of solves or more, so it starts before the single samples.
+            tasks.append(Task(("samples", i, j), solve_design_path, (Result(("relax", i)), samples, indices),
+                              cost=3.0 + len(indices), label=f"{name}: load path of samples "
+                                                             f"{', '.join(str(k + 1) for k in indices)}/{count}"))
+        results = tuple(Result(("samples", i, j)) for j in range(len(layout)))
+        tasks.append(Task(("fit", i), fit_task, (fabric, Result(("relax", i)), model, friction, layout, *results),
+                          cost=1.0, label=f"{name}: fit"))
         tasks.append(Task(("export", i), export_task, (Result(("fit", i)),), label=f"{name}: export"))
         wanted += [("fit", i), ("export", i)]
         if validate:
@@ -369,6 +395,7 @@ def _fit_columns(outcomes: dict, i: int) -> dict:
     worst = max(rms, key=rms.get) if rms else ""
     r2 = [f["r2"] for f in families.values() if f.get("r2") is not None and f.get("samples", 0) >= R2_MIN_SAMPLES]
     return {"engineering": {k: float(data["engineering"][k]) for k in ENGINEERING_KEYS if k in data["engineering"]},
+            "sample_friction": float(data["fit"].get("sample_friction", 0.0)),
             "fit_min_r2": float(min(r2)) if r2 else math.nan, "fit_worst_family": worst,
             "fit_max_relative_rms": float(rms[worst]) if worst else math.nan}
 
@@ -389,7 +416,8 @@ def write_table(entries: list[CatalogueEntry], out: Path) -> tuple[Path, Path]:
         writer.writerow({k: ("" if v is None or (isinstance(v, float) and math.isnan(v)) else v)
                          for k, v in row.items()})
     table_csv = write_atomically(out / "catalogue.csv", text.getvalue())
-    types = {"row": pa.int64(), "verdicts_passed": pa.int64(), "fit_min_r2": pa.float64(),
+    types = {"row": pa.int64(), "verdicts_passed": pa.int64(), "sample_friction": pa.float64(),
+             "fit_min_r2": pa.float64(),
              "fit_max_relative_rms": pa.float64(), **{k: pa.float64() for k in ENGINEERING_KEYS}}
     schema = pa.schema([(c, types.get(c, pa.string())) for c in TABLE_COLUMNS])
     table = pa.Table.from_pylist(rows, schema=schema)

@@ -178,6 +178,9 @@ def build_parser() -> argparse.ArgumentParser:
     catalogue.add_argument("--samples", type=int, default=None, metavar="N",
                            help="about how many deformation samples per fabric (at least 16; default 55)")
     catalogue.add_argument("--model", choices=("full", "paper"), default="full", help="as for `yarnfit fit`")
+    catalogue.add_argument("--friction", action="store_true",
+                           help="load the membrane samples from rest with the fibre's friction, as `yarnfit fit "
+                                "--friction` (slower: one task per load path)")
     catalogue.add_argument("--validate", action="store_true",
                            help="also run the validation scenes (quick: stretch, sphere, cusick) on each fabric")
     catalogue.add_argument("--workers", type=int, default=None, metavar="N",
@@ -825,7 +828,7 @@ def cmd_catalogue(args: argparse.Namespace) -> int:
 
     with make_backend(args.scheduler, args.workers, dask=args.dask) as backend, announce_compilation(line):
         run = run_catalogue(args.labels, out, backend, samples=samples, model=args.model, validate=args.validate,
-                            on_done=on_done)
+                            on_done=on_done, friction=args.friction)
     line.close()
     width = max(len(e.label.name) for e in run.entries)
     for entry in run.entries:

@@ -19,7 +19,8 @@ from typing import Callable
 
 from .fabric import Fabric
 from .fit import COUPLING_LIMIT, ShellFit, fit_shell
-from .homogenize import default_ranges, solve_loading_samples, solve_sample, solve_samples
+from .homogenize import (default_ranges, loading_groups, loading_path_samples, solve_loading_samples, solve_sample,
+                         solve_samples)
 from .material_file import MaterialFile
 from .relax import RelaxedRepeat, relax
 from .samples import SampleRanges, SampleResult, SampleSpec, design_size, levels_for, sample_design
@@ -109,6 +110,30 @@ def solve_design_sample(relaxed: RelaxedRepeat, samples: int, index: int) -> Sam
     """Sample ``index`` of :func:`design_specs` (default ranges), solved: one task of a fit whose
     design is only known once the repeat is relaxed (a catalogue's)."""
     return solve_sample(relaxed, design_specs(relaxed, samples)[index])
+
+
+def design_loading_groups(samples: int = DEFAULT_SAMPLES) -> tuple[list[int], dict]:
+    """:func:`~yarnfit.homogenize.loading_groups` of the design of about ``samples`` samples, known
+    before the repeat is relaxed (a catalogue's task graph): default ranges (no in-plane
+    compression) change the design's magnitudes from one fabric to the next, never which family and
+    sign each sample is. :func:`solve_design_path` checks that against the relaxed repeat's own."""
+    return loading_groups(sample_design(SampleRanges(stretch=0.1, curvature=10.0), levels_for(samples)))
+
+
+def solve_design_path(relaxed: RelaxedRepeat, samples: int, indices: tuple[int, ...]) -> list[SampleResult]:
+    """The samples ``indices`` of :func:`design_specs` (default ranges), one frictional load path
+    with the fibre's friction (:func:`yarnfit.homogenize.loading_path_samples`): one task of a
+    catalogue's loading fit.
+
+    Raises:
+        ValueError: ``indices`` are not one path of the relaxed repeat's design.
+    """
+    specs = design_specs(relaxed, samples)
+    if list(indices) not in loading_groups(specs)[1].values():
+        raise ValueError(f"samples {list(indices)} are not one load path of the {len(specs)}-sample design")
+    chosen = [specs[i] for i in indices]
+    return loading_path_samples(relaxed, chosen[0].family, [spec.parameter for spec in chosen],
+                                relaxed.fiber.friction)
 
 
 def fit_solved(fabric: Fabric, relaxed: RelaxedRepeat, results: list[SampleResult], model: str = "full",

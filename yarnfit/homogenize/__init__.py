@@ -34,7 +34,7 @@ such paths, for a shell fitted to the fabric's loading response: ``yarnfit fit -
 
 from .equilibrium import MAX_ITERATIONS
 from .frictional import frictional_periodic_bias_pull, frictional_periodic_pull
-from .loading import loading_path_samples, solve_loading_samples
+from .loading import loading_groups, loading_path_samples, solve_loading_samples
 from .pull import PeriodicPull, periodic_bias_pull, periodic_pull
 from .sample import MAX_TURN_PER_REPEAT, default_ranges, sample_tasks, solve_sample, solve_samples
 from .surface import SurfaceMap, TiledRepeat, tile_repeat, transfer_fluctuation
@@ -48,6 +48,7 @@ __all__ = [
     "default_ranges",
     "frictional_periodic_bias_pull",
     "frictional_periodic_pull",
+    "loading_groups",
     "loading_path_samples",
     "periodic_bias_pull",
     "periodic_pull",

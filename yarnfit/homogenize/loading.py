@@ -45,7 +45,7 @@ from .frictional import (_frictional_step, _Pass, _rest, _Trial, frictional_peri
 from .sample import sample_tasks
 from .surface import _form_map
 
-__all__ = ["loading_path_samples", "solve_loading_samples"]
+__all__ = ["loading_groups", "loading_path_samples", "solve_loading_samples"]
 
 # Two magnitudes of a path count as the same sample when closer than this (a sample's parameter
 # is also a step's end; round-off of the grid).
@@ -162,6 +162,20 @@ def _uniaxial_path(relaxed: RelaxedRepeat, family: Family, grid: Sequence[float]
         across_slope=0.0) for pull in pulls]
 
 
+def loading_groups(specs: Sequence[SampleSpec]) -> tuple[list[int], dict[tuple[Family, bool], list[int]]]:
+    """How a loading fit solves ``specs``: the indices solved alone (bends, the undeformed sample),
+    and the indices of each frictional path, keyed by family and whether it is the path in tension
+    (positive parameters), in the order of ``specs``."""
+    single: list[int] = []
+    paths: dict[tuple[Family, bool], list[int]] = {}
+    for i, spec in enumerate(specs):
+        if spec.is_membrane and spec.parameter != 0.0:
+            paths.setdefault((spec.family, spec.parameter > 0.0), []).append(i)
+        else:
+            single.append(i)
+    return single, paths
+
+
 def solve_loading_samples(relaxed: RelaxedRepeat, specs: Sequence[SampleSpec], coefficient: float,
                           workers: int | None = None,
                           on_sample: Callable[[int, int, SampleResult], None] | None = None,
@@ -177,13 +191,7 @@ def solve_loading_samples(relaxed: RelaxedRepeat, specs: Sequence[SampleSpec], c
     if backend is None:
         with LocalPool(workers, tasks=len(specs)) as pool:
             return solve_loading_samples(relaxed, specs, coefficient, on_sample=on_sample, backend=pool)
-    paths: dict[tuple, list[int]] = {}
-    single = []
-    for i, spec in enumerate(specs):
-        if spec.is_membrane and spec.parameter != 0.0:
-            paths.setdefault((spec.family, spec.parameter > 0.0), []).append(i)
-        else:
-            single.append(i)
+    single, paths = loading_groups(specs)
     tasks = sample_tasks(relaxed, [specs[i] for i in single], key=lambda k: ("sample", single[k]))
     for (family, positive), indices in paths.items():
         # Paths first: each is several samples' worth of solves, the longest work there is.
