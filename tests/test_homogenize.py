@@ -39,7 +39,6 @@ from yarnfit.homogenize import (
     transfer_fluctuation,
 )
 from yarnfit.engine.friction import anchor_contacts
-from yarnfit.homogenize.bend import fabric_reach
 from yarnfit.homogenize.bias import _search_bias
 from yarnfit.homogenize.equilibrium import CONTINUATION_HALVINGS, _green_slope, _solve_with_continuation
 from yarnfit.homogenize.surface import _spd_sqrt
@@ -80,8 +79,6 @@ STRAIGHT_RTOL = 0.01
 STRETCH_SHARE_ATOL = 1e-3
 # Warp stretch, shear and warp bending of non-touching parallel weft yarns: "at least 100× smaller".
 DECOUPLED_RATIO = 1e-2
-# The neutral surface found against its first-order place (test_a_bend_is_taken_about_its_neutral_surface).
-NEUTRAL_OFFSET_RTOL = 0.02
 # The periodic pull of straight non-touching yarns against EA ε / d: the slope's central difference
 # costs ~1e-6 of it (STRAIN_SLOPE_STEP's note) and the solve's force residual (1e-8 relative) less.
 STRAIGHT_PULL_RTOL = 1e-5
@@ -495,57 +492,16 @@ def test_straight_parallel_yarns_give_the_closed_form_stiffness(model, breaking_
 
 
 @functools.lru_cache(maxsize=None)
-def straight_yarns(E=2e9, r=1e-4, d=3e-4, height=0.0):
+def straight_yarns(E=2e9, r=1e-4, d=3e-4):
     """Straight weft yarns of a linear fibre (Young's modulus E), radius r, spacing d, not
-    touching, at ``height`` above the repeat's reference surface, relaxed as solid rods."""
+    touching, relaxed as solid rods."""
     fiber = Fiber(name="linear", density_kg_m3=1000.0, young_min_pa=E, young_max_pa=E, breaking_strain=0.1,
                   poisson=0.3, friction=0.2, fineness_dtex=2.0, flexural_rigidity_nm2_per_tex2=0.5e-9,
                   torsional_rigidity_nm2_per_tex2=0.2e-9)
     x = np.linspace(0.0, 2e-3, 16, endpoint=False)
-    points = np.column_stack([x, np.full_like(x, 0.5 * d), np.full_like(x, height)])
+    points = np.column_stack([x, np.full_like(x, 0.5 * d), np.zeros_like(x)])
     pattern = YarnPattern.from_yarns("parallel", "woven", (2e-3, d), r, [(points, (1, 0))])
     return relax_pattern(pattern, fiber, shrink=1.0, yarn=YarnConstruction(model="solid"))
-
-
-def test_a_bend_is_taken_about_its_neutral_surface():
-    # Two straight weft yarns of a linear fibre per repeat, one 4r above the other, not touching;
-    # the upper one has twice the nodes, so the tiling's reference surface (the nodes' mean height)
-    # lies 8r/3 above the lower yarn, not midway where their stretch balances. Each yarn follows the
-    # surface at its height h: bent about a surface at height z, Ū = Σ (EI + EA (h − z)²) κ² / 2 over
-    # the repeat's area 2d per unit length. Held at the reference surface (the paper's I = Id) that
-    # is (EI + 40/9 EA r²) κ² / 2d; about the neutral surface (midway, 2r/3 below the reference)
-    # (EI + 4 EA r²) κ² / 2d, 10 % less: the search must find that surface and that energy.
-    r, d, E = 1e-4, 3e-4, 2e9
-    fiber = Fiber(name="linear", density_kg_m3=1000.0, young_min_pa=E, young_max_pa=E, breaking_strain=0.1,
-                  poisson=0.3, friction=0.2, fineness_dtex=2.0, flexural_rigidity_nm2_per_tex2=0.5e-9,
-                  torsional_rigidity_nm2_per_tex2=0.2e-9)
-    yarns = []
-    for count, y, z in ((16, 0.5 * d, 0.0), (32, 1.5 * d, 4.0 * r)):
-        x = np.linspace(0.0, 2e-3, count, endpoint=False)
-        yarns.append((np.column_stack([x, np.full_like(x, y), np.full_like(x, z)]), (1, 0)))
-    relaxed = relax_pattern(YarnPattern.from_yarns("layers", "woven", (2e-3, 2.0 * d), r, yarns), fiber, shrink=1.0,
-                            yarn=YarnConstruction(model="solid"))
-    heights = relaxed.state.node_position[:, 2]
-    assert heights.mean() - heights.min() == pytest.approx(8.0 * r / 3.0, rel=1e-6)
-    bending, stretch = relaxed.yarn.bending_rigidity_nm2, relaxed.yarn.tensile_rigidity_n
-    rest = solve_sample(relaxed, identity_sample()).energy_density
-    assert fabric_reach(relaxed) == pytest.approx(8.0 * r / 3.0 + r, rel=1e-6)
-    for curvature in (20.0, -20.0):
-        spec = SampleSpec.at(Family.WEFT_BEND, curvature)
-        sample = solve_sample(relaxed, spec)
-        assert sample.converged
-        assert sample.energy_density - rest == pytest.approx((bending + 4.0 * stretch * r**2) * curvature**2 / (2 * d),
-                                                             rel=STRAIGHT_RTOL)
-        offset = [o for o in sample.neutral_offset if not math.isnan(o)]
-        assert len(offset) == 1
-        # Midway to first order in the strain: the yarns' strains are λ (1 + h κ) − 1 with λ − 1 ≈ −z κ,
-        # whose product terms (h κ ~ 1e-3 of them) and the search's tolerance move the least-energy
-        # offset by ~1 % (measured 65.9 µm against 66.7).
-        assert abs(offset[0]) == pytest.approx(2.0 * r / 3.0, rel=NEUTRAL_OFFSET_RTOL)
-        tiled, fixed, _ = _solve_with_continuation(relaxed, np.eye(2), spec.II, QuasiStaticOptions())
-        assert fixed.converged
-        assert fixed.energy.internal / tiled.area - rest == pytest.approx(
-            (bending + 40.0 / 9.0 * stretch * r**2) * curvature**2 / (2 * d), rel=STRAIGHT_RTOL)
 
 
 def test_a_periodic_pull_of_straight_yarns_is_their_tensile_rigidity():

@@ -586,7 +586,6 @@ def export_summary(built, material, output, args) -> str:
 
 
 def fit_summary(fitted, output, recording_path) -> str:
-    from .homogenize.bend import at_reach, fabric_reach
     from .shell import GF_CM2_PER_CM
 
     fabric, relaxed, fit = fitted.fabric, fitted.relaxed, fitted.fit
@@ -627,11 +626,6 @@ def fit_summary(fitted, output, recording_path) -> str:
     lines.append("  samples         " + (f"membrane loaded from rest with friction μ {fitted.sample_friction:g} "
                                          "(--friction); bends frictionless" if fitted.sample_friction > 0.0 else
                                          "frictionless minimisers (the paper's; --friction loads them)"))
-    bends = [s for s in fitted.samples if not s.is_membrane]
-    reached = sum(at_reach(s, fabric_reach(relaxed)) for s in bends)
-    lines.append("  bends           about their neutral surfaces (membrane strain free along the curvature)"
-                 + (f"; {reached} of {len(bends)} ended at the fabric's reach, their Ū an upper bound" if reached
-                    else ""))
     t = fitted.seconds
     lines.append(f"  time            relax {t['relax']:.1f} s, samples {t['homogenize']:.1f} s, fit {t['fit']:.2f} s "
                  f"(total {sum(t.values()):.1f} s)")

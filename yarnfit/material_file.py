@@ -32,9 +32,7 @@
   ``converged``, ``residual`` {force, torque, penetration, energy_change}, ``iterations``,
   ``seconds``, ``stretch_share`` (of Ū in the yarns' stretch; absent or null: unknown),
   ``pull_slope_n_per_m`` and ``across_slope_n_per_m`` (uniaxial samples: dŪ/dE along and across the
-  pull at the width found; absent or null: unknown), ``neutral_offset_m`` (bends: the offsets of
-  the neutral surface they were solved about, per principal curvature in ascending order; absent
-  or null: unknown) — including
+  pull at the width found; absent or null: unknown) — including
   those that did not converge (excluded from the fit, never used);
 - ``relaxed_repeat``: ``pyp``, the relaxed repeat as ``.pyp`` text (:meth:`RelaxedRepeat.relaxed_pattern
   <yarnfit.relax.RelaxedRepeat.relaxed_pattern>`: relaxed positions, the rest lengths they balance

@@ -18,7 +18,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Callable
 
 import numpy as np
 
@@ -263,10 +262,6 @@ class SampleResult:
     ``across_slope`` (N/m), uniaxial samples only: ``dŪ/dE⊥`` across the pull at that width, ~0
     where the search found Ū's minimum, and not where it stopped at an end of its interval (a
     fabric that would widen stops at E⊥ = 0 with a negative slope); NaN as ``pull_slope``.
-    ``neutral_offset`` (m), bending samples only: ``(2,)`` the offsets along the normal of the
-    neutral surface the sample was solved about, one per principal curvature of ``II`` in
-    ascending order (NaN for a zero curvature, other families, or a file written before bends were
-    solved about their neutral surface: :mod:`yarnfit.homogenize.bend`).
 
     Non-converged samples are reported and never fitted. ValueError names the field at fault."""
 
@@ -280,7 +275,6 @@ class SampleResult:
     stretch_share: float = math.nan
     pull_slope: float = math.nan
     across_slope: float = math.nan
-    neutral_offset: tuple[float, float] = (math.nan, math.nan)
 
     def __post_init__(self) -> None:
         if not isinstance(self.spec, SampleSpec):
@@ -311,16 +305,6 @@ class SampleResult:
                 raise ValueError(f"SampleResult.{name} is only defined for a uniaxial family, got {slope!r} "
                                  f"for {self.spec.family}")
             object.__setattr__(self, name, slope)
-        offsets = self.neutral_offset
-        if not (isinstance(offsets, (tuple, list, np.ndarray)) and len(offsets) == 2):
-            raise ValueError(f"SampleResult.neutral_offset must be two offsets (m), got {offsets!r}")
-        offsets = tuple(real_number(o, "SampleResult.neutral_offset") for o in offsets)
-        if any(not math.isnan(o) for o in offsets) and self.spec.family.group is not Group.BENDING:
-            raise ValueError(f"SampleResult.neutral_offset is only defined for a bending family, got {offsets!r} "
-                             f"for {self.spec.family}")
-        if any(math.isinf(o) for o in offsets):
-            raise ValueError(f"SampleResult.neutral_offset must be finite or NaN, got {offsets!r}")
-        object.__setattr__(self, "neutral_offset", offsets)
 
     # The spec's fields, read through (the fit and the recording work with results).
     @property
@@ -367,7 +351,6 @@ class SampleResult:
             "stretch_share": finite_or_none(self.stretch_share),
             "pull_slope_n_per_m": finite_or_none(self.pull_slope),
             "across_slope_n_per_m": finite_or_none(self.across_slope),
-            "neutral_offset_m": [finite_or_none(o) for o in self.neutral_offset],
         }
 
     @classmethod
@@ -396,20 +379,10 @@ class SampleResult:
                        int(data.get("iterations", 0)), float(data.get("seconds", 0.0)),
                        stretch_share=number(data.get("stretch_share"), "stretch_share"),
                        pull_slope=number(data.get("pull_slope_n_per_m"), "pull_slope_n_per_m"),
-                       across_slope=number(data.get("across_slope_n_per_m"), "across_slope_n_per_m"),
-                       neutral_offset=_offsets(data.get("neutral_offset_m"), number))
+                       across_slope=number(data.get("across_slope_n_per_m"), "across_slope_n_per_m"))
         except (TypeError, ValueError) as exc:
             message = str(exc)
             raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None
-
-
-def _offsets(value: object, number: Callable[[object, str], float]) -> tuple[float, float]:
-    """A file's ``neutral_offset_m`` (absent or null: unknown)."""
-    if value is None:
-        return (math.nan, math.nan)
-    if not isinstance(value, list) or len(value) != 2:
-        raise ValueError(f"neutral_offset_m must be a list of two offsets, got {value!r}")
-    return (number(value[0], "neutral_offset_m[0]"), number(value[1], "neutral_offset_m[1]"))
 
 
 # -- sample design --------------------------------------------------------------------------------

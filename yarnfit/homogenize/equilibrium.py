@@ -103,23 +103,6 @@ def _solve_with_continuation(relaxed: RelaxedRepeat, I, II, options: QuasiStatic
     return tiled, result, iterations
 
 
-def _solve_near(relaxed: RelaxedRepeat, I: np.ndarray, II: np.ndarray, options: QuasiStaticOptions,
-                near: tuple[TiledRepeat, QuasiStaticResult]) -> tuple[TiledRepeat, QuasiStaticResult | None]:
-    """``relaxed`` tiled at ``(I, II)`` (curved or flat) and solved from ``near = (tiling, its
-    equilibrium)``, a neighbouring sample's, its fluctuation carried over
-    (:func:`~yarnfit.homogenize.surface.transfer_fluctuation`, as the continuation's steps are);
-    the result is ``None`` when a step left the tiles mapped. Warnings of a solve that does not
-    converge are silenced: the caller judges it."""
-    tiled = tile_repeat(relaxed, I, II)
-    transfer_fluctuation(near[0], near[1].state, tiled)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            return tiled, QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
-    except TilingReachError:
-        return tiled, None
-
-
 def _solve_from(relaxed: RelaxedRepeat, form: np.ndarray, II: np.ndarray, options: QuasiStaticOptions,
                 previous: tuple | None = None, **solve_args) -> tuple[TiledRepeat, QuasiStaticResult]:
     """``relaxed`` tiled at ``(form, II)`` (a flat sample's) and solved, warnings of a solve that

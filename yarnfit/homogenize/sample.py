@@ -11,9 +11,8 @@ import numpy as np
 
 from ..engine import QuasiStaticOptions, Residual
 from ..relax import RelaxedRepeat
-from ..samples import Family, SampleRanges, SampleResult, SampleSpec, stretch_share
+from ..samples import SampleRanges, SampleResult, SampleSpec, stretch_share
 from ..tasks import Backend, LocalPool, Task, run_tasks
-from .bend import _solve_bend
 from .bias import _solve_bias
 from .equilibrium import MAX_ITERATIONS, _solve_with_continuation
 from .uniaxial import _solve_uniaxial
@@ -24,18 +23,13 @@ def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticO
 
     A uniaxial-tension sample also minimises over its free strains: the transverse stretch μ along
     a yarn axis (:func:`_solve_uniaxial`), and on the bias the transverse strain and the pull
-    frame's shear (:func:`_solve_bias`); its result's spec carries the form found. A bending
-    sample is solved about its neutral surface, its membrane strain along each principal curvature
-    free (:func:`_solve_bend`, :mod:`.bend`: the fabric's bending at zero membrane force, which the
-    paper's ``I = Id`` is not where the repeat's reference surface is not the neutral one)."""
+    frame's shear (:func:`_solve_bias`); its result's spec carries the form found."""
     start = time.perf_counter()
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
     if spec.family.uniaxial_axis is not None:
         return _solve_uniaxial(relaxed, spec, options, start)
     if spec.family.uniaxial_angle is not None:
         return _solve_bias(relaxed, spec, options, start)
-    if not spec.is_membrane:
-        return _solve_bend(relaxed, spec, options, start)
     tiled, result, iterations = _solve_with_continuation(relaxed, spec.I, spec.II, options)
     if result is None:
         # No solve of this deformation stayed within the mapped tiles: nothing to report but that.
@@ -78,9 +72,9 @@ def default_ranges(relaxed: RelaxedRepeat) -> SampleRanges:
 def sample_tasks(relaxed, specs: Sequence[SampleSpec], key: Callable[[int], object] = lambda i: i,
                  label: str = "") -> list[Task]:
     """One :class:`~yarnfit.tasks.Task` per sample: ``solve_sample(relaxed, spec)`` keyed
-    ``key(i)``, ranked so that the longest start first (:func:`_expected_cost`: the searches of
-    many solves, the single bends' neutral offsets, then the membrane samples by strain, large
-    stretches taking the most Newton iterations). ``relaxed`` may be a :class:`~yarnfit.tasks.Result` placeholder (a catalogue's
+    ``key(i)``, ranked so that the longest start first (the uniaxial searches, 5–15 solves each;
+    then the membrane samples by strain, large stretches taking the most Newton iterations; then
+    the bends). ``relaxed`` may be a :class:`~yarnfit.tasks.Result` placeholder (a catalogue's
     relaxation task)."""
     order = sorted(range(len(specs)), key=lambda i: _expected_cost(specs[i]), reverse=True)
     rank = {i: len(specs) - r for r, i in enumerate(order)}
@@ -118,13 +112,8 @@ def solve_samples(
 
 
 def _expected_cost(spec: SampleSpec) -> tuple:
-    """Sort key of a sample's expected solve time (larger first): the searches of many solves
-    (uniaxial samples' free strains, a saddle's two neutral offsets: 20–70 solves), then the single
-    bends' one offset (~15 solves), then the membrane samples (one), each by its magnitude."""
+    """Sort key of a sample's expected solve time (larger first): uniaxial searches, then membrane
+    samples by strain, then bends by curvature."""
     strain = float(np.abs(spec.I - np.eye(2)).max())
-    curvature = float(np.abs(spec.II).max())
-    if spec.family.uniaxial_angle is not None or spec.family is Family.SADDLE_BEND:
-        solves = 2
-    else:
-        solves = 1 if curvature > 0.0 else 0
-    return (solves, strain, curvature)
+    return (spec.family.uniaxial_angle is not None, float(np.abs(spec.II).max()) == 0.0, strain,
+            float(np.abs(spec.II).max()))
