@@ -303,8 +303,8 @@ def run_catalogue(
     out = Path(out_dir)
     count = design_size(levels_for(samples))
     # Each sample task's design indices: one sample alone, or (with friction) a load path's samples.
-    single, paths = design_loading_groups(samples) if friction else (list(range(count)), {})
-    paths = [tuple(indices) for indices in paths.values()]
+    single, groups = design_loading_groups(samples) if friction else (list(range(count)), {})
+    paths = [tuple(indices) for indices in groups.values()]
     layout = tuple((k,) for k in single) + tuple(paths)
     entries: dict[int, CatalogueEntry] = {}
     fabrics: dict[int, Fabric] = {}
@@ -417,8 +417,8 @@ def write_table(entries: list[CatalogueEntry], out: Path) -> tuple[Path, Path]:
                          for k, v in row.items()})
     table_csv = write_atomically(out / "catalogue.csv", text.getvalue())
     types = {"row": pa.int64(), "verdicts_passed": pa.int64(), "sample_friction": pa.float64(),
-             "fit_min_r2": pa.float64(),
-             "fit_max_relative_rms": pa.float64(), **{k: pa.float64() for k in ENGINEERING_KEYS}}
+             "fit_min_r2": pa.float64(), "fit_max_relative_rms": pa.float64(),
+             **{k: pa.float64() for k in ENGINEERING_KEYS}}
     schema = pa.schema([(c, types.get(c, pa.string())) for c in TABLE_COLUMNS])
     table = pa.Table.from_pylist(rows, schema=schema)
     sink = pa.BufferOutputStream()
