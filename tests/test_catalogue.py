@@ -24,7 +24,7 @@ from test_tasks import checkout_env, default_sigint
 
 # The smallest design (one magnitude per family and sign): the catalogue's machinery, not the fit,
 # is under test here.
-SAMPLES = 32
+SAMPLES = 33
 # The issue's bound on a rerun of a finished catalogue (it loads the cached results only).
 RERUN_SECONDS = 5.0
 LABELS = """name,fibre,pattern,gsm,counts,yarn_spinning

@@ -522,8 +522,8 @@ def test_quality_dict_is_plain_json():
     again = json.loads(json.dumps(quality, allow_nan=False))
     assert again == quality
     keys = {"model", "membrane", "parameters_pa", "std_error_pa", "families", "linear", "strain_range",
-            "reference_energy_j_per_m2", "residual_stress", "active_bounds", "notes", "coupling_limit",
-            "weight_widths", "used", "excluded"}
+            "reference_energy_j_per_m2", "bending_reference_energy_j_per_m2", "residual_stress", "active_bounds",
+            "notes", "coupling_limit", "weight_widths", "used", "excluded"}
     assert set(quality) == keys
     assert quality["parameters_pa"] == fit.parameters
     assert len(quality["used"]) == len(fit.used)

@@ -248,6 +248,25 @@ def test_the_residual_stress_is_fitted_only_when_asked():
             assert quality["relative_rms"] <= RECOVERY_REL, family
 
 
+def test_the_bends_are_measured_from_the_unbent_sample_at_zero_membrane_force():
+    # Bends are solved at zero membrane force, which releases most of the relaxed repeat's own
+    # energy (its settle's tolerance): the unbent bending sample (free_rest_sample) is their
+    # reference, the undeformed membrane sample the membrane's. Bends carrying a rest energy of a
+    # tenth of the membrane's are fitted as exactly as with one reference for all.
+    bend_rest = 0.1 * REST_ENERGY
+    samples = [s if s.is_membrane else dataclasses.replace(s, energy_density=s.energy_density - REST_ENERGY + bend_rest)
+               for s in samples_of(FABRIC, REST_ENERGY)]
+    assert sum(not s.is_membrane and not np.any(s.II) for s in samples) == 1
+    fit = fit_shell(samples, H)
+    assert fit.reference_energy == pytest.approx(REST_ENERGY, rel=1e-12)
+    assert fit.bending_reference_energy == pytest.approx(bend_rest, rel=1e-12)
+    assert fit.quality_dict()["bending_reference_energy_j_per_m2"] == fit.bending_reference_energy
+    shell = FABRIC.energy_density(np.stack([s.I for s in fit.used]), np.stack([s.II for s in fit.used]))
+    np.testing.assert_allclose(fit.shell_energy(fit.used), shell, rtol=1e-6, atol=1e-9 * float(np.max(shell)))
+    for name in ("b00", "b11", "b22"):
+        assert fit.parameters[name] == pytest.approx(getattr(FABRIC, name), rel=RECOVERY_REL), name
+
+
 def test_residual_moments_are_the_central_differences_at_the_smallest_curvature():
     # A symmetric quadratic bending plus a moment: the ± difference at any curvature is the moment
     # exactly (the quadratic part cancels), so the reported moments are the data's to round-off.

@@ -43,7 +43,7 @@ TILES = [(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)]
 def fitted():
     """A real fit, as small as the sample design allows (15 samples, ~10 s)."""
     fabric = Fabric(name="plain", fiber=get_fiber("cotton"), structure="plain", areal_density=0.2)
-    return fit_fabric(fabric, samples=32, workers=1)
+    return fit_fabric(fabric, samples=33, workers=1)
 
 
 def record(fabric_fit, path, samples=True):

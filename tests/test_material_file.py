@@ -29,7 +29,7 @@ REBUILD_ITERATIONS = 30
 def fitted():
     fabric = Fabric(name="plain", fiber=get_fiber("cotton"), structure="plain", areal_density=0.2,
                     counts=(2500.0, 2500.0))
-    return fit_fabric(fabric, samples=32, workers=1)
+    return fit_fabric(fabric, samples=33, workers=1)
 
 
 def test_what_fit_writes_reads_back(tmp_path):

@@ -6,8 +6,9 @@ yarn-construction columns ``yarn_model``, ``yarn_spinning``, ``yarn_packing``, `
 (as the ``--yarn-*`` options of ``yarnfit fit``; empty cells take the defaults). Any other column
 is refused (a misspelt column would otherwise be silently ignored).
 
-Work: per fabric, a graph of tasks (:mod:`yarnfit.tasks`) — relax the repeat; solve each sample of
-the design (with ``friction``, each membrane family's samples as one load path with the fibre's
+Work: per fabric, a graph of tasks (:mod:`yarnfit.tasks`) — relax the repeat; solve the design's
+samples, one task per group of :func:`yarnfit.homogenize.sample_groups` (each bend family and sign
+as a path; with ``friction``, each membrane family's samples as one load path with the fibre's
 friction, as ``yarnfit fit --friction``); fit the shell; export the MuJoCo scene; with
 ``validate``, run the validation scenes — on a local pool or a Dask cluster. Results are cached in
 ``DIR/.cache`` by a hash of every input and the yarnfit version, so a rerun, or a run after an
@@ -37,8 +38,7 @@ from typing import Callable
 
 from .fabric import DEFAULT_COUNTS_PER_CM, Fabric, counts_from_label
 from .checks import error_line
-from .fabric_fit import (DEFAULT_SAMPLES, design_loading_groups, fit_solved, relax_for_fit, solve_design_path,
-                         solve_design_sample)
+from .fabric_fit import DEFAULT_SAMPLES, design_groups, fit_solved, relax_for_fit, solve_design_group
 from .fibers import get_fiber
 from .material_file import MaterialFile
 from .outputs import write_atomically
@@ -235,7 +235,7 @@ class CatalogueRun:
 def fit_task(fabric: Fabric, relaxed, model: str, friction: bool, layout: tuple[tuple[int, ...], ...],
              *outcomes) -> dict:
     """The material file's contents of the shell fitted to the design's samples: ``outcomes[j]``
-    carries the samples ``layout[j]`` of the design (one sample, or a load path's list), loaded
+    carries the samples ``layout[j]`` of the design (one sample, or a path's list), loaded
     with the fibre's friction if ``friction``."""
     results: list = [None] * sum(len(indices) for indices in layout)
     for indices, outcome in zip(layout, outcomes, strict=True):
@@ -302,10 +302,8 @@ def run_catalogue(
         raise ValueError(f"model must be 'full' or 'paper', got {model!r}")
     out = Path(out_dir)
     count = design_size(levels_for(samples))
-    # Each sample task's design indices: one sample alone, or (with friction) a load path's samples.
-    single, groups = design_loading_groups(samples) if friction else (list(range(count)), {})
-    paths = [tuple(indices) for indices in groups.values()]
-    layout = tuple((k,) for k in single) + tuple(paths)
+    # Each sample task's design indices: one sample alone, a bend path, or (with friction) a load path.
+    layout = tuple(design_groups(samples, friction))
     entries: dict[int, CatalogueEntry] = {}
     fabrics: dict[int, Fabric] = {}
     seen: dict[str, int] = {}
@@ -324,14 +322,12 @@ def run_catalogue(
     for i, fabric in fabrics.items():
         name = fabric.name
         tasks.append(Task(("relax", i), relax_for_fit, (fabric,), cost=3.0, label=f"{name}: relax"))
-        for j, k in enumerate(single):
-            tasks.append(Task(("samples", i, j), solve_design_sample, (Result(("relax", i)), samples, k), cost=2.0,
-                              label=f"{name}: sample {k + 1}/{count}"))
-        for j, indices in enumerate(paths, start=len(single)):
-            # A load path: a few samples' worth of solves or more, so it starts before the single samples.
-            tasks.append(Task(("samples", i, j), solve_design_path, (Result(("relax", i)), samples, indices),
-                              cost=3.0 + len(indices), label=f"{name}: load path of samples "
-                                                             f"{', '.join(str(k + 1) for k in indices)}/{count}"))
+        for j, indices in enumerate(layout):
+            # A path: a few samples' worth of solves or more, so it starts before the single samples.
+            what = (f"sample {indices[0] + 1}/{count}" if len(indices) == 1 else
+                    f"path of samples {', '.join(str(k + 1) for k in indices)}/{count}")
+            tasks.append(Task(("samples", i, j), solve_design_group, (Result(("relax", i)), samples, indices, friction),
+                              cost=1.0 + len(indices), label=f"{name}: {what}"))
         results = tuple(Result(("samples", i, j)) for j in range(len(layout)))
         tasks.append(Task(("fit", i), fit_task, (fabric, Result(("relax", i)), model, friction, layout, *results),
                           cost=1.0, label=f"{name}: fit"))

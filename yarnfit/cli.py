@@ -621,7 +621,8 @@ def fit_summary(fitted, output, recording_path) -> str:
         stress = (f"residual stress {r['n0']:.3g} / {r['n1']:.3g} N/m weft / warp (fitted), "
                   if any(r[n] for n in ("n0", "n1", "n2")) else "")
         lines.append(f"  rest state      {stress}moments {r['m0']:.3g} / {r['m1']:.3g} N (from ±κ), rest energy "
-                     f"{fit.reference_energy:.3g} J/m²: left out of the shell")
+                     f"{fit.reference_energy:.3g} J/m² (bends, at zero membrane force: {fit.bending_reference:.3g}): "
+                     f"left out of the shell")
     lines += [f"  note            {note}" for note in fit.notes]
     lines.append("  samples         " + (f"membrane loaded from rest with friction μ {fitted.sample_friction:g} "
                                          "(--friction); bends frictionless" if fitted.sample_friction > 0.0 else

@@ -19,8 +19,7 @@ from typing import Callable
 
 from .fabric import Fabric
 from .fit import COUPLING_LIMIT, ShellFit, fit_shell
-from .homogenize import (default_ranges, loading_groups, loading_path_samples, solve_loading_samples, solve_sample,
-                         solve_samples)
+from .homogenize import default_ranges, sample_groups, solve_group, solve_samples
 from .material_file import MaterialFile
 from .relax import RelaxedRepeat, relax
 from .samples import SampleRanges, SampleResult, SampleSpec, design_size, levels_for, sample_design
@@ -106,34 +105,29 @@ def design_specs(relaxed: RelaxedRepeat, samples: int = DEFAULT_SAMPLES,
     return sample_design(ranges or default_ranges(relaxed), levels_for(samples))
 
 
-def solve_design_sample(relaxed: RelaxedRepeat, samples: int, index: int) -> SampleResult:
-    """Sample ``index`` of :func:`design_specs` (default ranges), solved: one task of a fit whose
-    design is only known once the repeat is relaxed (a catalogue's)."""
-    return solve_sample(relaxed, design_specs(relaxed, samples)[index])
-
-
-def design_loading_groups(samples: int = DEFAULT_SAMPLES) -> tuple[list[int], dict]:
-    """:func:`~yarnfit.homogenize.loading_groups` of the design of about ``samples`` samples, known
+def design_groups(samples: int = DEFAULT_SAMPLES, friction: bool = False) -> list[tuple[int, ...]]:
+    """:func:`~yarnfit.homogenize.sample_groups` of the design of about ``samples`` samples, known
     before the repeat is relaxed (a catalogue's task graph): default ranges (no in-plane
     compression) change the design's magnitudes from one fabric to the next, never which family and
-    sign each sample is. :func:`solve_design_path` checks that against the relaxed repeat's own."""
-    return loading_groups(sample_design(SampleRanges(stretch=0.1, curvature=10.0), levels_for(samples)))
+    sign each sample is, which is all the groups depend on (so any ranges give them).
+    :func:`solve_design_group` checks them against the relaxed repeat's own design."""
+    return sample_groups(sample_design(SampleRanges(stretch=0.1, curvature=10.0), levels_for(samples)), friction)
 
 
-def solve_design_path(relaxed: RelaxedRepeat, samples: int, indices: tuple[int, ...]) -> list[SampleResult]:
-    """The samples ``indices`` of :func:`design_specs` (default ranges), one frictional load path
-    with the fibre's friction (:func:`yarnfit.homogenize.loading_path_samples`): one task of a
-    catalogue's loading fit.
+def solve_design_group(relaxed: RelaxedRepeat, samples: int, indices: tuple[int, ...],
+                       friction: bool = False) -> list[SampleResult]:
+    """The samples ``indices`` of :func:`design_specs` (default ranges), one group of
+    :func:`design_groups` (with ``friction``: the membrane samples on load paths with the fibre's
+    friction), solved by :func:`~yarnfit.homogenize.solve_group`: one task of a fit whose design is
+    only known once the repeat is relaxed (a catalogue's).
 
     Raises:
-        ValueError: ``indices`` are not one path of the relaxed repeat's design.
+        ValueError: ``indices`` are not one group of the relaxed repeat's design.
     """
     specs = design_specs(relaxed, samples)
-    if list(indices) not in loading_groups(specs)[1].values():
-        raise ValueError(f"samples {list(indices)} are not one load path of the {len(specs)}-sample design")
-    chosen = [specs[i] for i in indices]
-    return loading_path_samples(relaxed, chosen[0].family, [spec.parameter for spec in chosen],
-                                relaxed.fiber.friction)
+    if tuple(indices) not in sample_groups(specs, friction):
+        raise ValueError(f"samples {list(indices)} are not one group of the {len(specs)}-sample design")
+    return solve_group(relaxed, [specs[i] for i in indices], relaxed.fiber.friction if friction else None)
 
 
 def fit_solved(fabric: Fabric, relaxed: RelaxedRepeat, results: list[SampleResult], model: str = "full",
@@ -193,10 +187,7 @@ def fit_fabric(
     specs = design_specs(relaxed, samples, ranges)
     start = time.perf_counter()
     coefficient = relaxed.fiber.friction if friction else 0.0
-    if friction:
-        results = solve_loading_samples(relaxed, specs, coefficient, workers=workers, on_sample=on_sample,
-                                        backend=backend)
-    else:
-        results = solve_samples(relaxed, specs, workers=workers, on_sample=on_sample, backend=backend)
+    results = solve_samples(relaxed, specs, workers=workers, on_sample=on_sample, backend=backend,
+                            coefficient=coefficient if friction else None)
     seconds["homogenize"] = time.perf_counter() - start
     return fit_solved(fabric, relaxed, results, model, coupling_limit, ranges, seconds, coefficient)

@@ -228,7 +228,11 @@ class ShellFit:
             Voigt strain of the used membrane samples ``[lo, hi]``: where the ridges were fitted
             (beyond it each ray keeps its last tangent).
         reference_energy: Ū of the undeformed samples (J/m², their mean; 0 without one): the
-            relaxed repeat's own energy, which every sample's Ū includes.
+            relaxed repeat's own energy, which every membrane sample's Ū includes.
+        bending_reference_energy: Ū of the unbent bending samples (J/m², their mean; the
+            ``reference_energy`` without one): the repeat's energy at zero membrane force
+            (:func:`~yarnfit.samples.free_rest_sample`), the bends' reference, as they are
+            solved at zero membrane force too.
         residual_stress: what the repeat carries at rest (0 without an undeformed sample):
             ``n0 n1 n2`` (N/m) along ε0, ε1, ε2, the membrane terms linear in the strain, fitted
             with the stiffening membrane and left out of the shell; ``m0 m1 m2`` (N, moment per
@@ -252,13 +256,19 @@ class ShellFit:
     strain_range: dict[str, list[float]] = field(default_factory=dict)
     reference_energy: float = 0.0
     residual_stress: dict[str, float] = field(default_factory=dict)
+    bending_reference_energy: float | None = None
     notes: list[str] = field(default_factory=list)
     coupling_limit: float | None = COUPLING_LIMIT
 
     def shell_energy(self, samples: Sequence[SampleResult]) -> np.ndarray:
         """``(n,)`` the part of each sample's Ū the shell represents (J/m²): Ū less the rest
         energy and the membrane's residual-stress terms (NaN stays NaN)."""
-        return shell_energy_of(samples, self.reference_energy, self.residual_stress)
+        return shell_energy_of(samples, self.reference_energy, self.residual_stress, self.bending_reference_energy)
+
+    @property
+    def bending_reference(self) -> float:
+        """The bends' rest energy (J/m²): ``bending_reference_energy``, else ``reference_energy``."""
+        return self.reference_energy if self.bending_reference_energy is None else self.bending_reference_energy
 
     def quality_dict(self) -> dict:
         """Everything but the material as plain JSON data (str, float, int, list, dict).
@@ -294,6 +304,7 @@ class ShellFit:
             },
             "strain_range": {k: [float(v) for v in r] for k, r in self.strain_range.items()},
             "reference_energy_j_per_m2": float(self.reference_energy),
+            "bending_reference_energy_j_per_m2": float(self.bending_reference),
             "residual_stress": {
                 "membrane_n_per_m": {k: float(self.residual_stress.get(k, 0.0)) for k in RESIDUAL_STRESS_NAMES["membrane"]},
                 "bending_n": {k: float(self.residual_stress.get(k, 0.0)) for k in RESIDUAL_STRESS_NAMES["bending"]},
@@ -308,17 +319,27 @@ class ShellFit:
 
 
 def shell_energy_of(samples: Sequence[SampleResult], reference_energy: float = 0.0,
-                    residual_stress: dict[str, float] | None = None) -> np.ndarray:
+                    residual_stress: dict[str, float] | None = None,
+                    bending_reference_energy: float | None = None) -> np.ndarray:
     """``(n,)`` the part of each sample's Ū the shell represents (J/m²): Ū less the rest energy
-    ``reference_energy`` (J/m²) and the membrane's residual-stress terms ``n · ε`` (``residual_stress``
-    by name, ``n0 n1 n2`` in N/m; a missing one is 0, the bending moments are not fitted). NaN
-    stays NaN. :meth:`ShellFit.shell_energy` with a fit's own values; a material file keeps them
-    (:meth:`~yarnfit.material_file.MaterialFile.rest_state`)."""
+    (J/m²: ``reference_energy`` of a membrane sample, ``bending_reference_energy`` of a bend,
+    ``reference_energy`` if that is ``None``) and the membrane's residual-stress terms ``n · ε``
+    (``residual_stress`` by name, ``n0 n1 n2`` in N/m; a missing one is 0, the bending moments are
+    not fitted). NaN stays NaN. :meth:`ShellFit.shell_energy` with a fit's own values; a material
+    file keeps them (:meth:`~yarnfit.material_file.MaterialFile.rest_state`)."""
     samples = _sample_list(samples)
     residual_stress = residual_stress or {}
     energy = np.array([s.energy_density for s in samples], dtype=np.float64)
     stress = np.array([residual_stress.get(n, 0.0) for n in RESIDUAL_STRESS_NAMES["membrane"]])
-    return energy - reference_energy - _residual_stress_columns(samples)[:, :3] @ stress
+    return (energy - _rest_energies(samples, reference_energy, bending_reference_energy)
+            - _residual_stress_columns(samples)[:, :3] @ stress)
+
+
+def _rest_energies(samples: list[SampleResult], reference_energy: float,
+                   bending_reference_energy: float | None) -> np.ndarray:
+    """``(n,)`` each sample's rest energy (J/m², :func:`shell_energy_of`)."""
+    bending = reference_energy if bending_reference_energy is None else bending_reference_energy
+    return np.array([reference_energy if s.is_membrane else bending for s in samples], dtype=np.float64)
 
 
 def design_matrix(samples: Sequence[SampleResult], thickness: float) -> np.ndarray:
@@ -517,23 +538,28 @@ def fit_shell(
             f"{', '.join(required)}"
         )
 
-    # The energy reference and the residual stress (module docstring): the undeformed samples'
-    # mean energy is subtracted, and each group gains the terms linear in its strains.
+    # The energy references and the residual stress (module docstring): the undeformed samples'
+    # mean energy is subtracted, the membrane's from the membrane samples and the unbent bending
+    # samples' (at zero membrane force) from the bends, and each group gains the terms linear in
+    # its strains.
     target = np.array([s.energy_density for s in used])
     undeformed = np.array([_is_undeformed(s) for s in used], dtype=bool)
-    reference_energy = float(np.mean(target[undeformed])) if np.any(undeformed) else 0.0
-    relative = target - reference_energy
+    membrane_rows = np.array([s.is_membrane for s in used], dtype=bool)
+    reference_energy = float(np.mean(target[undeformed & membrane_rows])) if np.any(undeformed & membrane_rows) else 0.0
+    bending_reference_energy = (float(np.mean(target[undeformed & ~membrane_rows]))
+                                if np.any(undeformed & ~membrane_rows) else None)
+    rest_energy = _rest_energies(used, reference_energy, bending_reference_energy)
+    relative = target - rest_energy
     weights, widths = sample_weights(used, h, weight_width)
     D = design_matrix(used, h)
     linear_terms = _residual_stress_columns(used)
-    membrane_rows = np.array([s.is_membrane for s in used], dtype=bool)
 
     parameters = dict.fromkeys(PARAMETER_NAMES, 0.0)
     std_error = dict.fromkeys(PARAMETER_NAMES, 0.0)
     active: list[str] = []
     notes: list[str] = []
     rest_stress = dict.fromkeys(_ALL_RESIDUAL, 0.0)
-    reference = bool(np.any(undeformed))
+    reference = bool(np.any(undeformed & membrane_rows))
 
     def linear_group(group, families, names, energies, residual):
         """The linear fit of one group (with its residual-stress terms if ``residual``)."""
@@ -636,7 +662,7 @@ def fit_shell(
         """The fit's prediction of each used sample's Ū: the shell, the reference, the residual stress."""
         shell = material.energy_density(np.stack([s.I for s in used]), np.stack([s.II for s in used]))
         membrane_stress = np.array([stress[n] for n in RESIDUAL_STRESS_NAMES["membrane"]])
-        return shell + reference_energy + linear_terms[:, :3] @ membrane_stress
+        return shell + rest_energy + linear_terms[:, :3] @ membrane_stress
 
     linear_families = _family_statistics(used, predicted(linear, rest_stress), target)
     material, strain_range = linear, {}
@@ -664,6 +690,7 @@ def fit_shell(
         strain_range=strain_range,
         reference_energy=reference_energy,
         residual_stress=rest_stress,
+        bending_reference_energy=bending_reference_energy,
         notes=notes,
         coupling_limit=coupling_limit,
     )

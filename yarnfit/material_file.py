@@ -56,7 +56,7 @@ import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 from . import __version__
 from .fibers import OPTIONAL_FIBER_FIELDS, Fiber
@@ -78,6 +78,16 @@ REQUIRED_KEYS = ("yarnfit_version", "inputs", "shell", "engineering")
 
 class IncompatibleMaterial(ValueError):
     """A material file this version cannot use (missing keys, or written by another minor version)."""
+
+
+class RestState(NamedTuple):
+    """What a fit took out of every sample's Ū before the shell (:meth:`MaterialFile.rest_state`):
+    the membrane samples' rest ``energy`` (J/m²), the membrane's ``residual_stress``
+    (``{n0, n1, n2}`` N/m) and the bends' rest energy ``bending_energy`` (J/m²)."""
+
+    energy: float
+    residual_stress: dict[str, float]
+    bending_energy: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,21 +250,24 @@ class MaterialFile:
             raise ValueError(f"{self.where}: no yarn-level samples (key 'samples'; write the file with `yarnfit fit`)")
         return [SampleResult.from_dict(sample, f"{self.where}: samples[{k}]") for k, sample in enumerate(samples)]
 
-    def rest_state(self) -> tuple[float, dict[str, float]]:
-        """``(rest energy J/m², {n0, n1, n2} N/m)``: what the fit took out of every sample's Ū
-        before the shell (``fit.reference_energy_j_per_m2`` and
-        ``fit.residual_stress.membrane_n_per_m``; :func:`yarnfit.fit.shell_energy_of` subtracts
-        them); zeros for a file written before they were fitted."""
+    def rest_state(self) -> RestState:
+        """What the fit took out of every sample's Ū before the shell (``fit.reference_energy_j_per_m2``,
+        ``fit.residual_stress.membrane_n_per_m`` and ``fit.bending_reference_energy_j_per_m2``;
+        :func:`yarnfit.fit.shell_energy_of` subtracts them); zeros for a file written before they
+        were fitted, the membrane's rest energy for the bends' in one written before bends were
+        solved at zero membrane force."""
         fit = self._block("fit")
         energy = fit.get("reference_energy_j_per_m2", 0.0)
+        bending = fit.get("bending_reference_energy_j_per_m2", energy)
         stress = fit.get("residual_stress", {})
         stress = stress.get("membrane_n_per_m", {}) if isinstance(stress, dict) else {}
         where = f"{self.where}: fit"
         if not isinstance(stress, dict):
             raise ValueError(f"{where}.residual_stress.membrane_n_per_m must be an object, got {stress!r}")
-        return (finite_number(energy, f"{where}.reference_energy_j_per_m2"),
-                {key: finite_number(value, f"{where}.residual_stress.membrane_n_per_m.{key}")
-                 for key, value in stress.items()})
+        return RestState(finite_number(energy, f"{where}.reference_energy_j_per_m2"),
+                         {key: finite_number(value, f"{where}.residual_stress.membrane_n_per_m.{key}")
+                          for key, value in stress.items()},
+                         finite_number(bending, f"{where}.bending_reference_energy_j_per_m2"))
 
     @property
     def name(self) -> str:

@@ -172,7 +172,7 @@ def fit_figures(material: str | os.PathLike | Mapping | MaterialFile, out_dir: s
     file = MaterialFile.read(material)
     samples = file.samples()
     shell = file.shell
-    rest_energy, residual_stress = file.rest_state()
+    rest = file.rest_state()
     fit = file.data.get("fit") if isinstance(file.data.get("fit"), Mapping) else {}
     quality = fit.get("families") if isinstance(fit.get("families"), Mapping) else {}
     folder = output_directory(out_dir)
@@ -182,8 +182,8 @@ def fit_figures(material: str | os.PathLike | Mapping | MaterialFile, out_dir: s
         members = [s for s in samples if s.family == family]
         if members:
             written += _family_figure(file.name, folder / f"{stem}-fit-{family}", family, members, shell,
-                                      shell_energy_of(members, rest_energy, residual_stress), quality.get(family),
-                                      rest_energy != 0.0 or any(residual_stress.values()))
+                                      shell_energy_of(members, rest.energy, rest.residual_stress, rest.bending_energy),
+                                      quality.get(family), rest.energy != 0.0 or any(rest.residual_stress.values()))
     stretch_range = _positive_or(fit.get("stretch_range"), DEFAULT_STRETCH_RANGE)
     written += _tension_figure(file.name, folder / f"{stem}-tension", shell, stretch_range)
     curvature_range = _positive_or(fit.get("curvature_range_per_m"), None)

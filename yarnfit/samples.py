@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Callable
 
 import numpy as np
 
@@ -39,6 +40,7 @@ __all__ = [
     "UNIAXIAL_FAMILIES",
     "design_size",
     "family_deformation",
+    "free_rest_sample",
     "identity_sample",
     "levels_for",
     "magnitudes",
@@ -262,6 +264,10 @@ class SampleResult:
     ``across_slope`` (N/m), uniaxial samples only: ``dŪ/dE⊥`` across the pull at that width, ~0
     where the search found Ū's minimum, and not where it stopped at an end of its interval (a
     fabric that would widen stops at E⊥ = 0 with a negative slope); NaN as ``pull_slope``.
+    ``free_membrane_strain``, bending samples only: ``(E00, E11, E01)`` the membrane Green strains
+    the bend was solved at, where Ū is least (zero membrane force; the spec keeps ``I = Id``:
+    :mod:`yarnfit.homogenize.bend`); NaN for other families and files written before bends were
+    solved so.
 
     Non-converged samples are reported and never fitted. ValueError names the field at fault."""
 
@@ -275,6 +281,7 @@ class SampleResult:
     stretch_share: float = math.nan
     pull_slope: float = math.nan
     across_slope: float = math.nan
+    free_membrane_strain: tuple[float, float, float] = (math.nan, math.nan, math.nan)
 
     def __post_init__(self) -> None:
         if not isinstance(self.spec, SampleSpec):
@@ -305,6 +312,16 @@ class SampleResult:
                 raise ValueError(f"SampleResult.{name} is only defined for a uniaxial family, got {slope!r} "
                                  f"for {self.spec.family}")
             object.__setattr__(self, name, slope)
+        strain = self.free_membrane_strain
+        if not (isinstance(strain, (tuple, list, np.ndarray)) and len(strain) == 3):
+            raise ValueError(f"SampleResult.free_membrane_strain must be three Green strains, got {strain!r}")
+        strain = tuple(real_number(e, "SampleResult.free_membrane_strain") for e in strain)
+        if any(math.isinf(e) for e in strain):
+            raise ValueError(f"SampleResult.free_membrane_strain must be finite or NaN, got {strain!r}")
+        if any(not math.isnan(e) for e in strain) and self.spec.family.group is not Group.BENDING:
+            raise ValueError(f"SampleResult.free_membrane_strain is only defined for a bending family, got "
+                             f"{strain!r} for {self.spec.family}")
+        object.__setattr__(self, "free_membrane_strain", strain)
 
     # The spec's fields, read through (the fit and the recording work with results).
     @property
@@ -351,6 +368,7 @@ class SampleResult:
             "stretch_share": finite_or_none(self.stretch_share),
             "pull_slope_n_per_m": finite_or_none(self.pull_slope),
             "across_slope_n_per_m": finite_or_none(self.across_slope),
+            "free_membrane_strain": [finite_or_none(e) for e in self.free_membrane_strain],
         }
 
     @classmethod
@@ -379,14 +397,26 @@ class SampleResult:
                        int(data.get("iterations", 0)), float(data.get("seconds", 0.0)),
                        stretch_share=number(data.get("stretch_share"), "stretch_share"),
                        pull_slope=number(data.get("pull_slope_n_per_m"), "pull_slope_n_per_m"),
-                       across_slope=number(data.get("across_slope_n_per_m"), "across_slope_n_per_m"))
+                       across_slope=number(data.get("across_slope_n_per_m"), "across_slope_n_per_m"),
+                       free_membrane_strain=_free_membrane_strain(data.get("free_membrane_strain"), number))
         except (TypeError, ValueError) as exc:
             message = str(exc)
             raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None
 
 
+def _free_membrane_strain(value: object, number: Callable[[object, str], float]) -> tuple[float, float, float]:
+    """A file's ``free_membrane_strain`` (absent or null: unknown)."""
+    if value is None:
+        return (math.nan, math.nan, math.nan)
+    if not isinstance(value, list) or len(value) != 3:
+        raise ValueError(f"free_membrane_strain must be a list of three Green strains, got {value!r}")
+    return tuple(number(e, f"free_membrane_strain[{k}]") for k, e in enumerate(value))
+
+
 # -- sample design --------------------------------------------------------------------------------
 
+# The design's energy references: the undeformed sample, and the unbent one at zero membrane force.
+REFERENCE_SAMPLES = 2
 # Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
 # four bend families of both signs; plus weft, warp and bias uniaxial tension at UNIAXIAL_LEVELS strains
 # each (uniaxial_strains).
@@ -450,9 +480,10 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
     in :data:`FAMILIES` order (:meth:`Family.deformation` gives each one's ``I`` and ``II``). The
     magnitudes (:func:`magnitudes`) are spaced logarithmically from :data:`SMALLEST_STRAIN` (and
     :data:`SMALLEST_CURVATURE` for bends) up to the range. The first sample is the undeformed
-    one (:func:`identity_sample`): the relaxed repeat's own energy, the reference of every other
-    sample's Ū (a knit's relaxed repeat carries a few hundredths of a J/m², of the order of its
-    0.1 % samples).
+    one (:func:`identity_sample`): the relaxed repeat's own energy, the reference of every
+    membrane sample's Ū (a knit's relaxed repeat carries a few hundredths of a J/m², of the order
+    of its 0.1 % samples). The second is the unbent repeat at zero membrane force
+    (:func:`free_rest_sample`), the reference of the bends, which are solved so.
 
     - weft, warp stretch: ``I = diag(λ², 1)`` / ``diag(1, λ²)``, λ − 1 at the stretch magnitudes,
       and one compression at ``ranges.compression`` of the range if that is not 0; biaxial
@@ -484,7 +515,7 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
             if family.group is group:
                 specs += [SampleSpec.at(family, float(value)) for value in layouts[family.layout]]
     order = {family: k for k, family in enumerate(FAMILIES)}
-    return [identity_sample()] + sorted(specs, key=lambda spec: order[spec.family])
+    return [identity_sample(), free_rest_sample()] + sorted(specs, key=lambda spec: order[spec.family])
 
 
 def magnitudes(largest: float, smallest: float, levels: int) -> np.ndarray:
@@ -505,7 +536,7 @@ def uniaxial_strains(largest: float) -> np.ndarray:
 
 def design_size(levels: int) -> int:
     """Samples in a design of ``levels`` magnitudes per family and sign."""
-    return 1 + SAMPLES_PER_LEVEL * levels + UNIAXIAL_SAMPLES
+    return REFERENCE_SAMPLES + SAMPLES_PER_LEVEL * levels + UNIAXIAL_SAMPLES
 
 
 def levels_for(samples: int) -> int:
@@ -519,8 +550,17 @@ def levels_for(samples: int) -> int:
 
 
 def identity_sample() -> SampleSpec:
-    """The undeformed surface (``I = Id``, ``II = 0``): Ū must vanish."""
+    """The undeformed surface (``I = Id``, ``II = 0``): the membrane samples' energy reference."""
     return SampleSpec.at(Family.WEFT_STRETCH, 0.0)
+
+
+def free_rest_sample() -> SampleSpec:
+    """The unbent surface as a bending sample (``II = 0``; solved at zero membrane force, as
+    every bend is): the bends' energy reference. The relaxed repeat is not quite free of membrane
+    stress at ``I = Id`` (its settle's tolerance), and freed it releases most of its own energy
+    (session 43: 85–98 %, e.g. cotton jersey 2.4e-6 → 4e-8 J/m²), as much as a 1 /m bend stores:
+    measured from ``I = Id`` the smallest bends came out negative."""
+    return SampleSpec.at(Family.WEFT_BEND, 0.0)
 
 
 def _single_form(check, value: object, name: str) -> np.ndarray:

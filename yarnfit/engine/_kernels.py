@@ -35,6 +35,7 @@ from ._quat import (
     mat_vec,
     norm,
     pull_back_block,
+    quat_between,
     quat_conj,
     quat_mul,
     quat_normalized,
@@ -706,6 +707,16 @@ def rotate_frames(quat, theta, out):
         for k in range(4):
             out[e, k] = qn[k]
 
+
+@njit(cache=True)
+def align_frames(quat, d3, tangent, out):
+    """``out[e]``: frame ``quat[e]`` ``(E, 4)`` turned by the minimal rotation taking its third
+    director ``d3[e]`` onto the unit ``tangent[e]`` ``(E, 3)``, normalised."""
+    for e in range(quat.shape[0]):
+        q = quat_mul(quat_between(row3(d3, e), row3(tangent, e)), row4(quat, e))
+        length = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        for k in range(4):
+            out[e, k] = q[k] / length
 
 
 @njit(cache=True)

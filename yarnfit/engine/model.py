@@ -214,16 +214,14 @@ def aligned_frames(model: "RodModel", position: np.ndarray, quaternion: np.ndarr
     An equilibrium leaves a small shear (``d3`` off the edge by ~force / GA); a rest state needs
     frames along their edges, and this keeps the material directors as close as possible.
     """
-    from ._quat import quat_between, quat_mul
+    from ._kernels import align_frames
 
     end = np.einsum("eij,ej->ei", model.edge_end_rotation, position[model.edge_nodes[:, 1]]) + model.edge_offset
     edge = end - position[model.edge_nodes[:, 0]]
     tangent = edge / np.linalg.norm(edge, axis=1, keepdims=True)
-    d3 = quaternion_d3(quaternion)
+    quaternion = np.ascontiguousarray(quaternion, dtype=np.float64)
     out = np.empty_like(quaternion)
-    for e in range(len(quaternion)):
-        q = quat_mul(quat_between(tuple(d3[e]), tuple(tangent[e])), tuple(quaternion[e]))
-        out[e] = np.asarray(q) / np.linalg.norm(q)
+    align_frames(quaternion, np.ascontiguousarray(quaternion_d3(quaternion)), tangent, out)
     return out
 
 

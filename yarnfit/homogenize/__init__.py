@@ -25,18 +25,21 @@ area) with its residual is the sample's result. Samples are independent and run 
 
 Modules, in the order data flows through them: :mod:`.surface` (the repeat on the mid-surface),
 :mod:`.equilibrium` (one solve, its continuation and warm starts, Ū's slope along a strain),
-:mod:`.uniaxial` and :mod:`.bias` (the free-strain searches of the uniaxial samples),
-:mod:`.sample` (any sample, the default ranges, many samples in parallel), :mod:`.pull` (the
+:mod:`.search` (the quasi-Newton of the free strains), :mod:`.uniaxial` and :mod:`.bias` (the
+free-strain searches of the uniaxial samples), :mod:`.bend` (the bends at zero membrane force),
+:mod:`.sample` (any sample, the default ranges), :mod:`.pull` (the
 periodic pull a cut strip converges to), :mod:`.frictional` (the same pull along a load path
-with the fibre's friction, as a strip is pulled) and :mod:`.loading` (the membrane samples along
-such paths, for a shell fitted to the fabric's loading response: ``yarnfit fit --friction``).
+with the fibre's friction, as a strip is pulled), :mod:`.loading` (the membrane samples along
+such paths, for a shell fitted to the fabric's loading response: ``yarnfit fit --friction``) and
+:mod:`.groups` (many samples in parallel, grouped into paths and single samples).
 """
 
 from .equilibrium import MAX_ITERATIONS
 from .frictional import frictional_periodic_bias_pull, frictional_periodic_pull
-from .loading import loading_groups, loading_path_samples, solve_loading_samples
+from .groups import group_tasks, sample_groups, solve_group, solve_loading_samples, solve_samples
+from .loading import loading_path_samples
 from .pull import PeriodicPull, periodic_bias_pull, periodic_pull
-from .sample import MAX_TURN_PER_REPEAT, default_ranges, sample_tasks, solve_sample, solve_samples
+from .sample import MAX_TURN_PER_REPEAT, default_ranges, solve_sample
 from .surface import SurfaceMap, TiledRepeat, tile_repeat, transfer_fluctuation
 
 __all__ = [
@@ -48,11 +51,12 @@ __all__ = [
     "default_ranges",
     "frictional_periodic_bias_pull",
     "frictional_periodic_pull",
-    "loading_groups",
+    "group_tasks",
     "loading_path_samples",
     "periodic_bias_pull",
     "periodic_pull",
-    "sample_tasks",
+    "sample_groups",
+    "solve_group",
     "solve_sample",
     "solve_loading_samples",
     "solve_samples",

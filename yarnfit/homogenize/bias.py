@@ -19,6 +19,7 @@ from ..engine.friction import FrictionAnchors
 from ..relax import RelaxedRepeat
 from ..samples import SampleResult, SampleSpec, stretch_share
 from .equilibrium import _green_slope, _solve_from, _solve_with_continuation
+from .search import Trial, probe_hessian, promised_decrease, quasi_newton
 from .surface import TiledRepeat, _form_map, tile_repeat
 from .uniaxial import FLAT_ENERGY_RTOL, FREE_SLOPE_RTOL, FREE_STRAIN_SOLVES, SEARCH_ENERGY_RTOL, SMALLEST_FREE_STRETCH
 
@@ -90,7 +91,7 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
     flat = np.zeros((2, 2))
     least_free = 0.5 * (SMALLEST_FREE_STRETCH**2 - 1.0)
     iterations = 0
-    solved = []  # (free (2,), result, tiled, energy, slopes (2,))
+    solved: list[Trial] = []
 
     def form(free: np.ndarray) -> np.ndarray:
         return np.eye(2) + 2.0 * q @ np.array([[pulled, free[1]], [free[1], free[0]]]) @ q.T
@@ -111,8 +112,8 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
             iterations += count
         else:
             if solved:
-                nearest = min(solved, key=lambda point: float(np.abs(point[0] - free).max()))
-                warm = (nearest[1].state, form(nearest[0]))
+                nearest = min(solved, key=lambda point: float(np.abs(point.free - free).max()))
+                warm = (nearest.result.state, form(nearest.free))
             else:
                 warm = (start[1], start[2])
             try:
@@ -125,8 +126,8 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
         slopes = np.array([_green_slope(tiled.model, result, first, change, tiled.area, anchors)
                            for change in changes])
         slip = 0.0 if anchors is None else anchors.energy_gradient(result.state.node_position)[0]
-        point = (np.array(free, dtype=np.float64), result, tiled, (result.energy.internal + slip) / tiled.area, slopes,
-                 anchors)
+        point = Trial(np.array(free, dtype=np.float64), result, tiled, (result.energy.internal + slip) / tiled.area,
+                      slopes, anchors)
         solved.append(point)
         return point
 
@@ -136,7 +137,7 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
         return _BiasSearch(origin, form(origin), None, None, iterations,
                            "the pure stretch along the pull did not converge" if start is None else
                            "the path's start did not converge", np.full(2, math.nan))
-    scale, start_energy = float(np.abs(current[4]).max()), current[3]
+    scale, start_energy = float(np.abs(current.slopes).max()), current.energy
     if start is not None:
         # Started on the path, the start's slopes and Ū are nearly balanced already: the energy's
         # scale is the affine pure stretch's Ū instead (an upper bound of the solved pure
@@ -146,72 +147,35 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
         start_energy = max(abs(start_energy), sum(rods) / affine.area)
     # The Hessian from two probes of the slopes from the pure stretch, one per free strain,
     # towards where each points, BIAS_PROBE_FRACTION of the pull's strain long.
-    base, hessian = current, np.zeros((2, 2))
-    for k in range(2):
-        probe = origin.copy()
-        probe[k] -= math.copysign(BIAS_PROBE_FRACTION * pulled, base[4][k] or 1.0)
-        if not admissible(probe) or (point := solve_at(probe)) is None:
-            return _BiasSearch(current[0], form(current[0]), current[1], current[2], iterations,
-                               "a probe of the free strains did not converge", current[4])
-        hessian[:, k] = (point[4] - base[4]) / (probe[k] - origin[k])
-        if start is not None:
-            # The slopes' scale on the path: what the probes' slopes grow to over a change of the
-            # free strains as large as the pull's, as the pure stretch's are off its free strains
-            # by about that much.
-            scale = max(scale, float(np.abs(point[4]).max()) / BIAS_PROBE_FRACTION)
-        if point[3] < current[3]:
+    probed = probe_hessian(solve_at, admissible, current, np.full(2, BIAS_PROBE_FRACTION * pulled))
+    if probed is None:
+        return _BiasSearch(current.free, form(current.free), current.result, current.tiled, iterations,
+                           "a probe of the free strains did not converge", current.slopes)
+    hessian, probes = probed
+    if start is not None:
+        # The slopes' scale on the path: what the probes' slopes grow to over a change of the free
+        # strains as large as the pull's, as the pure stretch's are off its free strains by about
+        # that much.
+        scale = max([scale] + [float(np.abs(point.slopes).max()) / BIAS_PROBE_FRACTION for point in probes])
+    for point in probes:
+        if point.energy < current.energy:
             current = point
-    hessian = 0.5 * (hessian + hessian.T)
-    failure = "the search ran out of solves"
 
-    def balanced(point, w, v) -> bool:
+    def balanced(point: Trial, w: np.ndarray, v: np.ndarray) -> bool:
         """Both slopes below FREE_SLOPE_RTOL of the pure stretch's, and the decrease of Ū they
-        still promise (½ sᵀ H⁻¹ s) below SEARCH_ENERGY_RTOL of Ū, as the axis search asks: a
-        knit's free minimum can lie far below its jammed pure stretch (wool jersey at 2 %: Ū 0.03
-        against 2.0 J/m²), where slopes of 1 % of the pure stretch's still move Ū by a tenth."""
-        promised = 0.5 * float(point[4] @ ((v / w) @ (v.T @ point[4])))
-        slope = float(np.abs(point[4]).max())
+        still promise below SEARCH_ENERGY_RTOL of Ū, as the axis search asks: a knit's free minimum
+        can lie far below its jammed pure stretch (wool jersey at 2 %: Ū 0.03 against 2.0 J/m²),
+        where slopes of 1 % of the pure stretch's still move Ū by a tenth."""
+        slope = float(np.abs(point.slopes).max())
         # Or Ū does not depend on the free strains at all (straight parallel yarns on the bias: a
         # line of minima at Ū = 0 to round-off), as FLAT_ENERGY_RTOL says for the axis search.
-        return (slope <= FREE_SLOPE_RTOL * scale and promised <= SEARCH_ENERGY_RTOL * abs(point[3])
+        return (slope <= FREE_SLOPE_RTOL * scale and promised_decrease(point, w, v) <= SEARCH_ENERGY_RTOL * abs(point.energy)
                 or slope * BIAS_STEP_LIMIT <= FLAT_ENERGY_RTOL * abs(start_energy))
 
-    while len(solved) < FREE_STRAIN_SOLVES:
-        w, v = np.linalg.eigh(hessian)
-        # A curvature that is not positive (a kink, a mechanism), or so small that the step would
-        # pass the limit, is replaced by the current slopes over the limit: a step as long as the
-        # limit allows. (Not the pure stretch's slopes: near a knit's free minimum Ū is far softer
-        # than its jammed pure stretch, wool jersey's curvature there ~1/60 of the start's.)
-        w = np.maximum(w, max(float(np.abs(current[4]).max()), np.finfo(float).tiny) / BIAS_STEP_LIMIT)
-        step = -(v / w) @ (v.T @ current[4])
-        step *= min(1.0, BIAS_STEP_LIMIT / float(np.abs(step).max()))
-        if float(np.abs(step).max()) <= BIAS_STEP_TOLERANCE:
-            failure = None
-            break
-        accepted = None
-        while float(np.abs(step).max()) > BIAS_STEP_TOLERANCE and len(solved) < FREE_STRAIN_SOLVES:
-            trial = current[0] + step
-            point = solve_at(trial) if admissible(trial) else None
-            # Taken if Ū falls or the slopes do: near the minimum warm-started solves land in
-            # contact states whose Ū differ by more than the step changes it (the plain weave at
-            # 0.1 %: 3e-7 J/m², 2.5 % of Ū), while the slopes still fall steadily.
-            if point is not None and (point[3] < current[3]
-                                      or float(np.abs(point[4]).max()) < float(np.abs(current[4]).max())):
-                accepted = point
-                break
-            step = 0.5 * step
-        if accepted is None:
-            # No step lowers Ū: its changes are round-off here. Found if the slopes are as small
-            # as the axis search asks (balanced); else the search is stuck.
-            failure = None if balanced(current, w, v) else "no step of the free strains lowered Ū"
-            break
-        moved, change = accepted[0] - current[0], accepted[4] - current[4]
-        if float(moved @ change) > 0.0:  # BFGS keeps the Hessian positive definite
-            hs = hessian @ moved
-            hessian = hessian - np.outer(hs, hs) / float(moved @ hs) + np.outer(change, change) / float(moved @ change)
-        current = accepted
-    return _BiasSearch(current[0], form(current[0]), current[1], current[2], iterations, failure, current[4],
-                       current[5])
+    current, failure, _ = quasi_newton(solve_at, admissible, current, hessian, lambda: len(solved), FREE_STRAIN_SOLVES,
+                                       BIAS_STEP_LIMIT, BIAS_STEP_TOLERANCE, balanced)
+    return _BiasSearch(current.free, form(current.free), current.result, current.tiled, iterations, failure, current.slopes,
+                       current.anchors)
 
 
 def _solve_bias(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOptions, start: float) -> SampleResult:

@@ -17,7 +17,7 @@ from ..engine.friction import FrictionAnchors
 from ..engine.model import aligned_frames
 from ..engine.tiling import transform_images
 from ..relax import RelaxedRepeat
-from .surface import TiledRepeat, _form_map, tile_repeat, transfer_fluctuation
+from .surface import CarriedEquilibrium, TiledRepeat, _form_map, tile_repeat, transfer_fluctuation
 
 
 # Newton iterations per sample: most take 10–60; the limit only stops a run going nowhere.
@@ -103,6 +103,23 @@ def _solve_with_continuation(relaxed: RelaxedRepeat, I, II, options: QuasiStatic
     return tiled, result, iterations
 
 
+def _solve_near(relaxed: RelaxedRepeat, I: np.ndarray, II: np.ndarray, options: QuasiStaticOptions,
+                near: tuple[TiledRepeat, QuasiStaticResult]) -> tuple[TiledRepeat, QuasiStaticResult | None]:
+    """``relaxed`` tiled at ``(I, II)`` (curved or flat) and solved from ``near = (tiling, its
+    equilibrium)``, a neighbouring sample's, its fluctuation carried over
+    (:func:`~yarnfit.homogenize.surface.transfer_fluctuation`, as the continuation's steps are);
+    the result is ``None`` when a step left the tiles mapped. Warnings of a solve that does not
+    converge are silenced: the caller judges it."""
+    tiled = tile_repeat(relaxed, I, II)
+    transfer_fluctuation(near[0], near[1].state, tiled)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            return tiled, QuasiStaticSolver(tiled.model, options).solve(tiled.state, constraints=tiled.constraints)
+    except TilingReachError:
+        return tiled, None
+
+
 def _solve_from(relaxed: RelaxedRepeat, form: np.ndarray, II: np.ndarray, options: QuasiStaticOptions,
                 previous: tuple | None = None, **solve_args) -> tuple[TiledRepeat, QuasiStaticResult]:
     """``relaxed`` tiled at ``(form, II)`` (a flat sample's) and solved, warnings of a solve that
@@ -157,6 +174,25 @@ def _green_slope(model: RodModel, result, form: np.ndarray, change: np.ndarray, 
         slip = 0.0 if friction is None else friction.transformed(matrix).energy_gradient(position)[0]
         values.append(rods + contact_potential(mapped, position, contacts) + slip)
     return (values[0] - values[1]) / (2.0 * STRAIN_SLOPE_STEP * area)
+
+
+def _surface_green_slope(carried: CarriedEquilibrium, result: QuasiStaticResult, form: np.ndarray,
+                         change: np.ndarray) -> float:
+    """dŪ/dh (J/m²) at ``result``, the equilibrium ``carried`` holds (its tiling: first form
+    ``form``, any second form, flat or curved), along the Green strain ``E + h change``, the second
+    form held: :func:`_green_slope`'s envelope-theorem slope along the path that carries the
+    equilibrium's corotated fluctuation to the surfaces at ``(form + 2 h change, II)``
+    (:class:`~yarnfit.homogenize.surface.CarriedEquilibrium`: C_RVE kept; the frames turned with
+    the surface, not re-aligned with their edges, which would move them off the equilibrium by its
+    shear: 3e-5 of the plain weave's weft slope at 1 %), the contacts' multipliers and penalties
+    as the solve ended. On a flat tiling it is :func:`_green_slope`'s path (measured equal to
+    4e-10 relative)."""
+    values = []
+    for step in (STRAIN_SLOPE_STEP, -STRAIN_SLOPE_STEP):
+        model, position, quaternion, pairs = carried.carried(np.asarray(form) + 2.0 * step * np.asarray(change))
+        rods = sum(internal_forces(model, position, quaternion).terms)
+        values.append(rods + contact_potential(model, position, replace(result.contacts, pairs=pairs)))
+    return (values[0] - values[1]) / (2.0 * STRAIN_SLOPE_STEP * carried.tiled.area)
 
 
 def _axis_change(axis: int) -> np.ndarray:

@@ -30,7 +30,7 @@ import math
 import time
 import warnings
 from dataclasses import replace
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -38,14 +38,12 @@ from ..engine import ConvergenceWarning, QuasiStaticOptions
 from ..engine.lagged import FRICTION_STRAIN_STEP
 from ..relax import RelaxedRepeat
 from ..samples import Family, Group, SampleResult, SampleSpec, stretch_share
-from ..tasks import Backend, LocalPool, Task, run_tasks
 from .equilibrium import MAX_ITERATIONS, _solve_from
 from .frictional import (_frictional_step, _Pass, _rest, _Trial, frictional_periodic_bias_pull,
                          frictional_periodic_pull)
-from .sample import sample_tasks
 from .surface import _form_map
 
-__all__ = ["loading_groups", "loading_path_samples", "solve_loading_samples"]
+__all__ = ["loading_path_samples"]
 
 # Two magnitudes of a path count as the same sample when closer than this (a sample's parameter
 # is also a step's end; round-off of the grid).
@@ -160,61 +158,3 @@ def _uniaxial_path(relaxed: RelaxedRepeat, family: Family, grid: Sequence[float]
         energy_density=pull.energy_density + pull.friction_work, converged=pull.converged, residual=pull.residual,
         iterations=pull.iterations, seconds=pull.seconds, pull_slope=pull.force_n_per_m / (1.0 + pull.strain),
         across_slope=0.0) for pull in pulls]
-
-
-def loading_groups(specs: Sequence[SampleSpec]) -> tuple[list[int], dict[tuple[Family, bool], list[int]]]:
-    """How a loading fit solves ``specs``: the indices solved alone (bends, the undeformed sample),
-    and the indices of each frictional path, keyed by family and whether it is the path in tension
-    (positive parameters), in the order of ``specs``."""
-    single: list[int] = []
-    paths: dict[tuple[Family, bool], list[int]] = {}
-    for i, spec in enumerate(specs):
-        if spec.is_membrane and spec.parameter != 0.0:
-            paths.setdefault((spec.family, spec.parameter > 0.0), []).append(i)
-        else:
-            single.append(i)
-    return single, paths
-
-
-def solve_loading_samples(relaxed: RelaxedRepeat, specs: Sequence[SampleSpec], coefficient: float,
-                          workers: int | None = None,
-                          on_sample: Callable[[int, int, SampleResult], None] | None = None,
-                          backend: Backend | None = None) -> list[SampleResult]:
-    """Every sample of ``specs``: the membrane ones along frictional load paths with friction
-    ``coefficient`` μ (:func:`loading_path_samples`, one task per family and sign), the others
-    (bends, the undeformed sample) as :func:`~yarnfit.homogenize.solve_samples` solves them. Run
-    on ``backend`` (default a :class:`~yarnfit.tasks.LocalPool` of ``workers`` processes);
-    ``on_sample(done, total, result)`` as each sample is known; results in the order of
-    ``specs``."""
-    if not (math.isfinite(coefficient) and coefficient >= 0.0):
-        raise ValueError(f"friction coefficient must be finite and non-negative, got {coefficient!r}")
-    if backend is None:
-        with LocalPool(workers, tasks=len(specs)) as pool:
-            return solve_loading_samples(relaxed, specs, coefficient, on_sample=on_sample, backend=pool)
-    single, paths = loading_groups(specs)
-    tasks = sample_tasks(relaxed, [specs[i] for i in single], key=lambda k: ("sample", single[k]))
-    for (family, positive), indices in paths.items():
-        # Paths first: each is several samples' worth of solves, the longest work there is.
-        tasks.append(Task(("path", family, positive), loading_path_samples,
-                          (relaxed, family, [specs[i].parameter for i in indices], coefficient),
-                          cost=len(specs) + len(indices),
-                          label=f"load path {family} {'+' if positive else '-'} ({len(indices)} samples)"))
-    results: list[SampleResult | None] = [None] * len(specs)
-    known = 0
-
-    def done(task, outcome, count, total):
-        nonlocal known
-        if isinstance(outcome, BaseException):
-            return
-        found = [(task.key[1], outcome)] if task.key[0] == "sample" else list(zip(paths[task.key[1:]], outcome))
-        for i, sample in found:
-            results[i] = sample
-            known += 1
-            if on_sample is not None:
-                on_sample(known, len(specs), sample)
-
-    outcomes = run_tasks(tasks, backend, on_done=done)
-    for outcome in outcomes.values():
-        if isinstance(outcome, BaseException):
-            raise outcome
-    return results

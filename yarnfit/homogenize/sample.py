@@ -1,18 +1,16 @@
-"""One sample of any family (:func:`solve_sample`), the ranges the fibre bears, and many samples
-solved in parallel."""
+"""One sample of any family (:func:`solve_sample`) and the ranges the fibre bears."""
 
 from __future__ import annotations
 
 import math
 import time
-from typing import Callable, Sequence
 
 import numpy as np
 
 from ..engine import QuasiStaticOptions, Residual
 from ..relax import RelaxedRepeat
 from ..samples import SampleRanges, SampleResult, SampleSpec, stretch_share
-from ..tasks import Backend, LocalPool, Task, run_tasks
+from .bend import _solve_bend
 from .bias import _solve_bias
 from .equilibrium import MAX_ITERATIONS, _solve_with_continuation
 from .uniaxial import _solve_uniaxial
@@ -23,13 +21,17 @@ def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticO
 
     A uniaxial-tension sample also minimises over its free strains: the transverse stretch μ along
     a yarn axis (:func:`_solve_uniaxial`), and on the bias the transverse strain and the pull
-    frame's shear (:func:`_solve_bias`); its result's spec carries the form found."""
+    frame's shear (:func:`_solve_bias`); its result's spec carries the form found. A bending
+    sample is solved at zero membrane force, its three membrane strains free (:func:`_solve_bend`:
+    the paper's ``I = Id`` pulls the yarns of a bend's stretched side straight)."""
     start = time.perf_counter()
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
     if spec.family.uniaxial_axis is not None:
         return _solve_uniaxial(relaxed, spec, options, start)
     if spec.family.uniaxial_angle is not None:
         return _solve_bias(relaxed, spec, options, start)
+    if not spec.is_membrane:
+        return _solve_bend(relaxed, spec, options, start)
     tiled, result, iterations = _solve_with_continuation(relaxed, spec.I, spec.II, options)
     if result is None:
         # No solve of this deformation stayed within the mapped tiles: nothing to report but that.
@@ -64,51 +66,6 @@ def default_ranges(relaxed: RelaxedRepeat) -> SampleRanges:
     strain = relaxed.fiber.breaking_strain
     curvature = min(strain / relaxed.radius, MAX_TURN_PER_REPEAT / float(max(relaxed.repeat_size)))
     return SampleRanges(stretch=strain, curvature=curvature)
-
-
-# -- many samples in parallel ---------------------------------------------------------------------
-
-
-def sample_tasks(relaxed, specs: Sequence[SampleSpec], key: Callable[[int], object] = lambda i: i,
-                 label: str = "") -> list[Task]:
-    """One :class:`~yarnfit.tasks.Task` per sample: ``solve_sample(relaxed, spec)`` keyed
-    ``key(i)``, ranked so that the longest start first (the uniaxial searches, 5–15 solves each;
-    then the membrane samples by strain, large stretches taking the most Newton iterations; then
-    the bends). ``relaxed`` may be a :class:`~yarnfit.tasks.Result` placeholder (a catalogue's
-    relaxation task)."""
-    order = sorted(range(len(specs)), key=lambda i: _expected_cost(specs[i]), reverse=True)
-    rank = {i: len(specs) - r for r, i in enumerate(order)}
-    return [Task(key(i), solve_sample, (relaxed, spec), cost=rank[i],
-                 label=f"{label}sample {i + 1}/{len(specs)} ({spec.family} {spec.parameter:+.3g})")
-            for i, spec in enumerate(specs)]
-
-
-def solve_samples(
-    relaxed: RelaxedRepeat,
-    specs: Sequence[SampleSpec],
-    workers: int | None = None,
-    on_sample: Callable[[int, int, SampleResult], None] | None = None,
-    backend: Backend | None = None,
-) -> list[SampleResult]:
-    """Solve every sample on ``backend`` (default: a :class:`~yarnfit.tasks.LocalPool` of
-    ``workers`` processes, every core by default; 1 runs in this process). ``on_sample(done,
-    total, result)`` is called as each finishes. Results come back in the order of ``specs``.
-
-    A sample whose solve raises makes this raise it (after the others finished); Ctrl-C stops the
-    workers and raises ``KeyboardInterrupt`` (:mod:`yarnfit.tasks`)."""
-    if backend is None:
-        with LocalPool(workers, tasks=len(specs)) as pool:
-            return solve_samples(relaxed, specs, on_sample=on_sample, backend=pool)
-
-    def done(task, outcome, count, total):
-        if on_sample is not None and not isinstance(outcome, BaseException):
-            on_sample(count, total, outcome)
-
-    outcomes = run_tasks(sample_tasks(relaxed, specs), backend, on_done=done)
-    for i in range(len(specs)):
-        if isinstance(outcomes[i], BaseException):
-            raise outcomes[i]
-    return [outcomes[i] for i in range(len(specs))]
 
 
 def _expected_cost(spec: SampleSpec) -> tuple:

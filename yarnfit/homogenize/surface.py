@@ -5,14 +5,15 @@ equilibrium carried from one surface to another (see the package docstring)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ..engine import LinearConstraints, RodModel, RodState
-from ..engine.contact import image_range
+from ..engine.contact import ContactPairs, image_range
 from ..engine.model import aligned_frames
-from ..engine.rotations import rotate_frames
+from ..engine.rotations import as_frames, rotate_frames
 from ..engine.tiling import CurvedTiling, retile
 from ..relax import RelaxedRepeat, yarn_centroid_constraints
 from ..shell import as_first_fundamental_form, as_second_fundamental_form
@@ -248,3 +249,64 @@ def transfer_fluctuation(source: TiledRepeat, state: RodState, target: TiledRepe
     quaternion = rotate_frames(turn[target.model.edge_nodes[:, 0]], state.edge_quaternion)
     target.state.node_position[:] = position
     target.state.edge_quaternion[:] = aligned_frames(target.model, position, quaternion)
+
+
+class CarriedEquilibrium:
+    """An equilibrium ``state`` of ``tiled`` made ready to be carried to the surfaces of other first
+    forms and the same second form, as :func:`transfer_fluctuation` carries it (each node's
+    corotated fluctuation kept, frames turned with the surface and not re-aligned), for the energy
+    there: :meth:`carried` gives the rods' model, the configuration and the contact ``pairs`` (a
+    :class:`~yarnfit.engine.contact.ContactPairs` of ``tiled``) on the new surface. Only the maps
+    onto the periodic images that the ghost edges, the joints and the pairs use are evaluated (a
+    full tiling's maps reach every tile a contact search may need: ~10 times the points)."""
+
+    def __init__(self, relaxed: RelaxedRepeat, tiled: TiledRepeat, state: RodState, pairs) -> None:
+        self.tiled, self.pairs = tiled, pairs
+        self.repeat = np.asarray(relaxed.repeat_size, dtype=np.float64)
+        base, _, frame = tiled.surface.evaluate(tiled.reference, tiled.height)
+        self.frame = frame
+        self.local = np.einsum("nji,nj->ni", frame, state.node_position - base)  # R_sᵀ ũ
+        self.quaternion = state.edge_quaternion
+        model = tiled.model
+        b = pairs.pairs[:, 1]
+        joint = model.joint_edges[:, 0]
+        # Every (node, tile) whose map is used: ghost-edge ends, joints, and the pairs' second edges.
+        node = np.concatenate([model.edge_nodes[:, 1], model.edge_nodes[joint, 1], model.edge_nodes[b, 0],
+                               model.edge_nodes[b, 1]])
+        tile = np.concatenate([model.edge_tile, model.edge_tile[joint], pairs.images, pairs.images + model.edge_tile[b]])
+        keys, self.index = np.unique(np.column_stack([node, tile]), axis=0, return_inverse=True)
+        self.index = self.index.reshape(-1)
+        self.node, self.tile = keys[:, 0], keys[:, 1:]
+        self.sizes = np.cumsum([0, model.n_edges, len(joint), len(b), len(b)])
+
+    def carried(self, I: np.ndarray) -> tuple[RodModel, np.ndarray, np.ndarray, object]:
+        """``(model, position (N, 3), quaternion (E, 4), pairs)`` on the surface of first form ``I``
+        ``(2, 2)`` and the tiling's second form."""
+        tiled, model = self.tiled, self.tiled.model
+        surface = SurfaceMap(np.asarray(I, dtype=np.float64), tiled.surface.II)
+        base, _, frame = surface.evaluate(tiled.reference, tiled.height)
+        position = base + np.einsum("nij,nj->ni", frame, self.local)
+        turn = np.einsum("nij,nkj->nik", frame, self.frame)
+        quaternion = rotate_frames(turn[model.edge_nodes[:, 0]], self.quaternion)
+        # The maps R(X + T) R(X)ᵀ, x ↦ Q x + c with c taking the node's base point to its image's
+        # (as _curved_tiling), the home tile exactly the identity.
+        shifted = tiled.reference[self.node] + self.tile * self.repeat
+        image, _, image_frame = surface.evaluate(shifted, tiled.height[self.node])
+        rotation = np.einsum("kij,klj->kil", image_frame, frame[self.node])
+        translation = image - np.einsum("kij,kj->ki", rotation, base[self.node])
+        home = np.all(self.tile == 0, axis=1)
+        rotation[home], translation[home] = np.eye(3), 0.0
+        rotation, translation = rotation[self.index], translation[self.index]
+        edges, joints, first, second = (slice(self.sizes[k], self.sizes[k + 1]) for k in range(4))
+        moved = replace(model, edge_end_rotation=np.ascontiguousarray(rotation[edges]),
+                        edge_offset=np.ascontiguousarray(translation[edges]),
+                        joint_frame_rotation=as_frames(Rotation.from_matrix(rotation[joints])))
+        pairs = self.pairs
+        a = pairs.pairs[:, 0]
+        pair_rotation = np.empty((len(pairs), 4, 3, 3))
+        pair_translation = np.empty((len(pairs), 4, 3))
+        pair_rotation[:, 0], pair_translation[:, 0] = np.eye(3), 0.0
+        pair_rotation[:, 1], pair_translation[:, 1] = moved.edge_end_rotation[a], moved.edge_offset[a]
+        pair_rotation[:, 2], pair_translation[:, 2] = rotation[first], translation[first]
+        pair_rotation[:, 3], pair_translation[:, 3] = rotation[second], translation[second]
+        return moved, position, quaternion, ContactPairs(pairs.pairs, pairs.images, pair_rotation, pair_translation)

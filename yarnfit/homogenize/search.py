@@ -1,0 +1,152 @@
+"""A quasi-Newton search for the free strains of a sample: the strains nothing prescribes, placed
+where Ū is least, each trial a full warm-started solve giving Ū and its envelope-theorem slopes.
+The bias pull's two (:mod:`.bias`) and a bend's three membrane strains (:mod:`.bend`) use it."""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from ..engine import QuasiStaticResult
+from ..engine.friction import FrictionAnchors
+from .surface import TiledRepeat
+
+
+class Trial(NamedTuple):
+    """One converged solve of a search: the free strains ``(n,)``, the solve and its tiling, Ū
+    (J/m², plus the friction potential for a frictional pass) and Ū's slopes along the free
+    strains ``(n,)`` (J/m²), with the friction ``anchors`` it was solved against (or ``None``)."""
+
+    free: np.ndarray
+    result: QuasiStaticResult
+    tiled: TiledRepeat
+    energy: float
+    slopes: np.ndarray
+    anchors: FrictionAnchors | None = None
+
+
+def probe_hessian(solve_at: Callable[[np.ndarray], Trial | None], admissible: Callable[[np.ndarray], bool],
+                  base: Trial, sizes: np.ndarray) -> tuple[np.ndarray, list[Trial]] | None:
+    """The Hessian of Ū in the free strains at ``base`` ``(n, n)``, symmetrised, from one probe
+    solve per free strain ``k``, ``sizes[k]`` long towards where its slope points (down Ū), with
+    the probes' trials; ``None`` when a probe is not admissible or does not converge."""
+    n = len(base.free)
+    hessian, probes = np.zeros((n, n)), []
+    for k in range(n):
+        probe = base.free.copy()
+        probe[k] -= math.copysign(sizes[k], base.slopes[k] or 1.0)
+        if not admissible(probe) or (point := solve_at(probe)) is None:
+            return None
+        hessian[:, k] = (point.slopes - base.slopes) / (probe[k] - base.free[k])
+        probes.append(point)
+    return 0.5 * (hessian + hessian.T), probes
+
+
+def quasi_newton(solve_at: Callable[[np.ndarray], Trial | None], admissible: Callable[[np.ndarray], bool],
+                 current: Trial, hessian: np.ndarray, solves: Callable[[], int], max_solves: int,
+                 step_limit: float, step_tolerance: float,
+                 balanced: Callable[[Trial, np.ndarray, np.ndarray], bool],
+                 settled: Callable[[list[Trial]], bool] | None = None,
+                 bound: np.ndarray | None = None, interpolate: bool = False) -> tuple[Trial, str | None, np.ndarray]:
+    """Newton steps on the slopes from ``current`` with ``hessian`` (``(n, n)``, from probes) and
+    secant (BFGS) updates, until the step is below ``step_tolerance``: ``(the trial reached, why it
+    did not converge or None, the Hessian as updated)``. Each step is at most ``step_limit`` in every free strain and is
+    halved until ``solve_at`` (``None`` for a solve that did not converge) gives a trial whose Ū
+    or slopes fall; when no step does, the search ends there, found if ``balanced(trial, w, v)``
+    says its slopes are spent (``w, v``: the eigenpairs of the Hessian as the steps use it). Found
+    too when ``settled`` says so of the trials accepted so far (``current`` first). Not converged
+    after ``max_solves`` solves (``solves()`` counts them).
+
+    With ``bound`` ``(n,)`` the free strains stay within ``|free| <= bound`` (a projected Newton):
+    a strain at its bound whose slope pushes it further is held there, the step taken in the
+    others, and ``balanced`` and ``settled`` see trials whose held slopes are zero.
+
+    With ``interpolate``, a step that raises Ū is not halved but shortened to the least of the
+    parabola through Ū and its slope along the step at ``current`` and Ū at the trial (within
+    :data:`BACKTRACK_RANGE` of it): a Newton step from a probed Hessian can land where a knit jams,
+    Ū many times its start, and halving walked back from there one solve at a time."""
+    failure = "the search ran out of solves"
+    accepted_trials = [_projected(current, bound)]
+    while solves() < max_solves:
+        held = _held(current, bound)
+        moving = ~held
+        if not np.any(moving):
+            return current, None, hessian  # every strain at a bound, pushing out: the least Ū in the box
+        slopes = current.slopes[moving]
+        w, v = np.linalg.eigh(hessian[np.ix_(moving, moving)])
+        # A curvature that is not positive (a kink, a mechanism), or so small that the step would
+        # pass the limit, is replaced by the current slopes over the limit: a step as long as the
+        # limit allows. (Not the start's slopes: near a knit's free minimum Ū is far softer than its
+        # jammed start, wool jersey's curvature on the bias ~1/60 of the pure stretch's.)
+        w = np.maximum(w, max(float(np.abs(slopes).max()), np.finfo(float).tiny) / step_limit)
+        step = np.zeros(len(current.free))
+        step[moving] = -(v / w) @ (v.T @ slopes)
+        step *= min(1.0, step_limit / float(np.abs(step).max()))
+        if bound is not None:
+            step = np.clip(current.free + step, -bound, bound) - current.free
+        if float(np.abs(step).max()) <= step_tolerance:
+            return current, None, hessian
+        accepted = None
+        while float(np.abs(step).max()) > step_tolerance and solves() < max_solves:
+            trial = current.free + step
+            point = solve_at(trial) if admissible(trial) else None
+            # Taken if Ū falls or the slopes do: near the minimum warm-started solves land in
+            # contact states whose Ū differ by more than the step changes it (the plain weave on
+            # the bias at 0.1 %: 3e-7 J/m², 2.5 % of Ū), while the slopes still fall steadily.
+            if point is not None and (point.energy < current.energy
+                                      or float(np.abs(point.slopes).max()) < float(np.abs(current.slopes).max())):
+                accepted = point
+                break
+            step = _shortened(current, step, point) if interpolate else 0.5 * step
+        if accepted is None:
+            # No step lowers Ū: its changes are round-off here. Found if the slopes are spent;
+            # else the search is stuck.
+            spent = balanced(current._replace(slopes=slopes), w, v)
+            return current, None if spent else "no step of the free strains lowered Ū", hessian
+        moved, change = accepted.free - current.free, accepted.slopes - current.slopes
+        if float(moved @ change) > 0.0:  # BFGS keeps the Hessian positive definite
+            hs = hessian @ moved
+            hessian = hessian - np.outer(hs, hs) / float(moved @ hs) + np.outer(change, change) / float(moved @ change)
+        current = accepted
+        accepted_trials.append(_projected(current, bound))
+        if settled is not None and settled(accepted_trials):
+            return current, None, hessian
+    return current, failure, hessian
+
+
+# The shortest and longest fraction of a step that raised Ū its parabola may keep (:func:`_shortened`):
+# the safeguards of a backtracking line search (Nocedal & Wright, §3.5).
+BACKTRACK_RANGE = (0.1, 0.5)
+
+
+def _shortened(current: Trial, step: np.ndarray, point: Trial | None) -> np.ndarray:
+    """The step from ``current`` shortened after its trial ``point`` was refused: to the least of
+    the parabola through Ū(0), dŪ/dt(0) = slopes · step and Ū(1) when that lies within
+    :data:`BACKTRACK_RANGE`, else to the nearer end of it; halved if the trial did not converge."""
+    if point is None:
+        return 0.5 * step
+    slope = float(current.slopes @ step)
+    rise = point.energy - current.energy - slope
+    fraction = -slope / (2.0 * rise) if rise > 0.0 and slope < 0.0 else BACKTRACK_RANGE[1]
+    return min(max(fraction, BACKTRACK_RANGE[0]), BACKTRACK_RANGE[1]) * step
+
+
+def _held(trial: Trial, bound: np.ndarray | None) -> np.ndarray:
+    """``(n,)`` bool: the free strains at their ``bound`` whose slope pushes them further out."""
+    if bound is None:
+        return np.zeros(len(trial.free), dtype=bool)
+    return (np.abs(trial.free) >= bound) & (trial.free * trial.slopes < 0.0)
+
+
+def _projected(trial: Trial, bound: np.ndarray | None) -> Trial:
+    """``trial`` with the slopes of its held strains (:func:`_held`) zero."""
+    held = _held(trial, bound)
+    return trial._replace(slopes=np.where(held, 0.0, trial.slopes)) if np.any(held) else trial
+
+
+def promised_decrease(trial: Trial, w: np.ndarray, v: np.ndarray) -> float:
+    """The decrease of Ū a Newton step from ``trial`` still promises, ``½ sᵀ H⁻¹ s`` (J/m²), with
+    the Hessian's eigenpairs ``w, v``."""
+    return 0.5 * float(trial.slopes @ ((v / w) @ (v.T @ trial.slopes)))
