@@ -323,6 +323,26 @@ class SampleResult:
                              f"{strain!r} for {self.spec.family}")
         object.__setattr__(self, "free_membrane_strain", strain)
 
+    @classmethod
+    def unsolved(cls, spec: SampleSpec, iterations: int, seconds: float,
+                 position: np.ndarray | None = None) -> "SampleResult":
+        """A sample no solve brought to a state to measure (every one left the mapped tiles, or a
+        search's first solve failed): not converged, its energy and residuals NaN."""
+        return cls(spec=spec, energy_density=math.nan, converged=False,
+                   residual=Residual(math.nan, math.nan, math.nan, math.nan), iterations=iterations, seconds=seconds,
+                   position=position)
+
+    @classmethod
+    def of_solve(cls, spec: SampleSpec, result, area: float, converged: bool, iterations: int, seconds: float,
+                 **fields) -> "SampleResult":
+        """The sample ``spec`` at a solve's ``result`` (a
+        :class:`~yarnfit.engine.QuasiStaticResult` on a tiling of ``area`` m²): its Ū, residual,
+        node positions and stretch share; other fields (a uniaxial sample's slopes, a bend's free
+        strains) by keyword."""
+        return cls(spec=spec, energy_density=result.energy.internal / area, converged=converged,
+                   residual=result.residual, iterations=iterations, seconds=seconds,
+                   position=result.state.node_position, stretch_share=stretch_share(result.energy), **fields)
+
     # The spec's fields, read through (the fit and the recording work with results).
     @property
     def family(self) -> Family:

@@ -17,17 +17,16 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
-from ..engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticResult, Residual
+from ..engine import QuasiStaticOptions, QuasiStaticResult
 from ..relax import RelaxedRepeat
-from ..samples import SMALLEST_CURVATURE, SampleResult, SampleSpec, stretch_share
+from ..samples import SMALLEST_CURVATURE, SampleResult, SampleSpec
 from .equilibrium import _solve_near, _solve_with_continuation, _surface_green_slope
-from .search import Trial, probe_hessian, promised_decrease, quasi_newton
+from .search import Trial, probe_hessian, promised_decrease, quasi_newton, warn_unconverged
 from .surface import CarriedEquilibrium, TiledRepeat
 from .uniaxial import FLAT_ENERGY_RTOL, FREE_SLOPE_RTOL, FREE_STRAIN_SOLVES, SEARCH_ENERGY_RTOL, SMALLEST_FREE_STRETCH
 
@@ -230,23 +229,9 @@ def _solve_bend_path(relaxed: RelaxedRepeat, specs: Sequence[SampleSpec], option
 def _bend_result(spec: SampleSpec, search: _BendSearch, start: float) -> SampleResult:
     """The sample's result of its search (warned of when it did not converge); ``start`` its
     wall-clock start (s, :func:`time.perf_counter`)."""
-    if search.failure is not None:
-        warnings.warn(f"bending sample {spec.family} {spec.parameter:+.3g} did not converge: {search.failure}"
-                      + ("" if search.result is None else f": {search.result.residual}"), ConvergenceWarning,
-                      stacklevel=4)
+    warn_unconverged(f"bending sample {spec.family} {spec.parameter:+.3g}", search.failure, search.result, 4)
     result = search.result
     if result is None:
-        return SampleResult(spec=spec, energy_density=math.nan, converged=False,
-                            residual=Residual(math.nan, math.nan, math.nan, math.nan), iterations=search.iterations,
-                            seconds=time.perf_counter() - start)
-    return SampleResult(
-        spec=spec,
-        energy_density=result.energy.internal / search.tiled.area,
-        converged=search.failure is None,
-        residual=result.residual,
-        iterations=search.iterations,
-        seconds=time.perf_counter() - start,
-        position=result.state.node_position,
-        stretch_share=stretch_share(result.energy),
-        free_membrane_strain=tuple(float(e) for e in search.free),
-    )
+        return SampleResult.unsolved(spec, search.iterations, time.perf_counter() - start)
+    return SampleResult.of_solve(spec, result, search.tiled.area, search.failure is None, search.iterations,
+                                 time.perf_counter() - start, free_membrane_strain=tuple(float(e) for e in search.free))

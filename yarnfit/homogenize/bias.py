@@ -6,20 +6,19 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticResult, Residual
+from ..engine import QuasiStaticOptions, QuasiStaticResult
 from ..engine.contact import TilingReachError
 from ..engine.contact_lagrangian import ContactSet
 from ..engine.energy import internal_forces
 from ..engine.friction import FrictionAnchors
 from ..relax import RelaxedRepeat
-from ..samples import SampleResult, SampleSpec, stretch_share
+from ..samples import SampleResult, SampleSpec
 from .equilibrium import _green_slope, _solve_from, _solve_with_continuation
-from .search import Trial, probe_hessian, promised_decrease, quasi_newton
+from .search import Trial, probe_hessian, promised_decrease, quasi_newton, warn_unconverged
 from .surface import TiledRepeat, _form_map, tile_repeat
 from .uniaxial import FLAT_ENERGY_RTOL, FREE_SLOPE_RTOL, FREE_STRAIN_SOLVES, SEARCH_ENERGY_RTOL, SMALLEST_FREE_STRETCH
 
@@ -185,26 +184,14 @@ def _solve_bias(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticOp
     shear is free too: its slope is ~0 where the search converged)."""
     angle = spec.family.uniaxial_angle
     search = _search_bias(relaxed, spec.parameter, options, angle)
-    if search.failure is not None:
-        warnings.warn(f"uniaxial sample {spec.family} {spec.parameter:+.3g} did not converge: {search.failure}"
-                      + ("" if search.result is None else f": {search.result.residual}"), ConvergenceWarning,
-                      stacklevel=3)
+    warn_unconverged(f"uniaxial sample {spec.family} {spec.parameter:+.3g}", search.failure, search.result, 3)
     result = search.result
     if result is None:
-        return SampleResult(spec=spec, energy_density=math.nan, converged=False,
-                            residual=Residual(math.nan, math.nan, math.nan, math.nan), iterations=search.iterations,
-                            seconds=time.perf_counter() - start)
+        return SampleResult.unsolved(spec, search.iterations, time.perf_counter() - start)
     direction = np.array([math.cos(angle), math.sin(angle)])
     area = search.tiled.area
-    return SampleResult(
-        spec=SampleSpec(spec.family, search.form, spec.II, spec.parameter),
-        energy_density=result.energy.internal / area,
-        converged=search.failure is None,
-        residual=result.residual,
-        iterations=search.iterations,
-        seconds=time.perf_counter() - start,
-        position=result.state.node_position,
-        stretch_share=stretch_share(result.energy),
+    return SampleResult.of_solve(
+        SampleSpec(spec.family, search.form, spec.II, spec.parameter), result, area, search.failure is None,
+        search.iterations, time.perf_counter() - start,
         pull_slope=_green_slope(search.tiled.model, result, search.form, np.outer(direction, direction), area),
-        across_slope=float(search.slopes[0]),
-    )
+        across_slope=float(search.slopes[0]))

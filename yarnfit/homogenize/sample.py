@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 
-from ..engine import QuasiStaticOptions, Residual
+from ..engine import QuasiStaticOptions
 from ..relax import RelaxedRepeat
-from ..samples import SampleRanges, SampleResult, SampleSpec, stretch_share
+from ..samples import SampleRanges, SampleResult, SampleSpec
 from .bend import _solve_bend
 from .bias import _solve_bias
 from .equilibrium import MAX_ITERATIONS, _solve_with_continuation
@@ -35,19 +34,8 @@ def solve_sample(relaxed: RelaxedRepeat, spec: SampleSpec, options: QuasiStaticO
     tiled, result, iterations = _solve_with_continuation(relaxed, spec.I, spec.II, options)
     if result is None:
         # No solve of this deformation stayed within the mapped tiles: nothing to report but that.
-        return SampleResult(spec=spec, energy_density=math.nan, converged=False,
-                            residual=Residual(math.nan, math.nan, math.nan, math.nan), iterations=iterations,
-                            seconds=time.perf_counter() - start, position=tiled.state.node_position)
-    return SampleResult(
-        spec=spec,
-        energy_density=result.energy.internal / tiled.area,
-        converged=result.converged,
-        residual=result.residual,
-        iterations=iterations,
-        seconds=time.perf_counter() - start,
-        position=result.state.node_position,
-        stretch_share=stretch_share(result.energy),
-    )
+        return SampleResult.unsolved(spec, iterations, time.perf_counter() - start, tiled.state.node_position)
+    return SampleResult.of_solve(spec, result, tiled.area, result.converged, iterations, time.perf_counter() - start)
 
 
 # -- sample ranges --------------------------------------------------------------------------------

@@ -5,11 +5,12 @@ The bias pull's two (:mod:`.bias`) and a bend's three membrane strains (:mod:`.b
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..engine import QuasiStaticResult
+from ..engine import ConvergenceWarning, QuasiStaticResult
 from ..engine.friction import FrictionAnchors
 from .surface import TiledRepeat
 
@@ -150,3 +151,12 @@ def promised_decrease(trial: Trial, w: np.ndarray, v: np.ndarray) -> float:
     """The decrease of Ū a Newton step from ``trial`` still promises, ``½ sᵀ H⁻¹ s`` (J/m²), with
     the Hessian's eigenpairs ``w, v``."""
     return 0.5 * float(trial.slopes @ ((v / w) @ (v.T @ trial.slopes)))
+
+
+def warn_unconverged(what: str, failure: str | None, result: QuasiStaticResult | None, stacklevel: int) -> None:
+    """A :class:`~yarnfit.engine.ConvergenceWarning` that the search for ``what`` (a sample's
+    name) did not converge, giving ``failure`` and the residual of its last solve; nothing when
+    ``failure`` is ``None``. ``stacklevel`` as :func:`warnings.warn`'s, counted from the caller."""
+    if failure is not None:
+        warnings.warn(f"{what} did not converge: {failure}" + ("" if result is None else f": {result.residual}"),
+                      ConvergenceWarning, stacklevel=stacklevel + 1)
