@@ -170,16 +170,19 @@ def _search_bend(relaxed: RelaxedRepeat, II: np.ndarray, options: QuasiStaticOpt
         current = min([current] + probes, key=lambda point: point.energy)
     start_energy = solved[0].energy
     step_limit = BEND_STEP_LIMIT_FRACTION * scale
-    # The yarns' own bending energy at this curvature (J/m²): their length per area bent to it.
-    yarn_energy = (0.5 * relaxed.yarn.bending_rigidity_nm2 * curvature**2 * float(relaxed.model.edge_rest_length.sum())
-                   / float(np.prod(relaxed.repeat_size)))
+    # The yarns' own bending energy at this curvature (J/m²; at least the smallest sampled one, for
+    # the unbent reference): their length per area bent to it.
+    yarn_energy = (0.5 * relaxed.yarn.bending_rigidity_nm2 * max(curvature, SMALLEST_CURVATURE)**2
+                   * float(relaxed.model.edge_rest_length.sum()) / float(np.prod(relaxed.repeat_size)))
 
     def balanced(point: Trial, w: np.ndarray, v: np.ndarray) -> bool:
         """The slopes spent: below FREE_SLOPE_RTOL of the start's with the decrease they promise
         below SEARCH_ENERGY_RTOL of Ū; or Ū flat in them (FLAT_ENERGY_RTOL, as the bias search);
         or a mechanism: what a limit-long step could still gain is below SEARCH_ENERGY_RTOL of the
         yarns' own bending energy (a jersey bent wale-wise one way: its loops nest, Ū ~1e-9 J/m²
-        against 4e-4 for its yarns, round-off the quasi-Newton cannot descend)."""
+        against 4e-4 for its yarns, round-off the quasi-Newton cannot descend; the unbent
+        reference of a solid-yarn jersey 1.5 times as thick ended so, its Ū as settled as the
+        solver's round-off lets it)."""
         slope = float(np.abs(point.slopes).max())
         return (slope <= FREE_SLOPE_RTOL * slope_scale
                 and promised_decrease(point, w, v) <= SEARCH_ENERGY_RTOL * abs(point.energy)
