@@ -26,13 +26,16 @@
 - ``engineering``: the small-strain constants of ``docs/design.md`` §3 (``weft_stretch_n_per_m``, …);
 - ``fit``: the fit's quality (model, membrane, parameters and standard errors, R² and relative RMS
   per family, the ``linear`` fit beside it (parameters and quality: :attr:`MaterialFile.linear_shell`),
-  the strain range the stiffening was fitted over, the rest energy (and the residual stress when
-  fitted) left out of the shell, active bounds, weights, used and excluded samples);
+  the strain range the stiffening was fitted over, the rest energies left out of the shell (the
+  membrane's ``reference_energy_j_per_m2``, the bends' ``bending_reference_energy_j_per_m2``) and
+  the residual stress when fitted, active bounds, weights, used and excluded samples);
 - ``samples``: every sample — ``family``, ``parameter``, ``I``, ``II``, ``energy_density_j_m2``,
   ``converged``, ``residual`` {force, torque, penetration, energy_change}, ``iterations``,
   ``seconds``, ``stretch_share`` (of Ū in the yarns' stretch; absent or null: unknown),
   ``pull_slope_n_per_m`` and ``across_slope_n_per_m`` (uniaxial samples: dŪ/dE along and across the
-  pull at the width found; absent or null: unknown) — including
+  pull at the width found; absent or null: unknown), ``free_membrane_strain`` (bends: the
+  membrane Green strains ``[E00, E11, E01]`` they were solved at, zero membrane force; absent or
+  null: unknown) — including
   those that did not converge (excluded from the fit, never used);
 - ``relaxed_repeat``: ``pyp``, the relaxed repeat as ``.pyp`` text (:meth:`RelaxedRepeat.relaxed_pattern
   <yarnfit.relax.RelaxedRepeat.relaxed_pattern>`: relaxed positions, the rest lengths they balance

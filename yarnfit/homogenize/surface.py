@@ -244,11 +244,21 @@ def transfer_fluctuation(source: TiledRepeat, state: RodState, target: TiledRepe
     and is then aligned with its edge. Writes ``target.state``."""
     base_source, _, frame_source = source.surface.evaluate(source.reference, source.height)
     base_target, _, frame_target = target.surface.evaluate(target.reference, target.height)
-    turn = np.einsum("nij,nkj->nik", frame_target, frame_source)
-    position = base_target + np.einsum("nij,nj->ni", turn, state.node_position - base_source)
-    quaternion = rotate_frames(turn[target.model.edge_nodes[:, 0]], state.edge_quaternion)
+    position, quaternion = _carry(base_source, frame_source, state, base_target, frame_target,
+                                  target.model.edge_nodes[:, 0])
     target.state.node_position[:] = position
     target.state.edge_quaternion[:] = aligned_frames(target.model, position, quaternion)
+
+
+def _carry(base_source: np.ndarray, frame_source: np.ndarray, state: RodState, base_target: np.ndarray,
+           frame_target: np.ndarray, first_nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``state``'s nodes ``(N, 3)`` and frames ``(E, 4)`` carried from the surface points and frames
+    ``base_source``, ``frame_source`` ``(N, 3)``, ``(N, 3, 3)`` to ``base_target``, ``frame_target``:
+    each node's fluctuation turned by ``R_t R_sᵀ``, each frame by its first node's turn
+    (``first_nodes`` ``(E,)``), not aligned with its edge."""
+    turn = np.einsum("nij,nkj->nik", frame_target, frame_source)
+    position = base_target + np.einsum("nij,nj->ni", turn, state.node_position - base_source)
+    return position, rotate_frames(turn[first_nodes], state.edge_quaternion)
 
 
 class CarriedEquilibrium:
@@ -263,10 +273,8 @@ class CarriedEquilibrium:
     def __init__(self, relaxed: RelaxedRepeat, tiled: TiledRepeat, state: RodState, pairs) -> None:
         self.tiled, self.pairs = tiled, pairs
         self.repeat = np.asarray(relaxed.repeat_size, dtype=np.float64)
-        base, _, frame = tiled.surface.evaluate(tiled.reference, tiled.height)
-        self.frame = frame
-        self.local = np.einsum("nji,nj->ni", frame, state.node_position - base)  # R_sᵀ ũ
-        self.quaternion = state.edge_quaternion
+        self.base, _, self.frame = tiled.surface.evaluate(tiled.reference, tiled.height)
+        self.state = state
         model = tiled.model
         b = pairs.pairs[:, 1]
         joint = model.joint_edges[:, 0]
@@ -285,9 +293,7 @@ class CarriedEquilibrium:
         tiled, model = self.tiled, self.tiled.model
         surface = SurfaceMap(np.asarray(I, dtype=np.float64), tiled.surface.II)
         base, _, frame = surface.evaluate(tiled.reference, tiled.height)
-        position = base + np.einsum("nij,nj->ni", frame, self.local)
-        turn = np.einsum("nij,nkj->nik", frame, self.frame)
-        quaternion = rotate_frames(turn[model.edge_nodes[:, 0]], self.quaternion)
+        position, quaternion = _carry(self.base, self.frame, self.state, base, frame, model.edge_nodes[:, 0])
         # The maps R(X + T) R(X)ᵀ, x ↦ Q x + c with c taking the node's base point to its image's
         # (as _curved_tiling), the home tile exactly the identity.
         shifted = tiled.reference[self.node] + self.tile * self.repeat
