@@ -70,3 +70,46 @@ def test_a_refused_step_is_shortened_to_its_parabolas_least_point():
     assert _shortened(current, step, Trial(step, None, None, 100.0, np.zeros(1)))[0] == pytest.approx(0.1)
     assert _shortened(current, step, Trial(step, None, None, -0.9, np.zeros(1)))[0] == pytest.approx(0.5)
     assert _shortened(current, step, None)[0] == pytest.approx(0.5)
+
+
+# A quartic's least Ū (scipy's BFGS to round-off) against the search stopped on spent slopes: a
+# Newton step promised at most SPENT_DECREASE more, and the quartic term makes the promise a
+# near-quadratic's, so what is left is within SPENT_FACTOR of it.
+SPENT_DECREASE = 1e-9
+SPENT_FACTOR = 10.0
+
+
+def quartic(free: np.ndarray) -> Trial:
+    """Ū = ½ (x − c)ᵀ H (x − c) + 50 Σ (x − c)⁴ + 1 and its slopes: its Hessian changes along the
+    way, so the BFGS updates take several steps."""
+    offset = np.asarray(free, dtype=np.float64) - CENTRE
+    energy = 0.5 * float(offset @ HESSIAN @ offset) + 50.0 * float(np.sum(offset**4)) + 1.0
+    return Trial(np.array(free, dtype=np.float64), None, None, energy, HESSIAN @ offset + 200.0 * offset**3)
+
+
+def test_a_search_asked_every_step_stops_at_spent_slopes():
+    from yarnfit.homogenize.search import promised_decrease
+
+    def run(balanced_ends):
+        solved = []
+
+        def solve_at(free):
+            solved.append(quartic(free))
+            return solved[-1]
+
+        start = solve_at(np.zeros(3))
+        hessian, probes = probe_hessian(solve_at, lambda free: True, start, np.full(3, 1e-2))
+        current = min([start] + probes, key=lambda trial: trial.energy)
+        spent = lambda trial, w, v: promised_decrease(trial, w, v) <= SPENT_DECREASE
+        found, failure, _ = quasi_newton(solve_at, lambda free: True, current, hessian, lambda: len(solved), 40, 0.05,
+                                         STEP_TOLERANCE, spent, interpolate=True, balanced_ends=balanced_ends)
+        assert failure is None
+        return found, len(solved)
+
+    least = scipy.optimize.minimize(lambda x: quartic(x).energy, np.zeros(3), jac=lambda x: quartic(x).slopes,
+                                    method="BFGS", options={"gtol": 1e-13}).fun
+    stopped, early = run(True)
+    walked, late = run(False)
+    assert early < late
+    assert 0.0 <= stopped.energy - least <= SPENT_FACTOR * SPENT_DECREASE
+    assert walked.energy - least <= SPENT_FACTOR * SPENT_DECREASE

@@ -110,10 +110,10 @@ def _search_bend(relaxed: RelaxedRepeat, II: np.ndarray, options: QuasiStaticOpt
     """``relaxed`` bent to ``II`` ``(2, 2)`` (1/m) with its membrane strains where Ū is least:
     from the paper's ``I = Id``, a Hessian from three probe solves (:data:`BEND_PROBE_FRACTION`
     of the bend's strain scale each) and :func:`~.search.quasi_newton`, each trial warm-started
-    from the nearest trial's equilibrium, its fluctuation carried over. Stops as the bias pull's
-    search does (its slopes below :data:`FREE_SLOPE_RTOL` of ``I = Id``'s, with the decrease they
-    promise below :data:`SEARCH_ENERGY_RTOL` of Ū, or Ū flat in them), or when Ū has settled
-    (:data:`BEND_SETTLED_STEPS`).
+    from the nearest trial's equilibrium, its fluctuation carried over. Stops at the first trial
+    whose slopes are spent by the bias pull's test (below :data:`FREE_SLOPE_RTOL` of ``I = Id``'s,
+    with the decrease they promise below :data:`SEARCH_ENERGY_RTOL` of Ū, or Ū flat in them),
+    asked before every step, or when Ū has settled (:data:`BEND_SETTLED_STEPS`).
 
     From a ``start`` (the previous, gentler bend of the same family and sign) the first trial is
     its free strains scaled by the ratio of the curvatures, warm-started from its equilibrium, and
@@ -202,7 +202,7 @@ def _search_bend(relaxed: RelaxedRepeat, II: np.ndarray, options: QuasiStaticOpt
 
     current, failure, hessian = quasi_newton(solve_at, admissible, current, hessian, lambda: len(solved),
                                              FREE_STRAIN_SOLVES, step_limit, BEND_STEP_TOLERANCE_FRACTION * scale,
-                                             balanced, settled, bound, interpolate=True)
+                                             balanced, settled, bound, interpolate=True, balanced_ends=True)
     onward = None if failure is not None else _BendStart(II, current.free, current.tiled, current.result, hessian,
                                                          slope_scale)
     return _BendSearch(current.free, current.result, current.tiled, iterations, failure, current.slopes, len(solved),
