@@ -106,10 +106,11 @@ def solve_samples(
 
     A group whose solve raises makes this raise it (after the others finished); Ctrl-C stops the
     workers and raises ``KeyboardInterrupt`` (:mod:`yarnfit.tasks`)."""
-    if backend is None:
-        with LocalPool(workers, tasks=len(specs)) as pool:
-            return solve_samples(relaxed, specs, on_sample=on_sample, backend=pool, coefficient=coefficient)
     groups = sample_groups(specs, coefficient is not None)
+    if backend is None:
+        # One task per group: a design of three bend paths needs no more than three workers.
+        with LocalPool(workers, tasks=len(groups)) as pool:
+            return solve_samples(relaxed, specs, on_sample=on_sample, backend=pool, coefficient=coefficient)
     results: list[SampleResult | None] = [None] * len(specs)
     known = 0
 
