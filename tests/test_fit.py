@@ -59,8 +59,9 @@ CALIBRATION_REL = 0.12
 
 
 def fit_linear(*args, **kwargs):
-    """The linear (StVK) fit, as the material: these tests check its least squares exactly."""
-    return fit_shell(*args, membrane="linear", **kwargs)
+    """The linear (StVK) fit, as the material (quadratic membrane, symmetric bending): these tests
+    check its least squares exactly."""
+    return fit_shell(*args, membrane="linear", bending="symmetric", **kwargs)
 # Energy noise of the noisy-data tests, relative to the group's largest energy (10 J/m² membrane,
 # 0.26 J/m² bending). The smallest shear energies are ~1/2500 of the largest membrane energy, so this
 # is already ~25 % noise on them; much more and s22 would reach its floor in some trials, truncating
@@ -521,7 +522,7 @@ def test_quality_dict_is_plain_json():
     quality = fit.quality_dict()
     again = json.loads(json.dumps(quality, allow_nan=False))
     assert again == quality
-    keys = {"model", "membrane", "parameters_pa", "std_error_pa", "families", "linear", "strain_range",
+    keys = {"model", "membrane", "bending", "parameters_pa", "std_error_pa", "families", "linear", "strain_range",
             "reference_energy_j_per_m2", "bending_reference_energy_j_per_m2", "residual_stress", "active_bounds",
             "notes", "coupling_limit", "weight_widths", "used", "excluded"}
     assert set(quality) == keys

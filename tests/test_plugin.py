@@ -61,7 +61,8 @@ def vertex_forces(model, qfrc):
 
 class ReferenceShell:
     """The plugin's discrete energy, written independently in numpy: per triangle
-    A0 (h/2) εᵀ S ε + A0 (h³/2) κᵀ B κ, with κ from the signed dihedral angles θ of the triangle's
+    A0 (h/2) εᵀ S ε + A0 (h³/2) κᵀ B κ (with ``b00_neg``, ``b11_neg`` in the material, B's
+    diagonal on the side of each κ's sign), with κ from the signed dihedral angles θ of the triangle's
     edges. A triangle whose three edges are interior solves θ_e = r_eᵀ κ for κ, r_e the hinge
     angle a quadratic surface of constant curvature κ makes across edge e (the jump of its linear
     interpolant's slope, from the two opposite vertices' positions along and off the edge): exact
@@ -95,6 +96,9 @@ class ReferenceShell:
                                [0, 0, material["s22"]]])
         self.B = h**3 * np.array([[material["b00"], material["b01"], 0], [material["b01"], material["b11"], 0],
                                   [0, 0, material["b22"]]])
+        # The signed bending's negative sides (the positive ones are b00, b11), as B's diagonal.
+        self.negative = h**3 * np.array([material.get("b00_neg", material["b00"]),
+                                         material.get("b11_neg", material["b11"])])
         self.area = np.array([0.5 * abs(np.linalg.det(np.column_stack([r[1] - r[0], r[2] - r[0]])))
                               for r in self.corner])
         # Interior edges: the two triangles on each, oriented by the first.
@@ -196,7 +200,10 @@ class ReferenceShell:
 
     def energy(self, x):
         eps, kappa = self.strains(x)
-        bending = 0.5 * float(self.area @ np.einsum("ti,ij,tj->t", kappa, self.B, kappa))
+        B = np.repeat(self.B[None], len(kappa), axis=0)
+        for k in range(2):
+            B[:, k, k] = np.where(kappa[:, k] >= 0, self.B[k, k], self.negative[k])
+        bending = 0.5 * float(self.area @ np.einsum("ti,tij,tj->t", kappa, B, kappa))
         if self.domains is None:
             return 0.5 * float(self.area @ np.einsum("ti,ij,tj->t", eps, self.S, eps)) + bending
         # Node-smoothed membrane: ε_d = Σ over the domain's corners of (A_t/3)/A_d ε_t (the
@@ -304,6 +311,50 @@ def test_bending_on_irregular_meshes_is_minus_the_gradient_of_the_consistent_ope
     assert np.abs(gradient).max() > 1e-5  # N: a real bend
     np.testing.assert_allclose(vertex_forces(model, qfrc), -gradient, rtol=0,
                                atol=GRADIENT_RTOL * np.abs(gradient).max())
+
+
+# A signed bending (b00_neg, b11_neg): each side several times the other's, as a jersey's are.
+SIGNED = {"b00_neg": 4.0e6, "b11_neg": 2.0e5}
+
+
+def test_signed_bending_is_minus_the_gradient_of_its_energy():
+    """With ``b00_neg`` and ``b11_neg`` the stiffness along weft and warp depends on the sign of
+    each triangle's curvature: the forces are minus the gradient of the reference energy that
+    picks B's diagonal by those signs, on a criss-cross mesh bent both ways in both directions."""
+    from yarnfit.mujoco.scenes import grid_mesh
+
+    points, triangles = grid_mesh(5, 5, 0.12, 0.1, crisscross=True)
+    soft = {**MATERIAL, **SIGNED, "s00": 1e-6, "s01": 0.0, "s11": 1e-6, "s22": 1e-6}
+    model = mesh_model(points, triangles, soft)
+    reference = ReferenceShell(model, soft)
+    qpos = model.qpos0 + 0.005 * np.random.default_rng(3).standard_normal(model.nq)
+    qfrc, x = forces(model, qpos)
+    kappa = reference.strains(x)[1]
+    bent = np.any(kappa != 0, axis=1)
+    for k in range(2):  # both sides of both directions are in it
+        assert np.any(kappa[bent, k] > 0) and np.any(kappa[bent, k] < 0)
+    gradient = central_gradient(reference.energy, x)
+    np.testing.assert_allclose(vertex_forces(model, qfrc), -gradient, rtol=0,
+                               atol=GRADIENT_RTOL * np.abs(gradient).max())
+    # ... and the signs matter: the symmetric bending's forces differ.
+    symmetric, _ = forces(mesh_model(points, triangles, {**soft, "b00_neg": soft["b00"], "b11_neg": soft["b11"]}),
+                          qpos)
+    assert np.abs(qfrc - symmetric).max() > 0.1 * np.abs(qfrc).max()
+
+
+@pytest.mark.parametrize("extra, message", [
+    ({"b00_neg": -1.0}, r"config key 'b00_neg' must be positive, got -1"),
+    ({"b11_neg": 0.0}, r"config key 'b11_neg' must be positive, got 0"),
+    ({"b11_neg": math.nan}, r"config key 'b11_neg' must be a finite number, got 'nan'"),
+    # b01² = 1e10 < b00·b11 = 8e11, but not below min(b00, b00_neg)·min(b11, b11_neg) = 1e6 · 5e3.
+    ({"b11_neg": 5e3}, r"signed bending is not convex: b01\^2 = 1e\+10 >= min\(b00, b00_neg\)\*min\(b11, b11_neg\)"),
+])
+def test_bad_signed_bending_fails_compilation_naming_the_key(extra, message):
+    from yarnfit.mujoco.scenes import grid_mesh
+
+    points, triangles = grid_mesh(3, 3, 0.1, 0.1)
+    with pytest.raises(ValueError, match=message):
+        mesh_model(points, triangles, {**MATERIAL, **extra})
 
 
 def test_damping_is_the_stiffness_proportional_strain_rate_stress():

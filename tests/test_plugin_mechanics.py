@@ -14,7 +14,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from fabric_shell import FABRIC, H
-from yarnfit.shell import ShellMaterial
+from yarnfit.shell import ShellMaterial, SignedBending
 
 # The issue's bounds: clamp force and Poisson contraction within 2 % of the shell law's small-strain
 # prediction, cylinder bending energy within 5 %.
@@ -218,6 +218,38 @@ def bent_strip_error(kind, direction, cells, length=0.1, width=0.02, curvature=2
     model = mesh_model(points, triangles, soft)
     expected = 0.5 * FABRIC.engineering()[f"bending_{direction}_nm"] * curvature**2
     return wrapped_bending_energy(model, points, curvature, axis) / (length * width) / expected - 1
+
+
+# A signed bending on FABRIC's: each side of weft and warp several times the other's.
+SIGNED_FABRIC = ShellMaterial(FABRIC.thickness, **FABRIC.parameters, signed_bending=SignedBending(
+    b00_pos=FABRIC.b00, b00_neg=4.0 * FABRIC.b00, b01=FABRIC.b01, b11_pos=0.25 * FABRIC.b11, b11_neg=FABRIC.b11,
+    b22=FABRIC.b22))
+
+
+@pytest.mark.parametrize("direction", ["weft", "warp"])
+@pytest.mark.parametrize("curvature", [20.0, -20.0])
+def test_a_signed_bend_takes_its_sides_stiffness(direction, curvature):
+    """A strip wrapped towards +z (the flex's triangle normal, the repeat's +z: ``II > 0``) bends
+    with ``b00`` / ``b11``, away from it with ``b00_neg`` / ``b11_neg``: the exported plugin's
+    curvature has the sign of yarnfit's second form. Energy per area against ``h³`` times
+    :meth:`SignedBending.energy` at the strip's ``II``, to the consistent operator's accuracy."""
+    from test_plugin import mesh_model
+
+    axis = {"weft": 0, "warp": 1}[direction]
+    length, width = 0.1, 0.02
+    points, triangles = strip_mesh("grid", length, width, length / 32)
+    if axis == 1:  # the strip along y
+        points, triangles = points[:, [1, 0, 2]], triangles[:, ::-1]
+    # The keys as the export writes them (yarnfit.mujoco.scenes), read back as numbers.
+    keys = SIGNED_FABRIC.signed_bending.plugin_keys
+    soft = {**{key: float(text) for key, text in keys.items()}, "thickness": FABRIC.thickness,
+            "s00": 1e-6, "s01": 0.0, "s11": 1e-6, "s22": 1e-6}
+    model = mesh_model(points, triangles, soft)
+    II = np.zeros((2, 2))
+    II[axis, axis] = curvature
+    expected = SIGNED_FABRIC.energy_density(np.eye(2), II)  # J/m², the membrane's is zero
+    error = wrapped_bending_energy(model, points, curvature, axis) / (length * width) / expected - 1
+    assert abs(error) < CONSISTENT_BENDING_RTOL
 
 
 @pytest.mark.filterwarnings("ignore:.*is not rigid")

@@ -222,6 +222,14 @@ def bench_fit() -> None:
             for family, quality in fitted.fit.families.items():
                 if quality["samples"]:
                     report(f"{key}_r2_{family}", quality["r2"], "")
+            signed = fitted.fit.signed_fit  # the material's bending unless the fit's notes say why not
+            if signed is not None:
+                h3 = fitted.material.thickness**3
+                for name, value in signed.parameters.items():
+                    report(f"{key}_signed_{name}_nm", h3 * value, "" if fitted.fit.bending == "signed" else "(not used)")
+                for family, quality in fitted.fit.linear_families.items():
+                    if family.endswith("_bend") and quality["samples"]:
+                        report(f"{key}_symmetric_r2_{family}", quality["r2"], "")
         # The stockinette's samples once more on one worker, its own relaxation reused: the
         # figures above run every core at once, and a sample then shares the machine's caches and
         # memory with another (10–15 % slower on 2 cores); this is one core to itself.

@@ -152,7 +152,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="weft direction in degrees from world x (stretch: 0 weft strip, 90 warp, 45 bias)")
     export.add_argument("--gsm", type=float, metavar="G", help="areal density in g/m² (default: the material file's)")
     export.add_argument("--linear", action="store_true",
-                        help="the linear StVK membrane fitted from the same samples instead of the strain-stiffening one")
+                        help="the linear StVK shell fitted from the same samples (quadratic membrane and symmetric bending) "
+                             "instead of the strain-stiffening membrane and the signed bending")
     export.add_argument("--fallback", action="store_true",
                         help="no plugin: MuJoCo's built-in isotropic elasticity alone (stretch and bending) with the "
                              "material's isotropic fallback")
@@ -575,6 +576,10 @@ def export_summary(built, material, output, args) -> str:
                     else "linear membrane (--linear)" if args.linear else "linear membrane")
         bending = ("its own bending, the built-in hinge forces removed" if spec.flexes[0].elastic2d == 3
                    else "all bending")
+        if material.shell.signed_bending is not None:
+            bending = f"signed {bending}"
+        elif args.linear:
+            bending = f"symmetric {bending}"  # --linear: the quadratic bending of the same fit
         lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, "
                      f"{bending}), weft at {args.angle:g}° from x")
     if not built.fallback and material.shell.nonlinear is not None and args.check is None:
@@ -606,15 +611,25 @@ def fit_summary(fitted, output, recording_path) -> str:
     for key, label in (("bending_weft_nm", "bending weft"), ("bending_warp_nm", "bending warp"),
                        ("bending_bias_nm", "bending bias")):
         lines.append(f"  {label:<16}{eng[key]:12.5g} N·m   {eng[key] / GF_CM2_PER_CM:10.4g} gf·cm²/cm")
+    signed = fitted.material.signed_bending
+    if signed is not None:  # the symmetric figures above are the fit beside it (--linear's)
+        h3 = fitted.material.thickness**3
+        for label, positive, negative in (("signed weft", signed.b00_pos, signed.b00_neg),
+                                          ("signed warp", signed.b11_pos, signed.b11_neg)):
+            lines.append(f"  {label:<16}{h3 * positive:12.5g} / {h3 * negative:.5g} N·m towards / away from +z "
+                         f"(the material's bending; the figures above: symmetric)")
     lines.append(f"  {'thickness':<16}{fitted.material.thickness * 1e3:12.4g} mm")
     # R² needs spread within a family; a family of one sample gets its relative RMS error instead.
     quality = ", ".join(f"{family} {q['r2']:.3f}" if q["samples"] > 1 else f"{family} (rms {q['relative_rms']:.2g})"
                         for family, q in fit.families.items())
     lines.append(f"  fit R²          {quality}")
-    if fit.membrane == "nonlinear":
+    if fit.membrane == "nonlinear" or fit.bending == "signed":
+        shown = (("weft_s", "warp_s", "biaxial", "shear") if fit.membrane == "nonlinear" else ()) + (
+            ("weft_bend", "warp_bend", "bias_bend", "saddle_bend") if fit.bending == "signed" else ())
         linear_quality = ", ".join(f"{family} {q['r2']:.3f}" for family, q in fit.linear_families.items()
-                                   if family.startswith(("weft_s", "warp_s", "biaxial", "shear")))
+                                   if family.startswith(shown))
         lines.append(f"  linear R²       {linear_quality}")
+    if fit.membrane == "nonlinear":
         lines.append(f"  stiffening      {_stiffening_summary(fit)}")
     if fit.reference_energy or any(fit.residual_stress.values()):
         r = fit.residual_stress

@@ -61,8 +61,10 @@ from .shell import (
     BENDING_PARAMETERS,
     MEMBRANE_PARAMETERS,
     PARAMETER_NAMES,
+    SIGNED_BENDING_PARAMETERS,
     RidgeMembrane,
     ShellMaterial,
+    SignedBending,
     bending_strain,
     membrane_strain,
 )
@@ -86,6 +88,9 @@ MODELS = ("full", "paper")
 # The membrane of the fitted material: "nonlinear" (the strain-stiffening RidgeMembrane; S stays
 # the linear fit) or "linear" (the paper's StVK, the Gaussian-weighted fit).
 MEMBRANE_MODELS = ("nonlinear", "linear")
+# The bending of the fitted material: "signed" (SignedBending: b00 and b11 one value per sign of the
+# curvature; B stays the symmetric fit) or "symmetric" (B, the paper's quadratic).
+BENDING_MODELS = ("signed", "symmetric")
 # Samples a direction's own pure family (weft or warp stretch, shear) needs away from zero before
 # the strain-stiffening fit measures that direction's residual stress: with fewer, the linear term
 # takes up whatever the ridges miss (−2.8 kN/m from one level).
@@ -167,8 +172,11 @@ WEIGHT_WIDTH_FRACTION = 0.25
 # problem of at most 5 unknowns converges in tens of evaluations, the limit only stops a runaway.
 BOUNDED_SOLVE_TOLERANCE = 1e-15
 BOUNDED_SOLVE_EVALUATIONS = 10000
+# A diagonal the signed bending's bounded solve ends within this fraction of its floor sits on it:
+# the solve's values are sums u² + p whose round-off puts them a few ulps above it.
+FLOOR_ROUNDOFF = 1e-6
 
-_DIAGONAL = ("s00", "s11", "s22", "b00", "b11", "b22")
+_DIAGONAL = ("s00", "s11", "s22", "b00", "b11", "b22", "b00_pos", "b00_neg", "b11_pos", "b11_neg")
 # The residual-stress terms per group (see ShellFit.residual_stress).
 RESIDUAL_STRESS_NAMES = {"membrane": ("n0", "n1", "n2"), "bending": ("m0", "m1", "m2")}
 _ALL_RESIDUAL = RESIDUAL_STRESS_NAMES["membrane"] + RESIDUAL_STRESS_NAMES["bending"]
@@ -177,6 +185,7 @@ _GROUPS = ((Group.MEMBRANE, MEMBRANE_FAMILIES, MEMBRANE_PARAMETERS), (Group.BEND
 _COUPLINGS = {"membrane": ("s00", "s01", "s11"), "bending": ("b00", "b01", "b11")}
 # The sample family that determines each parameter (named in notes and errors).
 _FAMILY_OF = {family.determines: family for family in FAMILIES if family.determines is not None}
+_FAMILY_OF.update({f"{name}_{side}": _FAMILY_OF[name] for name in ("b00", "b11") for side in ("pos", "neg")})
 
 
 class IndefiniteFitError(ValueError):
@@ -201,15 +210,21 @@ class ShellFit:
     Attributes:
         material: the fitted material, with the thickness given to the fit: for ``membrane``
             "nonlinear" with its strain-stiffening membrane (``material.nonlinear``, ``None`` if
-            its fit failed: see ``notes``) and ``S`` the linear fit; for "linear" the linear fit.
+            its fit failed: see ``notes``) and ``S`` the linear fit; for "linear" the linear fit;
+            for ``bending`` "signed" with its signed bending (``material.signed_bending``) and
+            ``B`` the symmetric fit.
         model: ``"full"`` or ``"paper"``.
         membrane: ``"nonlinear"`` or ``"linear"``.
-        linear: the linear (StVK) fit from the same samples; the bending block is shared.
+        bending: ``"signed"`` or ``"symmetric"``: what the material carries.
+        signed_fit: the signed bending fitted to the bends (``None`` when not asked for or not
+            determined), which the material carries unless a stiffness of it ended on its floor
+            where the symmetric fit's did not (``notes`` say so, with both models' bend R²).
+        linear: the linear (StVK) fit from the same samples, with the symmetric bending.
         linear_families: per family statistics of ``linear`` (as ``families``).
         parameters: fitted stiffnesses (Pa) by name, all eight (b01 = 0 for the paper model): the
             linear fit's (the material's ``S`` and ``B``).
-        std_error: standard errors (Pa) by name; 0 for a parameter the model fixes, NaN for a group
-            with no more samples than parameters.
+        std_error: standard errors (Pa) by name (the signed bending's six too, when fitted); 0 for
+            a parameter the model fixes, NaN for a group with no more samples than parameters.
         families: per family ``{"r2": float, "relative_rms": float, "samples": int}`` of the
             material, unweighted, over the used samples (see :func:`fit_shell` for the edge cases).
         active_bounds: names of diagonal stiffnesses that ended on their positive floor, of
@@ -253,6 +268,8 @@ class ShellFit:
     linear: ShellMaterial
     linear_families: dict[str, dict]
     membrane: str = "nonlinear"
+    bending: str = "symmetric"
+    signed_fit: SignedBending | None = None
     strain_range: dict[str, list[float]] = field(default_factory=dict)
     reference_energy: float = 0.0
     residual_stress: dict[str, float] = field(default_factory=dict)
@@ -295,6 +312,7 @@ class ShellFit:
         return {
             "model": self.model,
             "membrane": self.membrane,
+            "bending": self.bending,
             "parameters_pa": {k: float(v) for k, v in self.parameters.items()},
             "std_error_pa": {k: finite_or_none(v) for k, v in self.std_error.items()},
             "families": _json_families(self.families),
@@ -474,6 +492,7 @@ def fit_shell(
     coupling_limit: float | None = COUPLING_LIMIT,
     membrane: str = "nonlinear",
     residual_stress: bool = False,
+    bending: str = "signed",
 ) -> ShellFit:
     """Fit an orthotropic shell to yarn-level energies: the linear (StVK) model by weighted linear
     least squares, and (``membrane="nonlinear"``) the strain-stiffening membrane (module docstring).
@@ -492,6 +511,8 @@ def fit_shell(
         coupling_limit: ρ_max in (0, 1), or ``None`` to fit the couplings unbounded and raise
             :class:`IndefiniteFitError` when the optimum is not positive definite.
         membrane: ``"nonlinear"`` (the material carries the stiffening membrane) or ``"linear"``.
+        bending: ``"signed"`` (the material carries a :class:`~yarnfit.shell.SignedBending` fitted
+            to the same bends, :func:`_fit_signed_bending`) or ``"symmetric"``.
         residual_stress: with an undeformed sample, also fit the membrane's terms linear in the
             strain (``ShellFit.residual_stress`` n0 n1 n2) and leave them out of the shell. Off by
             default: a relaxed repeat's rest state is its relaxed shape, force-free by construction
@@ -517,6 +538,8 @@ def fit_shell(
         raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
     if membrane not in MEMBRANE_MODELS:
         raise ValueError(f"membrane must be one of {', '.join(MEMBRANE_MODELS)}, got {membrane!r}")
+    if bending not in BENDING_MODELS:
+        raise ValueError(f"bending must be one of {', '.join(BENDING_MODELS)}, got {bending!r}")
     if coupling_limit is not None:
         coupling_limit = real_number(coupling_limit, "coupling_limit")
         if not 0.0 < coupling_limit < 1.0:
@@ -619,6 +642,30 @@ def fit_shell(
     if reference:
         rest_stress.update(_residual_moments(used, relative))
     bending_active, bending_notes = at_bound, group_notes
+    signed, unused_signed = None, None
+    if bending == "signed":
+        bends = ~membrane_rows & ~undeformed
+        signed, errors, at_bound, group_notes = _fit_signed_bending(
+            [s for s, bend in zip(used, bends) if bend], relative[bends], weights[bends], h, model == "full",
+            coupling_limit)
+        # A stiffness the signed fit puts on its floor where the symmetric fit's is not leaves a
+        # bending mode without stiffness (the jerseys' b22: their bias bends softer than their
+        # weft and warp bends' stiffer sides, which the convex signed bending cannot follow): the
+        # material keeps the symmetric bending, and the notes say what the signed one fitted.
+        floored = {n for n in at_bound if n != "b01"}
+        lost = sorted(n for n in floored if n.split("_")[0] not in bending_active)
+        if signed is None:
+            bending_notes = bending_notes + group_notes
+        elif lost:
+            unused_signed, signed = signed, None
+            bending_notes = bending_notes + [
+                f"signed bending not used: its {', '.join(lost)} at the positive floor where the symmetric fit's "
+                f"{', '.join(sorted({n.split('_')[0] for n in lost}))} is not (a bending mode without stiffness); "
+                f"the material keeps the symmetric bending"]
+        else:
+            std_error.update(errors)
+            bending_active = bending_active + at_bound
+            bending_notes = [f"symmetric bending: {note}" for note in bending_notes] + group_notes
     # Membrane: a quadratic cannot tell a residual stress from the curvature of the energy (a
     # linear fibre's Green-strain softening came out as 200 N/m of it), so the stiffening model,
     # which follows the curve, measures the residual stress (when asked); the linear fit takes it
@@ -665,10 +712,17 @@ def fit_shell(
         return shell + rest_energy + linear_terms[:, :3] @ membrane_stress
 
     linear_families = _family_statistics(used, predicted(linear, rest_stress), target)
-    material, strain_range = linear, {}
+    if unused_signed is not None:
+        tried = _family_statistics(used, predicted(ShellMaterial(h, **parameters, signed_bending=unused_signed),
+                                                   rest_stress), target)
+        notes.append("the signed bending it fitted: " + ", ".join(
+            f"{name} = {value:.4g} Pa" for name, value in unused_signed.parameters.items()) + "; bend R² (signed / "
+            "symmetric) " + ", ".join(f"{family} {tried[family]['r2']:.3f} / {linear_families[family]['r2']:.3f}"
+                                      for family in BENDING_FAMILIES if tried.get(family, {}).get("samples")))
+    material, strain_range = ShellMaterial(h, **parameters, signed_bending=signed), {}
     if membrane == "nonlinear":
         stiffening, membrane_notes, strain_range, _ = stiffening_fit
-        material = ShellMaterial(h, **parameters, nonlinear=stiffening)
+        material = ShellMaterial(h, **parameters, nonlinear=stiffening, signed_bending=signed)
         notes += membrane_notes
     notes += stretch_dominated_notes(used)
     fitted = predicted(material, rest_stress)
@@ -676,6 +730,8 @@ def fit_shell(
         material=material,
         model=model,
         membrane=membrane,
+        bending="signed" if signed is not None else "symmetric",
+        signed_fit=signed if signed is not None else unused_signed,
         parameters=parameters,
         std_error=std_error,
         families=_family_statistics(used, fitted, target),
@@ -694,6 +750,120 @@ def fit_shell(
         notes=notes,
         coupling_limit=coupling_limit,
     )
+
+
+def signed_design_matrix(samples: Sequence[SampleResult], thickness: float) -> np.ndarray:
+    """``dW/dγ`` of the signed bending (:class:`~yarnfit.shell.SignedBending`) for each sample,
+    ``(n, 6)``, columns in :data:`~yarnfit.shell.SIGNED_BENDING_PARAMETERS` order:
+    ``h³/2 (κ0₊², κ0₋², 2 κ0 κ1, κ1₊², κ1₋², κ2²)`` (J/m² per Pa), ``κ₊ = max(κ, 0)``,
+    ``κ₋ = min(κ, 0)``."""
+    h = _thickness(thickness)
+    kap = bending_strain(np.stack([s.II for s in _sample_list(samples)]))
+    above, below = np.maximum(kap, 0.0), np.minimum(kap, 0.0)
+    return 0.5 * h**3 * np.column_stack([above[:, 0]**2, below[:, 0]**2, 2.0 * kap[:, 0] * kap[:, 1],
+                                         above[:, 1]**2, below[:, 1]**2, kap[:, 2]**2])
+
+
+def _fit_signed_bending(bends: list[SampleResult], energies: np.ndarray, weights: np.ndarray, h: float,
+                        coupled: bool, coupling_limit: float | None
+                        ) -> tuple[SignedBending | None, dict[str, float], list[str], list[str]]:
+    """The signed bending fitted to the ``bends`` (their ``energies`` relative to the unbent
+    reference, J/m², and least-squares ``weights``), as the symmetric one is (:func:`_fit_group`:
+    the same floors, rank test and standard errors), and convex: ``|b01| <= coupling_limit ·
+    √(min(b00_pos, b00_neg) · min(b11_pos, b11_neg))`` (:func:`_signed_coupling_solve`; held at 0
+    without ``coupled``: the paper's model). Returns ``(the bending, standard errors by name, names
+    at a bound, notes)``; the bending is ``None`` (and the notes say why) when the bends do not
+    strain every stiffness it has, or when its optimum is not convex and ``coupling_limit`` is
+    ``None`` (unbounded couplings: the symmetric fit is then what is judged)."""
+    D = signed_design_matrix(bends, h)
+    names = list(SIGNED_BENDING_PARAMETERS)
+    free = names if coupled else [n for n in names if n != "b01"]
+    unsampled = [n for n, norm in zip(names, np.linalg.norm(np.sqrt(weights)[:, None] * D, axis=0))
+                 if norm == 0.0 and n in free]
+    if unsampled:
+        return None, {}, [], [f"signed bending not fitted: no bend with weight strains {', '.join(unsampled)} "
+                              f"(it needs weft and warp bends of both signs)"]
+    families = tuple(sorted({s.family for s in bends}))
+    columns = [names.index(n) for n in free]
+    values, errors, at_bound, _ = _fit_group("signed bending", families, free, D[:, columns], energies, weights,
+                                             ("b00_pos", "b01", "b11_pos"), None)
+    values.setdefault("b01", 0.0), errors.setdefault("b01", 0.0)
+    notes = [f"signed bending: {n} at its positive floor: the {_FAMILY_OF[n]} energies carry no {n} stiffness"
+             for n in at_bound]
+    result = SignedBending(**values)
+    if coupled and not result.positive_definite:
+        if coupling_limit is None:  # unbounded couplings (--strict): the symmetric fit is judged
+            return None, {}, [], [f"signed bending not used: its unbounded optimum is not convex "
+                                  f"({'; '.join(result.problems())}) and the couplings are not bounded"]
+        # Unlike the symmetric fit, a diagonal at its floor does not put b01 at 0: the bounded
+        # solve below is the convex problem's optimum, which holds the symmetric fit among its
+        # candidates (equal sides), so it never fits the bends worse than the symmetric one.
+        sw = np.sqrt(weights)
+        floor = DIAGONAL_FLOOR_REL * max(values[n] for n in names if n != "b01")
+        least = min(values["b00_pos"], values["b00_neg"]) * min(values["b11_pos"], values["b11_neg"])
+        ratio = values["b01"] / math.sqrt(least) if least > 0.0 else math.copysign(math.inf, values["b01"])
+        values = _signed_coupling_solve(sw[:, None] * D, sw * energies, values, coupling_limit, floor)
+        at_bound = [n for n in names if n != "b01" and values[n] <= floor] + ["b01"]
+        notes = [f"signed bending: {n} at its positive floor: the {_FAMILY_OF[n]} energies carry no {n} stiffness"
+                 for n in at_bound if n != "b01"]
+        notes.append(f"signed bending: b01 at the convexity bound |b01| = {coupling_limit:g} "
+                     f"√(min(b00_pos, b00_neg)·min(b11_pos, b11_neg)): the saddle_bend energies ask for "
+                     f"{ratio:.3g}, which no convex signed bending has")
+        result = SignedBending(**values)
+    return result, {n: errors[n] for n in names}, at_bound, notes
+
+
+def _signed_coupling_solve(A: np.ndarray, b: np.ndarray, start: dict[str, float], limit: float,
+                           floor: float) -> dict[str, float]:
+    """``min ‖A γ − b‖`` over the signed bending's six stiffnesses ``γ`` (Pa; ``A`` ``(n, 6)`` in
+    :data:`~yarnfit.shell.SIGNED_BENDING_PARAMETERS` order) subject to every diagonal ``>= 0`` and
+    ``|b01| <= limit √(min(b00_pos, b00_neg) · min(b11_pos, b11_neg))``, the diagonals at least
+    ``floor`` (Pa; one that ends within round-off of it is put on it exactly).
+
+    Solved in ``(u, p₊, p₋, v, q₊, q₋, ρ, w)`` (Pa and √Pa) with ``b00_± = u² + p_±``,
+    ``b11_± = v² + q_±`` (``p, q >= 0``), ``b01 = ρ u v``, ``|ρ| <= limit``, ``b22 = w``: the feasible set of ``γ`` is an intersection of four convex cones (one per
+    pair of sides) and the objective convex, so the local optimum this finds from ``start`` (the
+    unbounded fit, its coupling put on the bound) is the global one."""
+    scale = np.linalg.norm(A, axis=0)
+    As = A / scale
+    gamma0 = np.array([start[n] for n in SIGNED_BENDING_PARAMETERS])
+    u, v = math.sqrt(max(min(gamma0[0], gamma0[1]), 0.0)), math.sqrt(max(min(gamma0[3], gamma0[4]), 0.0))
+
+    def unpack(theta):
+        u, p_pos, p_neg, v, q_pos, q_neg, rho, w = theta
+        return np.array([u * u + p_pos, u * u + p_neg, rho * u * v, v * v + q_pos, v * v + q_neg, w])
+
+    def residual(theta):
+        return As @ (unpack(theta) * scale) - b
+
+    def jacobian(theta):
+        u, _, _, v, _, _, rho, _ = theta
+        d = np.zeros((6, 8))  # d γ / d θ
+        d[0, 0], d[0, 1] = 2.0 * u, 1.0
+        d[1, 0], d[1, 2] = 2.0 * u, 1.0
+        d[2, 0], d[2, 3], d[2, 6] = rho * v, rho * u, u * v
+        d[3, 3], d[3, 4] = 2.0 * v, 1.0
+        d[4, 3], d[4, 5] = 2.0 * v, 1.0
+        d[5, 7] = 1.0
+        return As @ (scale[:, None] * d)
+
+    theta0 = np.array([u, gamma0[0] - u * u, gamma0[1] - u * u, v, gamma0[3] - v * v, gamma0[4] - v * v,
+                       math.copysign(limit, gamma0[2]), max(gamma0[5], 0.0)])
+    theta0[[1, 2, 4, 5]] = np.maximum(theta0[[1, 2, 4, 5]], 0.0)
+    theta0[[0, 3]] = np.maximum(theta0[[0, 3]], math.sqrt(floor))
+    theta0[7] = max(theta0[7], floor)
+    low = np.array([math.sqrt(floor), 0.0, 0.0, math.sqrt(floor), 0.0, 0.0, -limit, floor])
+    high = np.array([np.inf, np.inf, np.inf, np.inf, np.inf, np.inf, limit, np.inf])
+    solution = least_squares(residual, theta0, jac=jacobian, bounds=(low, high), method="trf", x_scale="jac",
+                             xtol=BOUNDED_SOLVE_TOLERANCE, ftol=BOUNDED_SOLVE_TOLERANCE,
+                             gtol=BOUNDED_SOLVE_TOLERANCE, max_nfev=BOUNDED_SOLVE_EVALUATIONS)
+    if solution.status <= 0:
+        raise RuntimeError(f"signed bending's convexity-bounded solve failed: {solution.message}")
+    gamma = unpack(solution.x)
+    diagonal = np.array([n != "b01" for n in SIGNED_BENDING_PARAMETERS])
+    # On the floor to round-off (u² + p: a sum that rounds above it): exactly on it.
+    gamma[diagonal & (gamma <= floor * (1.0 + FLOOR_ROUNDOFF))] = floor
+    return dict(zip(SIGNED_BENDING_PARAMETERS, (float(g) for g in gamma)))
 
 
 def _residual_moments(used: list[SampleResult], relative: np.ndarray) -> dict[str, float]:

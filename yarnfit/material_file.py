@@ -22,9 +22,12 @@
   samples), ``bending_pa`` {b00, b01, b11, b22} and, for the strain-stiffening membrane,
   ``nonlinear`` {``model`` ``"green-ridge"``, ``base_pa``, ``ridges``} (:class:`~yarnfit.shell.RidgeMembrane`,
   the whole membrane: :attr:`MaterialFile.shell` reads it back; a reader that knows only StVK reads
-  the linear model; an earlier yarnfit's ``green-polynomial`` block is refused, naming the fix);
+  the linear model; an earlier yarnfit's ``green-polynomial`` block is refused, naming the fix) and,
+  for the signed bending, ``signed_bending_pa`` {b00_pos, b00_neg, b01, b11_pos, b11_neg, b22}
+  (:class:`~yarnfit.shell.SignedBending`, the whole bending; ``bending_pa`` is then the symmetric
+  fit beside it);
 - ``engineering``: the small-strain constants of ``docs/design.md`` §3 (``weft_stretch_n_per_m``, …);
-- ``fit``: the fit's quality (model, membrane, parameters and standard errors, R² and relative RMS
+- ``fit``: the fit's quality (model, membrane, bending (``"signed"`` or ``"symmetric"``), parameters and standard errors, R² and relative RMS
   per family, the ``linear`` fit beside it (parameters and quality: :attr:`MaterialFile.linear_shell`),
   the strain range the stiffening was fitted over, the rest energies left out of the shell (the
   membrane's ``reference_energy_j_per_m2``, the bends' ``bending_reference_energy_j_per_m2``) and
@@ -208,10 +211,12 @@ class MaterialFile:
     def linear_shell(self) -> ShellMaterial:
         """The linear (StVK) fit from the same samples: ``fit.linear.parameters_pa`` with the
         shell's thickness. A file without it (written before the strain-stiffening membrane) has a
-        linear shell already: its ``shell``. The ``shell.nonlinear`` block is not read, so a file of
-        an earlier membrane model still gives its linear fit. ValueError naming the key at fault."""
+        linear shell already: its ``shell``. The ``shell.nonlinear`` and ``shell.signed_bending_pa``
+        blocks are not read, so a file of an earlier membrane model still gives its linear fit.
+        ValueError naming the key at fault."""
         data = self._block("shell")
-        shell = ShellMaterial.from_dict({k: v for k, v in data.items() if k != "nonlinear"}, f"{self.where}: shell")
+        shell = ShellMaterial.from_dict({k: v for k, v in data.items() if k not in ("nonlinear", "signed_bending_pa")},
+                                        f"{self.where}: shell")
         linear = self._block("fit").get("linear")
         if linear is None:
             return shell.linear

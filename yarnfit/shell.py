@@ -16,6 +16,11 @@ Conventions (``docs/design.md`` §3), SI units throughout:
   convex sum of one-sided quadratic ridges, **instead of** ``(h/2) εᵀ S ε``. ``S`` stays the linear
   model fitted to the same samples: what a reader that knows only StVK, ``--linear`` and the
   engineering constants of the linear model use.
+* Signed bending (optional, :class:`SignedBending`, ``docs/design.md`` §3): ``b00`` and ``b11``
+  take one value for a positive curvature (the surface curving towards its normal, the repeat's
+  +z: ``II > 0``) and another for a negative one, **instead of** ``B``; ``B`` stays the symmetric
+  model fitted to the same samples (what ``--linear`` and the engineering constants use). A
+  jersey bends several times more easily one way than the other.
 * Moduli (paper Eq. shell_stiffness_moduli), ``D = 1 − ν_tp ν_pt``: ``s00 = E_t/D``, ``s11 = E_p/D``,
   ``s01 = ν_pt E_t/D = ν_tp E_p/D``, ``s22 = μ``.
 
@@ -49,7 +54,9 @@ __all__ = [
     "PARAMETER_NAMES",
     "RIDGE_MODEL",
     "RidgeMembrane",
+    "SIGNED_BENDING_PARAMETERS",
     "ShellMaterial",
+    "SignedBending",
     "as_first_fundamental_form",
     "as_second_fundamental_form",
     "bending_strain",
@@ -74,6 +81,9 @@ RIDGE_CONVEXITY_RTOL = 1e-12
 # Round-off admitted in the base's semi-definiteness q01² <= q00·q11: a fitted base of rank one
 # (a knit's, whose compression carries a single combination) sits on the bound to ~1e-16.
 RIDGE_BASE_RTOL = 1e-12
+
+# The signed bending's entries (SignedBending), in its material-file block and field order.
+SIGNED_BENDING_PARAMETERS = ("b00_pos", "b00_neg", "b01", "b11_pos", "b11_neg", "b22")
 
 # 1 gf·cm²/cm = 1 gf·cm = 9.80665e-3 N × 1e-2 m (N·m): KES-F and cantilever bending rigidity units.
 GF_CM2_PER_CM = 9.80665e-5
@@ -338,6 +348,111 @@ class RidgeMembrane:
             raise ValueError(f"{where}: {exc}") from None
 
 
+@dataclass(frozen=True)
+class SignedBending:
+    """An orthotropic bending whose weft and warp stiffnesses depend on the curvature's sign
+    (``docs/design.md`` §3).
+
+    Energy per reference area, over ``h³`` (Pa/m² = J/m⁵), at ``κ = (II00, II11, 2 II01)``:
+
+        ½ (b00(κ0) κ0² + 2 b01 κ0 κ1 + b11(κ1) κ1² + b22 κ2²),
+
+    ``b00(κ0) = b00_pos`` for ``κ0 >= 0`` (the surface curving towards its normal along weft),
+    ``b00_neg`` below; ``b11`` the same along warp. A quadratic on each quadrant of ``(κ0, κ1)``
+    whose gradient ``B(κ) κ`` is continuous across the axes (the jump of ``b00`` multiplies
+    ``κ0 = 0``), so the energy is C¹, and convex when every quadrant's matrix is positive definite:
+    ``b01² < min(b00_pos, b00_neg) · min(b11_pos, b11_neg)`` (along any line the slope is then
+    continuous and rises on every piece). Frame-invariant as ``B`` is: a function of the second
+    form in the material frame.
+
+    What it is for: a jersey's loops stand out of one face, so bent towards one face its wales or
+    courses nest and towards the other they are pulled straight; at zero membrane force cotton
+    jersey's weft bend costs 4 times more one way and its warp bend 800 times.
+
+    What it cannot represent: a coupling ``b01`` that depends on the quadrant (a jersey's saddle
+    bent one way costs ~3 times its weft and warp bends together, the other way their sum; one
+    ``b01`` follows one of them), twist stiffness that depends on the twist's sign, a natural
+    curvature (the energy is least flat), and bending that is not quadratic on each side.
+
+    Attributes: the six stiffnesses (Pa), :data:`SIGNED_BENDING_PARAMETERS` order.
+    """
+
+    b00_pos: float
+    b00_neg: float
+    b01: float
+    b11_pos: float
+    b11_neg: float
+    b22: float
+
+    def __post_init__(self) -> None:
+        for name in SIGNED_BENDING_PARAMETERS:
+            object.__setattr__(self, name, finite_number(getattr(self, name), name))
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """The six stiffnesses (Pa) by name."""
+        return {name: getattr(self, name) for name in SIGNED_BENDING_PARAMETERS}
+
+    @property
+    def positive_definite(self) -> bool:
+        """Every quadrant's matrix positive definite (the energy strictly convex)."""
+        return not self.problems()
+
+    def problems(self) -> list[str]:
+        """Why the energy is not strictly convex (empty when it is)."""
+        problems = [f"{name} = {getattr(self, name)!r} <= 0" for name in SIGNED_BENDING_PARAMETERS
+                    if name != "b01" and not getattr(self, name) > 0.0]
+        if not problems and not self.b01**2 < min(self.b00_pos, self.b00_neg) * min(self.b11_pos, self.b11_neg):
+            problems.append(f"b01² = {self.b01**2!r} >= min(b00_pos, b00_neg)·min(b11_pos, b11_neg) = "
+                            f"{min(self.b00_pos, self.b00_neg) * min(self.b11_pos, self.b11_neg)!r}")
+        return problems
+
+    @property
+    def upper(self) -> np.ndarray:
+        """``(3, 3)`` (Pa): the matrix with the stiffer side of each direction, above every
+        quadrant's (their difference is diagonal and non-negative)."""
+        return np.array([[max(self.b00_pos, self.b00_neg), self.b01, 0.0],
+                         [self.b01, max(self.b11_pos, self.b11_neg), 0.0], [0.0, 0.0, self.b22]])
+
+    def matrix(self, kap: np.ndarray) -> np.ndarray:
+        """The quadrant's matrix at curvatures ``kap (…, 3)`` (1/m): ``(…, 3, 3)`` (Pa)."""
+        kap = np.asarray(kap, dtype=np.float64)
+        out = np.zeros(kap.shape[:-1] + (3, 3))
+        out[..., 0, 0] = np.where(kap[..., 0] >= 0.0, self.b00_pos, self.b00_neg)
+        out[..., 1, 1] = np.where(kap[..., 1] >= 0.0, self.b11_pos, self.b11_neg)
+        out[..., 0, 1] = out[..., 1, 0] = self.b01
+        out[..., 2, 2] = self.b22
+        return out
+
+    def energy(self, kap: np.ndarray) -> np.ndarray:
+        """``½ κᵀ B(κ) κ`` (Pa/m²) at ``kap (…, 3)`` (1/m); shape ``(…)``."""
+        kap = np.asarray(kap, dtype=np.float64)
+        return 0.5 * np.einsum("...i,...ij,...j->...", kap, self.matrix(kap), kap)
+
+    def moment(self, kap: np.ndarray) -> np.ndarray:
+        """``∂/∂κ`` of :meth:`energy`, ``B(κ) κ`` (Pa/m), shaped like ``kap (…, 3)``."""
+        kap = np.asarray(kap, dtype=np.float64)
+        return np.einsum("...ij,...j->...i", self.matrix(kap), kap)
+
+    @property
+    def plugin_keys(self) -> dict[str, str]:
+        """The ``yarnfit.shell`` plugin's bending keys (``plugins/README.md``): ``b00`` and ``b11``
+        the positive side's, ``b00_neg`` and ``b11_neg`` the negative side's, ``b01`` and ``b22``;
+        every float written with ``repr``."""
+        return {"b00": repr(self.b00_pos), "b00_neg": repr(self.b00_neg), "b01": repr(self.b01),
+                "b11": repr(self.b11_pos), "b11_neg": repr(self.b11_neg), "b22": repr(self.b22)}
+
+    def to_dict(self) -> dict:
+        """JSON form: ``{"b00_pos": …, "b00_neg": …, "b01": …, "b11_pos": …, "b11_neg": …, "b22": …}`` (Pa)."""
+        return self.parameters
+
+    @classmethod
+    def from_dict(cls, data: Mapping, where: str = "shell material") -> SignedBending:
+        """Inverse of :meth:`to_dict`; ValueError ``<where>: …`` naming the key at fault."""
+        _check_keys(data, SIGNED_BENDING_PARAMETERS, where, "signed_bending_pa.")
+        return cls(**{k: _json_number(data[k], where, f"signed_bending_pa.{k}") for k in SIGNED_BENDING_PARAMETERS})
+
+
 def _read_only(array: np.ndarray) -> np.ndarray:
     array.setflags(write=False)
     return array
@@ -414,6 +529,9 @@ class ShellMaterial:
         nonlinear: the strain-stiffening membrane (:class:`RidgeMembrane`), which then *is* the
             membrane (energy ``h ψ(ε)``), or ``None`` (StVK, ``(h/2) εᵀ S ε``). ``S`` is the linear
             model either way: fitted to the same samples, what :attr:`linear` keeps.
+        signed_bending: the bending whose weft and warp stiffnesses depend on the curvature's sign
+            (:class:`SignedBending`), which then *is* the bending (energy ``h³`` times its own), or
+            ``None`` (``(h³/2) κᵀ B κ``). ``B`` is the symmetric model either way.
     """
 
     thickness: float
@@ -426,6 +544,7 @@ class ShellMaterial:
     b11: float
     b22: float
     nonlinear: RidgeMembrane | None = None
+    signed_bending: SignedBending | None = None
 
     def __post_init__(self) -> None:
         for name in ("thickness",) + PARAMETER_NAMES:
@@ -434,10 +553,14 @@ class ShellMaterial:
             raise ValueError(f"thickness must be > 0 (m), got {self.thickness!r}")
         if self.nonlinear is not None and not isinstance(self.nonlinear, RidgeMembrane):
             raise ValueError(f"nonlinear must be a RidgeMembrane or None, got {type(self.nonlinear).__name__}")
+        if self.signed_bending is not None and not isinstance(self.signed_bending, SignedBending):
+            raise ValueError(f"signed_bending must be a SignedBending or None, got "
+                             f"{type(self.signed_bending).__name__}")
 
     @property
     def linear(self) -> ShellMaterial:
-        """This material's linear model: StVK with ``S``, without the strain-stiffening membrane."""
+        """This material's linear model: StVK with ``S`` and ``B``, without the strain-stiffening
+        membrane and the signed bending."""
         return ShellMaterial(self.thickness, **self.parameters)
 
     # -- matrices and parameter views ------------------------------------------------------------
@@ -470,8 +593,9 @@ class ShellMaterial:
         return not _block_problems(self.b00, self.b01, self.b11, self.b22, BENDING_PARAMETERS)
 
     def check_positive_definite(self) -> None:
-        """Raise ValueError naming the block (membrane/bending) and the entries that fail. (A
-        :class:`RidgeMembrane` is convex by construction: its own checks run when it is made.)"""
+        """Raise ValueError naming the block (membrane/bending/signed bending) and the entries that
+        fail. (A :class:`RidgeMembrane` is convex by construction: its own checks run when it is
+        made.)"""
         problems = []
         membrane = _block_problems(self.s00, self.s01, self.s11, self.s22, MEMBRANE_PARAMETERS)
         bending = _block_problems(self.b00, self.b01, self.b11, self.b22, BENDING_PARAMETERS)
@@ -479,6 +603,8 @@ class ShellMaterial:
             problems.append(f"membrane block S not positive definite: {'; '.join(membrane)}")
         if bending:
             problems.append(f"bending block B not positive definite: {'; '.join(bending)}")
+        if self.signed_bending is not None and not self.signed_bending.positive_definite:
+            problems.append(f"signed bending not convex: {'; '.join(self.signed_bending.problems())}")
         if problems:
             raise ValueError(". ".join(problems))
 
@@ -601,9 +727,23 @@ class ShellMaterial:
         """
         eps, kap, single = self._strains(I, II)
         h = self.thickness
-        W = h * self.membrane_energy(eps)
-        W = W + 0.5 * h**3 * np.einsum("...i,ij,...j->...", kap, self.B, kap)
+        W = h * self.membrane_energy(eps) + h**3 * self.bending_energy(kap)
         return float(W) if single else W
+
+    def bending_energy(self, kap: np.ndarray) -> np.ndarray:
+        """The bending's energy per reference area over ``h³`` (Pa/m²) at Voigt curvatures
+        ``kap (…, 3)`` (1/m): the :class:`SignedBending`'s, or ``½ κᵀ B κ``; shape ``(…)``."""
+        kap = np.asarray(kap, dtype=np.float64)
+        if self.signed_bending is not None:
+            return self.signed_bending.energy(kap)
+        return 0.5 * np.einsum("...i,ij,...j->...", kap, self.B, kap)
+
+    def bending_moment(self, kap: np.ndarray) -> np.ndarray:
+        """``∂/∂κ`` of :meth:`bending_energy` (Pa/m), shaped like ``kap (…, 3)``."""
+        kap = np.asarray(kap, dtype=np.float64)
+        if self.signed_bending is not None:
+            return self.signed_bending.moment(kap)
+        return kap @ self.B  # B symmetric
 
     def membrane_energy(self, eps: np.ndarray) -> np.ndarray:
         """The membrane's energy per reference area and thickness (Pa = J/m³) at Voigt strains
@@ -790,7 +930,7 @@ class ShellMaterial:
 
         See the module docstring for the convention: both are symmetric,
         ``dW/dI = (h/2) [[σ_0, σ_2], [σ_2, σ_1]]`` (J/m²) with ``σ`` :meth:`membrane_stress` and
-        ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]`` (J/m) with ``m = B κ``.
+        ``dW/dII = h³ [[m_0, m_2], [m_2, m_1]]`` (J/m) with ``m`` :meth:`bending_moment`.
 
         Returns:
             two arrays ``(2, 2)`` for ``(2, 2)`` inputs, else ``(n, 2, 2)``.
@@ -799,7 +939,7 @@ class ShellMaterial:
         shape = np.broadcast_shapes(eps.shape, kap.shape)
         sigma = self.membrane_stress(eps)
         sigma = np.broadcast_to(sigma, shape)
-        moment = np.broadcast_to(kap @ self.B, shape)
+        moment = np.broadcast_to(self.bending_moment(kap), shape)
         h = self.thickness
         return 0.5 * h * _voigt_to_matrix(sigma), h**3 * _voigt_to_matrix(moment)
 
@@ -829,7 +969,9 @@ class ShellMaterial:
     def to_dict(self) -> dict:
         """JSON form: ``{"thickness_m": h, "membrane_pa": {s00, s01, s11, s22}, "bending_pa": {b00, ...}}``,
         plus ``"nonlinear"`` (:meth:`RidgeMembrane.to_dict`) when the material has a strain-stiffening
-        membrane (``membrane_pa`` is then its linear model)."""
+        membrane (``membrane_pa`` is then its linear model) and ``"signed_bending_pa"``
+        (:meth:`SignedBending.to_dict`) when it has a signed bending (``bending_pa`` is then its
+        symmetric model)."""
         data = {
             "thickness_m": self.thickness,
             "membrane_pa": {name: getattr(self, name) for name in MEMBRANE_PARAMETERS},
@@ -837,6 +979,8 @@ class ShellMaterial:
         }
         if self.nonlinear is not None:
             data["nonlinear"] = self.nonlinear.to_dict()
+        if self.signed_bending is not None:
+            data["signed_bending_pa"] = self.signed_bending.to_dict()
         return data
 
     @classmethod
@@ -850,10 +994,12 @@ class ShellMaterial:
         Raises:
             ValueError: ``<where>: ...`` naming the missing, unknown or non-numeric key.
         """
-        _check_keys(data, ("thickness_m", "membrane_pa", "bending_pa"), where, "", ("nonlinear",))
+        _check_keys(data, ("thickness_m", "membrane_pa", "bending_pa"), where, "", ("nonlinear", "signed_bending_pa"))
         fields = {"thickness": _json_number(data["thickness_m"], where, "thickness_m")}
         if "nonlinear" in data:
             fields["nonlinear"] = RidgeMembrane.from_dict(data["nonlinear"], where)
+        if "signed_bending_pa" in data:
+            fields["signed_bending"] = SignedBending.from_dict(data["signed_bending_pa"], where)
         for block, names in (("membrane_pa", MEMBRANE_PARAMETERS), ("bending_pa", BENDING_PARAMETERS)):
             _check_keys(data[block], names, where, f"{block}.")
             for name in names:

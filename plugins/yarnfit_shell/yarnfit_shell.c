@@ -8,6 +8,13 @@
 //   eps = (E00, E11, 2 E01)       Green strain,          S = [[s00, s01, 0], [s01, s11, 0], [0, 0, s22]],
 //   kappa = (II00, II11, 2 II01)  second fundamental form, B = [[b00, b01, 0], [b01, b11, 0], [0, 0, b22]].
 //
+// Signed bending (optional keys `b00_neg`, `b11_neg`, Pa): b00 then applies where kappa0 >= 0 (the
+// sheet curving towards its triangles' normal along weft) and b00_neg where kappa0 < 0, b11 and
+// b11_neg the same along warp: W_b = (h^3/2) (b00(kappa0) kappa0^2 + 2 b01 kappa0 kappa1 +
+// b11(kappa1) kappa1^2 + b22 kappa2^2), C1 (the jump multiplies kappa0 = 0), convex when b01^2 <
+// min(b00, b00_neg) min(b11, b11_neg). Absent, each equals b00 (b11): the quadratic above. The side
+// is chosen by the elastic curvature; damping uses that side's stiffness.
+//
 // Membrane: per linear triangle, constant deformation gradient F (3x2) from the rest edges.
 // Bending: per triangle, a curvature kappa_t from the dihedral angles theta_e of its three edges
 // (hinges shared with the neighbouring triangles). A constant-curvature surface makes, across edge
@@ -105,7 +112,7 @@
 
 static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
-  "builtin_young", "builtin_poisson", "builtin_thickness", "ridges", "rest", "membrane",
+  "builtin_young", "builtin_poisson", "builtin_thickness", "ridges", "rest", "membrane", "b00_neg", "b11_neg",
 };
 enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 
@@ -113,6 +120,7 @@ enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 typedef struct {
   double s00, s01, s11, s22, b00, b01, b11, b22, thickness, angle, damping;
   double builtin_young, builtin_poisson, builtin_thickness;
+  double b00_neg, b11_neg;  // signed bending: b00 and b11 where the curvature is negative (= b00, b11 if absent)
   int nridge;           // ridges of the ridge membrane: 0 (key absent or empty) keeps it exactly StVK
   double* ridge;        // (nridge x 5) n0 n1 n2 (unit, Voigt strain space), knot t, stiffness c (Pa)
   int node_membrane;    // membrane="node": strains smoothed over each vertex's third of its
@@ -136,6 +144,7 @@ typedef struct {
   int nedge;
   double membrane[4];   // the plugin's membrane stiffness h S - t_b S_iso: c00 c01 c11 c22 (N/m)
   double bending[4];    // h^3 B: d00 d01 d11 d22 (N m)
+  double bending_neg[2];  // h^3 b00_neg, h^3 b11_neg (N m): d00 and d11 where the curvature is negative
   int flex;
   int nvert;
   int ntri;
@@ -155,7 +164,8 @@ typedef struct {
   // stack, which a large cloth would overflow in a model with a small <size memory>.
   double* grad;         // (nvert x 3) energy gradient
   double* xdot;         // (nvert x 3) vertex velocities
-  double* theta;        // (nhinge) dihedral angles, then theta + damping * d(theta)/dt
+  double* theta;        // (nhinge) dihedral angles
+  double* theta_rate;   // (nhinge) damping * d(theta)/dt (zero without damping)
   double* torque;       // (nhinge) dW / d theta
   double* hinge_grad;   // (nhinge x 12) d theta / d (x1, x2, o0, o1)
   // MuJoCo's built-in bending on this flex (elastic2d "bend" or "both"), which compute removes:
@@ -318,10 +328,13 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
     {"thickness", &s->thickness, 1, 0}, {"angle", &s->angle, 0, 0}, {"damping", &s->damping, 0, 0},
     {"builtin_young", &s->builtin_young, 0, 0}, {"builtin_poisson", &s->builtin_poisson, 0, 0},
     {"builtin_thickness", &s->builtin_thickness, 0, 0},
+    {"b00_neg", &s->b00_neg, 0, NAN}, {"b11_neg", &s->b11_neg, 0, NAN},
   };
   for (size_t k = 0; k < sizeof(keys) / sizeof(keys[0]); k++) {
     if (read_number(m, instance, keys[k].key, keys[k].fallback, keys[k].required, keys[k].value)) return -1;
   }
+  if (isnan(s->b00_neg)) s->b00_neg = s->b00;  // absent: the quadratic bending
+  if (isnan(s->b11_neg)) s->b11_neg = s->b11;
   if (read_choice(m, instance, "membrane", "triangle", "node", &s->node_membrane) ||
       read_choice(m, instance, "rest", "qpos0", "texcoord", &s->rest_texcoord)) return -1;
   if (read_ridges(m, instance, NULL, &s->nridge)) return -1;
@@ -337,9 +350,9 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
   s->ridge = NULL;  // stored by init, once nothing can fail
   // Without ridges S is the StVK membrane and must be positive definite; with ridges it is the
   // ridge membrane's base, positive semi-definite (the ridges are convex on their own).
-  const char* positive[] = {"s00", "s11", "s22", "b00", "b11", "b22", "thickness"};
-  const double values[] = {s->s00, s->s11, s->s22, s->b00, s->b11, s->b22, s->thickness};
-  for (int k = 0; k < 7; k++) {
+  const char* positive[] = {"s00", "s11", "s22", "b00", "b11", "b22", "thickness", "b00_neg", "b11_neg"};
+  const double values[] = {s->s00, s->s11, s->s22, s->b00, s->b11, s->b22, s->thickness, s->b00_neg, s->b11_neg};
+  for (int k = 0; k < 9; k++) {
     if (s->nridge > 0 && k < 3) {
       if (!(values[k] >= 0)) {
         mju_error(YF_NAME ": config key '%s' must be >= 0 with ridges (the ridge membrane's base S is positive "
@@ -365,6 +378,12 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
   if (s->b01 * s->b01 >= s->b00 * s->b11) {
     mju_error(YF_NAME ": bending matrix B is not positive definite: b01^2 = %g >= b00*b11 = %g",
                 s->b01 * s->b01, s->b00 * s->b11);
+    return -1;
+  }
+  double least00 = fmin(s->b00, s->b00_neg), least11 = fmin(s->b11, s->b11_neg);
+  if (s->b01 * s->b01 >= least00 * least11) {
+    mju_error(YF_NAME ": signed bending is not convex: b01^2 = %g >= min(b00, b00_neg)*min(b11, b11_neg) = %g "
+              "(config keys 'b00_neg', 'b11_neg')", s->b01 * s->b01, least00 * least11);
     return -1;
   }
   if (s->damping < 0) {
@@ -434,6 +453,7 @@ static void shell_free(Shell* s) {
   free(s->grad);
   free(s->xdot);
   free(s->theta);
+  free(s->theta_rate);
   free(s->torque);
   free(s->hinge_grad);
   free(s->builtin_hinge);
@@ -881,6 +901,8 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
     s->bending[1] = h3 * s->b01;
     s->bending[2] = h3 * s->b11;
     s->bending[3] = h3 * s->b22;
+    s->bending_neg[0] = h3 * s->b00_neg;
+    s->bending_neg[1] = h3 * s->b11_neg;
   }
 
   // Rest vertex positions (qpos0) and the flex's reference axes: the first two edges of triangle 0
@@ -993,9 +1015,10 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
   s->grad = malloc(sizeof(double) * 3 * s->nvert);
   s->xdot = malloc(sizeof(double) * 3 * s->nvert);
   s->theta = malloc(sizeof(double) * nh);
+  s->theta_rate = malloc(sizeof(double) * nh);
   s->torque = malloc(sizeof(double) * nh);
   s->hinge_grad = malloc(sizeof(double) * 12 * nh);
-  if (!s->grad || !s->xdot || !s->theta || !s->torque || !s->hinge_grad) {
+  if (!s->grad || !s->xdot || !s->theta || !s->theta_rate || !s->torque || !s->hinge_grad) {
     shell_free(s);
     return -1;
   }
@@ -1268,27 +1291,34 @@ static void bending_forces(Shell* s, const double* x, const double* xdot) {
     const int* v = s->hinge + 4 * h;
     double* g = s->hinge_grad + 12 * h;
     s->theta[h] = hinge_angle(x + 3 * v[0], x + 3 * v[1], x + 3 * v[2], x + 3 * v[3], g);
+    s->theta_rate[h] = 0;
     if (xdot) {
       double rate = 0;
       for (int k = 0; k < 4; k++) rate += mju_dot3(g + 3 * k, xdot + 3 * v[k]);
-      s->theta[h] += s->damping * rate;
+      s->theta_rate[h] = s->damping * rate;
     }
     s->torque[h] = 0;
   }
   // dW/dtheta_e = sum over the triangles t bending with e (through their source triangle's
-  // operator) of A_t (h^3 B kappa_t) . d kappa_t / d theta_e.
+  // operator) of A_t (h^3 B kappa_t) . d kappa_t / d theta_e, B's diagonal on the side of the
+  // elastic curvature's sign (signed bending), applied to the curvature plus its damped rate.
   for (int t = 0; t < s->ntri; t++) {
     int src = s->tri_source[t];
     const int* hinge = s->tri_hinge + 3 * src;
     const double* w = s->tri_weight + 9 * src;
     if (hinge[0] < 0 && hinge[1] < 0 && hinge[2] < 0) continue;
-    double kappa[3] = {0, 0, 0};
+    double kappa[3] = {0, 0, 0}, rate[3] = {0, 0, 0};
     for (int k = 0; k < 3; k++) {
       if (hinge[k] < 0) continue;
-      for (int i = 0; i < 3; i++) kappa[i] += s->theta[hinge[k]] * w[3 * k + i];
+      for (int i = 0; i < 3; i++) {
+        kappa[i] += s->theta[hinge[k]] * w[3 * k + i];
+        rate[i] += s->theta_rate[hinge[k]] * w[3 * k + i];
+      }
     }
-    double moment[3] = {s->area[t] * (dm[0] * kappa[0] + dm[1] * kappa[1]),
-                        s->area[t] * (dm[1] * kappa[0] + dm[2] * kappa[1]), s->area[t] * dm[3] * kappa[2]};
+    double d00 = kappa[0] >= 0 ? dm[0] : s->bending_neg[0], d11 = kappa[1] >= 0 ? dm[2] : s->bending_neg[1];
+    for (int i = 0; i < 3; i++) kappa[i] += rate[i];
+    double moment[3] = {s->area[t] * (d00 * kappa[0] + dm[1] * kappa[1]),
+                        s->area[t] * (dm[1] * kappa[0] + d11 * kappa[1]), s->area[t] * dm[3] * kappa[2]};
     for (int k = 0; k < 3; k++) {
       if (hinge[k] >= 0) s->torque[hinge[k]] += mju_dot3(moment, w + 3 * k);
     }

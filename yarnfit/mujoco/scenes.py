@@ -144,8 +144,8 @@ class ClothMaterial:
         """Read a material file (``yarnfit fit`` output; at least ``shell`` and an areal density;
         a :class:`~yarnfit.material_file.MaterialFile` already read is taken as it is).
 
-        The shell is the file's (with its strain-stiffening membrane if it has one), or with
-        ``linear`` the linear StVK fit from the same samples. The areal density is
+        The shell is the file's (with its strain-stiffening membrane and signed bending if it has
+        them), or with ``linear`` the linear StVK fit from the same samples. The areal density is
         ``areal_density_kg_m2`` if given, else the file's ``inputs.areal_density_kg_m2``, else its
         ``yarn.areal_density_kg_m2`` (the relaxed repeat's).
 
@@ -712,6 +712,8 @@ def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damp
     config = {name: repr(value) for name, value in shell.parameters.items()}
     if shell.nonlinear is not None:  # the ridge membrane: its base as s00 ... s22, and its ridges (plugins/README.md)
         config.update(shell.nonlinear.plugin_keys)
+    if shell.signed_bending is not None:  # b00 b11 the positive side's, b00_neg b11_neg the negative's
+        config.update(shell.signed_bending.plugin_keys)
     config["thickness"] = repr(shell.thickness)
     config["angle"] = repr(float(angle))
     config["damping"] = repr(float(damping))

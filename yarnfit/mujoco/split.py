@@ -179,7 +179,8 @@ def builtin_isotropic(material: ShellMaterial, stiffening_bound: float = 0.0) ->
 
 def builtin_bending_rigidity(material: ShellMaterial) -> float:
     """Least isotropic hinge rigidity D (N·m) at least as stiff as the material's bending in every
-    mode: ``D diag(1, 1, ½) ⪰ h³ B``, i.e. ``D = h³ max(λ_max(B_normal), 2 b22)``.
+    mode: ``D diag(1, 1, ½) ⪰ h³ B``, i.e. ``D = h³ max(λ_max(B_normal), 2 b22)`` (with a signed
+    bending, ``B`` its stiffer side's, :attr:`~yarnfit.shell.SignedBending.upper`).
 
     MuJoCo's 2D hinge bending stores ``½ D (κ00² + κ11² + 2 κ01²)`` per area (measured on a 21 × 21
     grid: a cylinder, a sphere and a saddle at 0.95, 1.9 and 1.9 times ``½ D κ²``, the 5 % the free
@@ -190,8 +191,10 @@ def builtin_bending_rigidity(material: ShellMaterial) -> float:
     """
     if not material.bending_positive_definite:
         material.check_positive_definite()  # raises, naming the entries
-    normal = np.array([[material.b00, material.b01], [material.b01, material.b11]])
-    return material.thickness**3 * max(float(eigvalsh(normal)[-1]), 2.0 * material.b22)
+    # A signed bending (ShellMaterial.signed_bending): its stiffer side in each direction, above
+    # every quadrant's matrix.
+    B = material.B if material.signed_bending is None else material.signed_bending.upper
+    return material.thickness**3 * max(float(eigvalsh(B[:2, :2])[-1]), 2.0 * B[2, 2])
 
 
 def builtin_elasticity(material: ShellMaterial, digits: int = MJCF_DIGITS, *, bending: bool = True,
