@@ -574,12 +574,10 @@ def export_summary(built, material, output, args) -> str:
     if not built.fallback:
         membrane = ("strain-stiffening membrane" if material.shell.nonlinear is not None
                     else "linear membrane (--linear)" if args.linear else "linear membrane")
-        bending = ("its own bending, the built-in hinge forces removed" if spec.flexes[0].elastic2d == 3
-                   else "all bending")
-        if material.shell.signed_bending is not None:
-            bending = f"signed {bending}"
-        elif args.linear:
-            bending = f"symmetric {bending}"  # --linear: the quadratic bending of the same fit
+        # --linear: the symmetric (quadratic) bending of the same fit.
+        kind = "signed " if material.shell.signed_bending is not None else "symmetric " if args.linear else ""
+        bending = (f"its own {kind}bending, the built-in hinge forces removed" if spec.flexes[0].elastic2d == 3
+                   else f"all {kind}bending")
         lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, "
                      f"{bending}), weft at {args.angle:g}° from x")
     if not built.fallback and material.shell.nonlinear is not None and args.check is None:
