@@ -25,18 +25,21 @@ def quadratic(free: np.ndarray) -> Trial:
                  HESSIAN @ offset)
 
 
-def search(bound=None):
+def search(bound=None, function=None, probe=1e-3, balanced=lambda trial, w, v: False, balanced_ends=False):
+    """The search from 0 on ``function`` (default :func:`quadratic`), probes ``probe`` long:
+    ``((trial, failure, hessian), solves)``."""
+    function = function or quadratic
     solved = []
 
     def solve_at(free):
-        solved.append(quadratic(free))
+        solved.append(function(free))
         return solved[-1]
 
     start = solve_at(np.zeros(3))
-    hessian, probes = probe_hessian(solve_at, lambda free: True, start, np.full(3, 1e-3))
+    hessian, probes = probe_hessian(solve_at, lambda free: True, start, np.full(3, probe))
     current = min([start] + probes, key=lambda trial: trial.energy)
     return quasi_newton(solve_at, lambda free: True, current, hessian, lambda: len(solved), 40, 0.05, STEP_TOLERANCE,
-                        lambda trial, w, v: False, bound=bound, interpolate=True), len(solved)
+                        balanced, bound=bound, interpolate=True, balanced_ends=balanced_ends), len(solved)
 
 
 def test_probes_give_a_quadratics_hessian_and_the_search_its_minimum():
@@ -91,20 +94,10 @@ def test_a_search_asked_every_step_stops_at_spent_slopes():
     from yarnfit.homogenize.search import promised_decrease
 
     def run(balanced_ends):
-        solved = []
-
-        def solve_at(free):
-            solved.append(quartic(free))
-            return solved[-1]
-
-        start = solve_at(np.zeros(3))
-        hessian, probes = probe_hessian(solve_at, lambda free: True, start, np.full(3, 1e-2))
-        current = min([start] + probes, key=lambda trial: trial.energy)
         spent = lambda trial, w, v: promised_decrease(trial, w, v) <= SPENT_DECREASE
-        found, failure, _ = quasi_newton(solve_at, lambda free: True, current, hessian, lambda: len(solved), 40, 0.05,
-                                         STEP_TOLERANCE, spent, interpolate=True, balanced_ends=balanced_ends)
+        (found, failure, _), solves = search(function=quartic, probe=1e-2, balanced=spent, balanced_ends=balanced_ends)
         assert failure is None
-        return found, len(solved)
+        return found, solves
 
     least = scipy.optimize.minimize(lambda x: quartic(x).energy, np.zeros(3), jac=lambda x: quartic(x).slopes,
                                     method="BFGS", options={"gtol": 1e-13}).fun
