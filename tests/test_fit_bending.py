@@ -166,3 +166,14 @@ def test_bends_of_one_sign_fit_no_signed_bending():
     assert any(note.startswith("signed bending not fitted: no bend with weight strains b00_neg") for note in fit.notes)
     with pytest.raises(ValueError, match="bending must be one of signed, symmetric"):
         fit_shell(samples_of(FABRIC), H, bending="one-sided")
+
+
+def test_the_builtin_hinge_share_covers_the_stiffer_sides_and_refuses_a_non_convex_bending():
+    from yarnfit.mujoco.split import builtin_bending_rigidity
+
+    upper = WOVEN.upper
+    expected = H**3 * max(float(np.linalg.eigvalsh(upper[:2, :2])[-1]), 2.0 * upper[2, 2])
+    assert builtin_bending_rigidity(signed(WOVEN)) == pytest.approx(expected, rel=1e-14)
+    assert builtin_bending_rigidity(signed(WOVEN)) > builtin_bending_rigidity(FABRIC)  # warp_neg is stiffer
+    with pytest.raises(ValueError, match="signed bending not convex"):
+        builtin_bending_rigidity(signed(JERSEY))

@@ -788,8 +788,7 @@ def _fit_signed_bending(bends: list[SampleResult], energies: np.ndarray, weights
     values, errors, at_bound, _ = _fit_group("signed bending", families, free, D[:, columns], energies, weights,
                                              ("b00_pos", "b01", "b11_pos"), None)
     values.setdefault("b01", 0.0), errors.setdefault("b01", 0.0)
-    notes = [f"signed bending: {n} at its positive floor: the {_FAMILY_OF[n]} energies carry no {n} stiffness"
-             for n in at_bound]
+    coupling_note = []
     result = SignedBending(**values)
     if coupled and not result.positive_definite:
         if coupling_limit is None:  # unbounded couplings (--strict): the symmetric fit is judged
@@ -800,16 +799,17 @@ def _fit_signed_bending(bends: list[SampleResult], energies: np.ndarray, weights
         # candidates (equal sides), so it never fits the bends worse than the symmetric one.
         sw = np.sqrt(weights)
         floor = DIAGONAL_FLOOR_REL * max(values[n] for n in names if n != "b01")
-        least = min(values["b00_pos"], values["b00_neg"]) * min(values["b11_pos"], values["b11_neg"])
-        ratio = values["b01"] / math.sqrt(least) if least > 0.0 else math.copysign(math.inf, values["b01"])
+        least = np.array([min(values["b00_pos"], values["b00_neg"]), values["b01"],
+                          min(values["b11_pos"], values["b11_neg"])])
+        ratio = _coupling_ratio(least, 0, 1, 2)
         values = _signed_coupling_solve(sw[:, None] * D, sw * energies, values, coupling_limit, floor)
         at_bound = [n for n in names if n != "b01" and values[n] <= floor] + ["b01"]
-        notes = [f"signed bending: {n} at its positive floor: the {_FAMILY_OF[n]} energies carry no {n} stiffness"
-                 for n in at_bound if n != "b01"]
-        notes.append(f"signed bending: b01 at the convexity bound |b01| = {coupling_limit:g} "
-                     f"√(min(b00_pos, b00_neg)·min(b11_pos, b11_neg)): the saddle_bend energies ask for "
-                     f"{ratio:.3g}, which no convex signed bending has")
+        coupling_note = [f"signed bending: b01 at the convexity bound |b01| = {coupling_limit:g} "
+                         f"√(min(b00_pos, b00_neg)·min(b11_pos, b11_neg)): the saddle_bend energies ask for "
+                         f"{ratio:.3g}, which no convex signed bending has"]
         result = SignedBending(**values)
+    notes = [f"signed bending: {n} at its positive floor: the {_FAMILY_OF[n]} energies carry no {n} stiffness"
+             for n in at_bound if n != "b01"] + coupling_note
     return result, {n: errors[n] for n in names}, at_bound, notes
 
 

@@ -110,7 +110,14 @@ def solve_samples(
     if backend is None:
         # One task per group: a design of three bend paths needs no more than three workers.
         with LocalPool(workers, tasks=len(groups)) as pool:
-            return solve_samples(relaxed, specs, on_sample=on_sample, backend=pool, coefficient=coefficient)
+            return _solve_groups(relaxed, specs, groups, pool, on_sample, coefficient)
+    return _solve_groups(relaxed, specs, groups, backend, on_sample, coefficient)
+
+
+def _solve_groups(relaxed: RelaxedRepeat, specs: Sequence[SampleSpec], groups: list[tuple[int, ...]],
+                  backend: Backend, on_sample: Callable[[int, int, SampleResult], None] | None,
+                  coefficient: float | None) -> list[SampleResult]:
+    """:func:`solve_samples` on ``backend`` with its ``groups`` (:func:`sample_groups`) made."""
     results: list[SampleResult | None] = [None] * len(specs)
     known = 0
 

@@ -187,13 +187,14 @@ def builtin_bending_rigidity(material: ShellMaterial) -> float:
     edges' missing hinges), ours ``½ h³ κᵀ B κ`` with ``κ = (κ00, κ11, 2 κ01)``.
 
     Raises:
-        ValueError: ``B`` is not positive definite.
+        ValueError: ``B`` is not positive definite, or the signed bending not convex.
     """
-    if not material.bending_positive_definite:
+    signed = material.signed_bending
+    if not material.bending_positive_definite or (signed is not None and not signed.positive_definite):
         material.check_positive_definite()  # raises, naming the entries
     # A signed bending (ShellMaterial.signed_bending): its stiffer side in each direction, above
     # every quadrant's matrix.
-    B = material.B if material.signed_bending is None else material.signed_bending.upper
+    B = material.B if signed is None else signed.upper
     return material.thickness**3 * max(float(eigvalsh(B[:2, :2])[-1]), 2.0 * B[2, 2])
 
 
