@@ -16,8 +16,8 @@ from yarnfit.engine.model import quaternion_d3
 from yarnfit.engine.tiling import cut_rectangle
 from yarnfit.validate.strip import centre_line as middle_line
 from yarnfit.validate.strip import cut_forces, edge_draw_in, free_side_ends, mid_strain, middle_compression
-from yarnfit.validate.swatch import (FRICTION_STRAIN_STEP, STRAIN_TIMELINE, SWATCH_OPTIONS, cut_swatch, stretch_repeat,
-                                     stretch_swatch)
+from yarnfit.validate.swatch import (FRICTION_STRAIN_STEP, STRAIN_TIMELINE, SWATCH_OPTIONS,
+                                     UNIFORM_EXTRAPOLATION_RTOL, cut_swatch, read_uniform, stretch_repeat, stretch_swatch)
 
 E = 1e9  # Pa
 RADIUS = 1e-4  # m
@@ -101,6 +101,19 @@ def test_straight_wefts_match_closed_form(hardening):
         # Uniform between the jaws: the extensometer reads the jaws' strain.
         assert point["mid_strain"] == pytest.approx(point["strain"], rel=MID_STRAIN_RTOL)
         assert point["residual"]["force"] <= 1e-6
+        # One solve per level without friction: its one step's reading is the point's own.
+        (step,) = point["steps"]
+        assert step["strain"] == point["strain"] and step["converged"]
+        for key in ("mid_strain", "middle_force_n_per_m", "middle_compression_ratio", "compression_ratio"):
+            assert step[key] == point[key]
+    # Read off the curve at the strains the middle reached: the closed form again (at a level the
+    # reading is that state's; between levels a power law through them, exact for a linear yarn).
+    readings = read_uniform(out, (0.02, 0.035, 0.10))
+    for read, strain in zip(readings, (0.02, 0.035, 0.10)):
+        assert read.strain == strain and read.converged and not read.extrapolated and read.source == "steps"
+        assert read.compression_ratio == pytest.approx(1.0, abs=1e-9)
+        if hardening == 0.0 or strain in (0.02, 0.10):
+            assert read.force_n_per_m == pytest.approx(axial_force(strain, hardening) / spacing, rel=FORCE_RTOL)
 
 
 def test_the_extensometer_reads_the_middle_not_the_jaws():
@@ -308,6 +321,10 @@ def test_friction_holds_a_small_weave_stiffer_and_balanced():
         points[mu] = out["directions"]["bias"]["points"][1:]
     for point, steps in zip(points[cotton.friction], (4, 6)):  # 0 → 2 → 5 % in steps of 0.5 %
         assert point["converged"] and point["load_steps"] == steps and point["friction_passes"] >= 2 * steps
+        # Each load step's middle is read; the last step is the point itself.
+        assert len(point["steps"]) == steps and all(step["converged"] for step in point["steps"])
+        assert point["steps"][-1]["middle_force_n_per_m"] == point["middle_force_n_per_m"]
+        assert np.all(np.diff([step["strain"] for step in point["steps"]]) > 0)
         assert point["fixed_force_n_per_m"] == pytest.approx(point["force_n_per_m"], rel=1e-4)
         # The rods, contacts and friction anchors crossing a plane carry the jaws' pull.
         assert point["cut_force_n_per_m"] == pytest.approx(point["force_n_per_m"], rel=CUT_BALANCE_RTOL)
@@ -344,6 +361,51 @@ def test_a_frictional_pull_is_converged_in_its_load_step():
     for step in (0.0, -0.005, math.nan):
         with pytest.raises(ValueError, match="strain_step"):
             stretch_swatch(swatch, (0.02,), friction=cotton.friction, strain_step=step)
+
+
+def _power_law_curve(strains, steps: bool, exponent: float = 1.7, scale: float = 3e4):
+    """A curve as :func:`stretch_swatch` writes it whose middle pulls ``scale ε^exponent`` N/m at
+    its middle's strain ``ε = 1.3 × the jaws'`` and narrows linearly, with each level's load steps
+    (``steps``) or as a curve written before they were kept."""
+    def reading(jaws):
+        middle = 1.3 * jaws
+        return {"strain": jaws, "mid_strain": middle, "middle_force_n_per_m": scale * middle**exponent,
+                "middle_compression_ratio": 1.0 - 0.8 * middle, "converged": True}
+    points, previous = [{"strain": 0.0}], 0.0
+    for strain in strains:
+        point = {**reading(strain), "force_n_per_m": 0.0, "compression_ratio": 1.0}
+        if steps:
+            point["steps"] = [reading(previous + (strain - previous) * j / 4) for j in range(1, 5)]
+        points.append(point)
+        previous = strain
+    return {"points": points}
+
+
+@pytest.mark.parametrize("steps", [True, False])
+def test_the_uniform_part_is_read_at_the_strains_its_middle_reached(steps):
+    # A pull that grows as a power of the strain is read exactly between any two states (and below
+    # the first, through the origin), whether between load steps or between levels only.
+    curve = _power_law_curve((0.02, 0.05, 0.10), steps)
+    wanted = (0.01, 0.02, 0.05, 0.10)
+    for read, strain in zip(read_uniform(curve, wanted), wanted):
+        assert read.strain == strain and read.converged and not read.extrapolated
+        assert read.source == ("steps" if steps else "levels")
+        assert read.force_n_per_m == pytest.approx(3e4 * strain**1.7, rel=1e-12)
+        assert read.compression_ratio == pytest.approx(1.0 - 0.8 * strain, rel=1e-12)
+    # The middle reached 13 %: a little beyond it is read on the last stretch's power law and
+    # says so; further is not read.
+    reached = 1.3 * 0.10
+    near, far = read_uniform(curve, (reached * (1 + 0.5 * UNIFORM_EXTRAPOLATION_RTOL),
+                                     reached * (1 + 2 * UNIFORM_EXTRAPOLATION_RTOL)))
+    assert near.extrapolated and near.force_n_per_m == pytest.approx(3e4 * near.strain**1.7, rel=1e-12)
+    assert far is None
+    # A state that did not converge makes the readings next to it unconverged.
+    curve["points"][2]["converged"] = False
+    if steps:
+        curve["points"][2]["steps"][-1]["converged"] = False
+    assert not read_uniform(curve, (1.3 * 0.05,))[0].converged
+    with pytest.raises(ValueError, match="positive"):
+        read_uniform(curve, (0.0,))
 
 
 def documented_paths(directions):

@@ -29,9 +29,12 @@ against the largest strip of each direction (issue 14's acceptance): a long stri
 pulled at the strip's angle with every other stress free
 (:meth:`yarnfit.shell.ShellMaterial.uniaxial_pull`), force per width and width ratio, with a
 verdict (force within SHELL_FORCE_RTOL, width ratio within SHELL_COMPRESSION_ATOL), the strip read
-two ways (READINGS): at its jaws (their pull over the whole width at their travel, the whole
-width at mid-length) and where it is uniform, as issue 14 asks it measured (the middle half's pull
-at the strain the strip's middle reached, the middle half's width). Beside them the periodic
+three ways (READINGS): at its jaws (their pull over the whole width at their travel, the whole
+width at mid-length); where it is uniform, as issue 14 asks it measured (the middle half's pull
+at the strain the strip's middle reached at each level, the middle half's width); and the same at
+the nominal strains themselves, read off the middle's curve between its load steps
+(:func:`yarnfit.validate.swatch.read_uniform`; between the levels alone for curves written before
+the steps were kept, which the table says). Beside them the periodic
 repeat pulled the same way along weft, warp and bias (:func:`yarnfit.homogenize.periodic_pull`:
 the limit a frictionless strip would tend to as it widens, and what the shell is fitted to), the
 same pull with the fibre's friction, in load steps as the strip is pulled
@@ -59,7 +62,7 @@ from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
 from yarnfit.homogenize import (frictional_periodic_bias_pull, frictional_periodic_pull, periodic_bias_pull,
                                 periodic_pull)
-from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, stretch_swatch
+from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, read_uniform, stretch_swatch
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
 CLAMP_REPEATS = 0.5
@@ -192,7 +195,7 @@ def frictional_pulls(relaxed, curves: dict, reading: "Reading", coefficient: flo
     if coefficient <= 0.0:
         return pulls
     for direction, curve in largest_strips(curves).items():
-        strains = sorted({reading.strain(point) for point in curve["points"][1:]})
+        strains = sorted({point.strain for point in reading.read(curve) if point is not None})
         if direction == "bias":
             path = frictional_periodic_bias_pull(relaxed, strains, coefficient)
         elif direction in ("weft", "warp"):
@@ -229,28 +232,66 @@ def middle_strain(point: dict) -> float:
 
 
 @dataclass(frozen=True)
+class ReadPoint:
+    """One row of a strip's reading: the ``level`` it stands for (the jaws' strain, or the middle's
+    strain it was read at), the strip's ``force`` per width (N/m), the ``strain`` the free pulls
+    are taken to, its width ratio ``compression``, whether it ``converged``, and a ``note`` for
+    the strain's cell."""
+
+    level: float
+    force: float
+    strain: float
+    compression: float
+    converged: bool
+    note: str = ""
+
+
+@dataclass(frozen=True)
 class Reading:
-    """How a strip's pull is read for the verdict: its force per width, the strain the free pulls
-    are taken to, and its width ratio, each of a point of :func:`stretch_swatch`'s curve."""
+    """How a strip's pull is read for the verdict: ``read(curve)`` gives its rows
+    (:class:`ReadPoint`, or ``None`` for a strain it cannot be read at)."""
 
     name: str
     title: str
-    force: Callable[[dict], float]
-    strain: Callable[[dict], float]
-    compression: Callable[[dict], float]
+    read: Callable[[dict], list]
+
+
+def _jaws(curve: dict) -> list[ReadPoint]:
+    return [ReadPoint(p["strain"], p["force_n_per_m"], p["strain"], p["compression_ratio"], p["converged"])
+            for p in curve["points"][1:]]
+
+
+def _middle(curve: dict) -> list[ReadPoint]:
+    return [ReadPoint(p["strain"], middle_force(p), middle_strain(p), middle_compression(p), p["converged"])
+            for p in curve["points"][1:]]
+
+
+def _uniform(curve: dict) -> list[ReadPoint | None]:
+    rows = []
+    for read in read_uniform(curve, STRAINS):
+        note = "" if read is None else (" (between levels)" if read.source == "levels" else "") + (
+            " (extrapolated)" if read.extrapolated else "")
+        rows.append(None if read is None else ReadPoint(read.strain, read.force_n_per_m, read.strain,
+                                                        read.compression_ratio, read.converged, note))
+    return rows
 
 
 READINGS = (
     # As a tensile tester without extensometers reads a strip: the jaws' force over the whole
     # width, at the jaws' travel, and the whole width at mid-length.
-    Reading("jaws", "the jaws' pull over the whole width at the jaws' strain, the whole width at mid-length",
-            lambda p: p["force_n_per_m"], lambda p: p["strain"], lambda p: p["compression_ratio"]),
+    Reading("jaws", "the jaws' pull over the whole width at the jaws' strain, the whole width at mid-length", _jaws),
     # Where the strip is uniform (issue 14): the middle half's pull at the strain its middle
     # reached, the middle half's width (a strip's jaws hold its ends unsheared and unnarrowed, so
     # its middle strains more than their travel; a knit's cut sides, drawn in, carry little and
     # narrow the whole width far more).
     Reading("middle", "the middle half's pull at the strain of the strip's middle, the middle half's width",
-            middle_force, middle_strain, middle_compression),
+            _middle),
+    # The same, at the nominal strains themselves: read off the middle's curve where its strain
+    # was 2, 5 and 10 % (yarnfit.validate.swatch.read_uniform), as a tensile tester with an
+    # extensometer reads a force at a strain. (A knit's middle strains 12-13 % at the 10 % level,
+    # beyond the uniaxial samples; this row is read where the fit has samples.)
+    Reading("uniform", "the middle half's pull and width at the nominal strains of the strip's middle "
+            "(read off its curve between load steps)", _uniform),
 )
 
 
@@ -275,15 +316,19 @@ def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Cal
     for direction, curve in largest_strips(curves).items():
         angle = math.radians(curve["angle_deg"])
         gauge, width = curve["repeats"]
-        for point in curve["points"][1:]:
-            force, strain, narrowing = reading.force(point), reading.strain(point), reading.compression(point)
+        for level, point in zip(STRAINS, reading.read(curve)):
+            if point is None:
+                rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * level:g} % | — | not reached | — | "
+                            + " | ".join(["— | —"] * 4) + " | not reached |")
+                continue
+            force, strain, narrowing = point.force, point.strain, point.compression
             pull = periodic(direction, strain)
             cells = ["— | —" if pull is None else f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}"]
             pull = frictional.get((direction, strain))
             cells.append("— | —" if pull is None else
                          f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}"
                          + ("" if pull.converged else " (not converged)"))
-            if pull is not None and pull.converged and point["converged"]:
+            if pull is not None and pull.converged and point.converged:
                 rubbed += 1
                 rubbed_within += (abs(pull.force_n_per_m / force - 1.0) <= SHELL_FORCE_RTOL
                                   and abs(pull.width_ratio - narrowing) <= SHELL_COMPRESSION_ATOL)
@@ -294,13 +339,13 @@ def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Cal
                 verdicts[name] = (abs(ratio - 1.0) <= SHELL_FORCE_RTOL
                                   and abs(pull.width_ratio - narrowing) <= SHELL_COMPRESSION_ATOL)
                 cells.append(f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}")
-            if point["converged"]:
+            if point.converged:
                 judged += 1
                 within += verdicts["nonlinear"]
-            verdict = ("not converged" if not point["converged"] else
+            verdict = ("not converged" if not point.converged else
                        "within" if verdicts["nonlinear"] else "MISSED")
-            rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * point['strain']:g} % | {force:.4g} | "
-                        f"{100 * strain:.3g} % | {narrowing:.3f} | " + " | ".join(cells) + f" | {verdict} |")
+            rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * point.level:g} % | {force:.4g} | "
+                        f"{100 * strain:.3g} %{point.note} | {narrowing:.3f} | " + " | ".join(cells) + f" | {verdict} |")
     return rows, judged, within, rubbed, rubbed_within
 
 
