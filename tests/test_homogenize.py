@@ -676,6 +676,36 @@ def test_a_frictional_periodic_pull_refuses_bad_input():
             frictional_periodic_pull(relaxed, 0, (0.01,), mu)
 
 
+@pytest.mark.parametrize("verdicts, converged", [(("failed", "minimum"), True), (("minimum", "failed"), False),
+                                                  (("minimum", "minimum"), True)])
+def test_a_frictional_step_is_judged_by_its_last_pass(monkeypatch, verdicts, converged):
+    # Two passes: the first re-anchors (normal force 1 -> 2 N), the second settles (2 -> 2 N). A
+    # pass before the last only estimates the normal forces the next anchors; the step is what
+    # its last pass's search found.
+    from types import SimpleNamespace
+
+    import yarnfit.homogenize.frictional as frictional_module
+
+    bounds = iter([1.0, 2.0, 2.0])
+    monkeypatch.setattr(frictional_module, "anchor_contacts",
+                        lambda *args, **kwargs: SimpleNamespace(bound=np.array([next(bounds)])))
+    monkeypatch.setattr(frictional_module, "_form_map", lambda *args: None)
+    contacts = SimpleNamespace(with_base_penalties=lambda: None, pairs=SimpleNamespace(transformed=lambda m: None))
+    result = SimpleNamespace(converged=True, contacts=contacts, state=SimpleNamespace(node_position=np.zeros((1, 3))))
+    start = SimpleNamespace(result=result, form=np.eye(2), tiled=SimpleNamespace(model=None))
+    verdict = iter(verdicts)
+    anchored = []
+
+    def search(anchors, anchor_form, warm, contacts, guess, probe):
+        anchored.append(float(anchors.bound[0]))
+        trial = SimpleNamespace(result=result, form=np.eye(2), tiled=start.tiled, anchors=anchors, free=guess)
+        return frictional_module._Pass(trial, 10, next(verdict))
+
+    step = frictional_module._frictional_step(search, start, 0.3, np.zeros(1), 1e-3)
+    assert anchored == [1.0, 2.0]
+    assert (step.converged, step.settled, step.passes, step.iterations) == (converged, True, 2, 20)
+
+
 def test_loading_path_samples_without_friction_are_the_frictionless_samples():
     # Without friction a path's work is the yarns' energy at its end: the frictionless sample's Ū,
     # reached along the path instead of from the affine start.
