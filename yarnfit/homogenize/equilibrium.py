@@ -5,6 +5,7 @@ slope of Ū along any in-plane Green strain at an equilibrium (the envelope theo
 from __future__ import annotations
 
 import warnings
+from typing import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -164,16 +165,15 @@ def _green_slope(model: RodModel, result, form: np.ndarray, change: np.ndarray, 
     :meth:`~yarnfit.engine.contact.ContactPairs.transformed`). Frames stay as they are: they are
     balanced, so turning them changes the potential only to second order."""
     form, change = np.asarray(form, dtype=np.float64), np.asarray(change, dtype=np.float64)
-    values = []
-    for step in (STRAIN_SLOPE_STEP, -STRAIN_SLOPE_STEP):
+
+    def potential(step: float) -> float:
         matrix = _form_map(form + 2.0 * step * change, form)
-        mapped = transform_images(model, matrix)
         position = result.state.node_position @ matrix.T
-        contacts = replace(result.contacts, pairs=result.contacts.pairs.transformed(matrix))
-        rods = sum(internal_forces(mapped, position, result.state.edge_quaternion).terms)
         slip = 0.0 if friction is None else friction.transformed(matrix).energy_gradient(position)[0]
-        values.append(rods + contact_potential(mapped, position, contacts) + slip)
-    return (values[0] - values[1]) / (2.0 * STRAIN_SLOPE_STEP * area)
+        return (_balanced_potential(transform_images(model, matrix), position, result.state.edge_quaternion,
+                                    result.contacts, result.contacts.pairs.transformed(matrix)) + slip)
+
+    return _central_slope(potential, area)
 
 
 def _surface_green_slope(carried: CarriedEquilibrium, result: QuasiStaticResult, form: np.ndarray,
@@ -187,12 +187,25 @@ def _surface_green_slope(carried: CarriedEquilibrium, result: QuasiStaticResult,
     shear: 3e-5 of the plain weave's weft slope at 1 %), the contacts' multipliers and penalties
     as the solve ended. On a flat tiling it is :func:`_green_slope`'s path (measured equal to
     4e-10 relative)."""
-    values = []
-    for step in (STRAIN_SLOPE_STEP, -STRAIN_SLOPE_STEP):
+    def potential(step: float) -> float:
         model, position, quaternion, pairs = carried.carried(np.asarray(form) + 2.0 * step * np.asarray(change))
-        rods = sum(internal_forces(model, position, quaternion).terms)
-        values.append(rods + contact_potential(model, position, replace(result.contacts, pairs=pairs)))
-    return (values[0] - values[1]) / (2.0 * STRAIN_SLOPE_STEP * carried.tiled.area)
+        return _balanced_potential(model, position, quaternion, result.contacts, pairs)
+
+    return _central_slope(potential, carried.tiled.area)
+
+
+def _balanced_potential(model: RodModel, position: np.ndarray, quaternion: np.ndarray, contacts, pairs) -> float:
+    """The potential a solve balanced (J), at moved ``position`` ``(N, 3)`` and frames: the rods'
+    energy plus the contacts' augmented Lagrangian with ``contacts``' multipliers and penalties on
+    ``pairs`` (its pairs, moved with the nodes)."""
+    rods = sum(internal_forces(model, position, quaternion).terms)
+    return rods + contact_potential(model, position, replace(contacts, pairs=pairs))
+
+
+def _central_slope(potential: Callable[[float], float], area: float) -> float:
+    """``(potential(δ) − potential(−δ)) / (2 δ area)`` with δ = :data:`STRAIN_SLOPE_STEP`: the
+    slope (J/m²) of a potential along a strain path parametrised by ``h``."""
+    return (potential(STRAIN_SLOPE_STEP) - potential(-STRAIN_SLOPE_STEP)) / (2.0 * STRAIN_SLOPE_STEP * area)
 
 
 def _axis_change(axis: int) -> np.ndarray:
