@@ -374,21 +374,22 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             converged &= bool(result.converged)
             state, contacts, reached = result.state, result.contacts, target
             slowest = max(slowest, time.perf_counter() - step_start)
-            anchors = None if lagged is None else lagged.anchors
-            cut = cut_forces(swatch, state, result.contacts, anchors)
+            # The middle's reading after every step; the level's point is its last step's.
+            cut = cut_forces(swatch, state, result.contacts, None if lagged is None else lagged.anchors)
+            width = mid_width(swatch, state.node_position)
             step_readings.append({
                 "strain": target,
                 "mid_strain": finite_or_none(mid_strain(swatch, state.node_position)),
                 "middle_force_n_per_m": float(cut.middle.mean()) / (0.5 * swatch.width),
                 "middle_compression_ratio": finite_or_none(middle_compression(swatch, state.node_position)),
-                "compression_ratio": mid_width(swatch, state.node_position) / width0,
+                "compression_ratio": width / width0,
                 "converged": bool(result.converged) and (lagged is None or bool(lagged.settled)),
             })
+        middle = step_readings[-1]
         _, rod_gradient, _ = energy_gradient(model, state)
         pull = float(result.reaction_force[swatch.moving, 0].sum())
         back = float(result.reaction_force[swatch.fixed, 0].sum())
         rod_pull = float(rod_gradient[swatch.moving, 0].sum())
-        width = mid_width(swatch, state.node_position)
         r = result.residual
         point = {
             "strain": strain,
@@ -397,13 +398,13 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "rod_force_n_per_m": rod_pull / swatch.width,
             "contact_share": 0.0 if pull == 0 else 1.0 - rod_pull / pull,
             "cut_force_n_per_m": float(cut.whole.mean()) / swatch.width,
-            "middle_force_n_per_m": float(cut.middle.mean()) / (0.5 * swatch.width),
+            "middle_force_n_per_m": middle["middle_force_n_per_m"],
             "middle_force_range_n_per_m": [float(cut.middle.min()) / (0.5 * swatch.width),
                                            float(cut.middle.max()) / (0.5 * swatch.width)],
             "quarter_forces_n_per_m": (cut.quarters.mean(axis=0) / (0.25 * swatch.width)).tolist(),
-            "compression_ratio": width / width0,
-            "middle_compression_ratio": finite_or_none(middle_compression(swatch, state.node_position)),
-            "mid_strain": finite_or_none(mid_strain(swatch, state.node_position)),
+            "compression_ratio": middle["compression_ratio"],
+            "middle_compression_ratio": middle["middle_compression_ratio"],
+            "mid_strain": middle["mid_strain"],
             "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
             "width_m": width,
             "edge_draw_in_m": finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
