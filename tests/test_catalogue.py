@@ -92,6 +92,9 @@ def test_a_catalogue_on_a_dask_cluster(tmp_path):
     assert [r["name"] for r in parquet] == [r["name"] for r in rows]
     jersey = json.loads((out / "jersey.json").read_text())["engineering"]
     assert parquet[4]["weft_stretch_n_per_m"] == jersey["weft_stretch_n_per_m"]
+    # Unless told, the knit's membrane samples are loaded with its fibre's friction, the wovens' not.
+    assert [r["sample_friction"] for r in parquet[:2]] == [0.0, 0.0]
+    assert parquet[4]["sample_friction"] == get_fiber("cotton").friction > 0.0
     assert float(rows[4]["weft_stretch_n_per_m"]) == jersey["weft_stretch_n_per_m"]
     assert parquet[2]["status"] == "failed" and parquet[2]["weft_stretch_n_per_m"] is None or \
         parquet[2]["weft_stretch_n_per_m"] != parquet[2]["weft_stretch_n_per_m"]

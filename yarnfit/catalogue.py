@@ -8,8 +8,8 @@ is refused (a misspelt column would otherwise be silently ignored).
 
 Work: per fabric, a graph of tasks (:mod:`yarnfit.tasks`) — relax the repeat; solve the design's
 samples, one task per group of :func:`yarnfit.homogenize.sample_groups` (each bend family and sign
-as a path; with ``friction``, each membrane family's samples as one load path with the fibre's
-friction, as ``yarnfit fit --friction``); fit the shell; export the MuJoCo scene; with
+as a path; loaded with friction (knits by default, as ``yarnfit fit``), each membrane family's
+samples as one load path with the fibre's friction); fit the shell; export the MuJoCo scene; with
 ``validate``, run the validation scenes — on a local pool or a Dask cluster. Results are cached in
 ``DIR/.cache`` by a hash of every input and the yarnfit version, so a rerun, or a run after an
 interrupted one, recomputes nothing it has.
@@ -38,7 +38,8 @@ from typing import Callable
 
 from .fabric import DEFAULT_COUNTS_PER_CM, Fabric, counts_from_label
 from .checks import error_line
-from .fabric_fit import DEFAULT_SAMPLES, design_groups, fit_solved, relax_for_fit, solve_design_group
+from .fabric_fit import (DEFAULT_SAMPLES, design_groups, fit_solved, loads_with_friction, relax_for_fit,
+                         solve_design_group)
 from .fibers import get_fiber
 from .material_file import MaterialFile
 from .outputs import write_atomically
@@ -282,12 +283,13 @@ def run_catalogue(
     scenes: tuple[str, ...] = VALIDATION_SCENES,
     quick: bool = True,
     on_done: Callable[[Task, object, int, int], None] | None = None,
-    friction: bool = False,
+    friction: bool | None = None,
 ) -> CatalogueRun:
     """Fit, export and (with ``validate``) validate every row of the labels file into ``out_dir``
     (see the module docstring) on ``backend``; ``on_done`` as for :func:`yarnfit.tasks.run_tasks`.
     With ``friction`` the membrane samples are loaded from rest with the fibre's friction (as
-    ``yarnfit fit --friction``), one task per load path.
+    ``yarnfit fit --friction``), one task per load path; ``None``: each fabric as its structure
+    asks (:func:`yarnfit.fabric_fit.loads_with_friction`: knits loaded, wovens not).
 
     A row's failure (bad input, or any stage) is its entry's; the other rows still complete.
 
@@ -302,8 +304,6 @@ def run_catalogue(
         raise ValueError(f"model must be 'full' or 'paper', got {model!r}")
     out = Path(out_dir)
     count = design_size(levels_for(samples))
-    # Each sample task's design indices: one sample alone, a bend path, or (with friction) a load path.
-    layout = tuple(design_groups(samples, friction))
     entries: dict[int, CatalogueEntry] = {}
     fabrics: dict[int, Fabric] = {}
     seen: dict[str, int] = {}
@@ -321,15 +321,18 @@ def run_catalogue(
     tasks, wanted = [], []
     for i, fabric in fabrics.items():
         name = fabric.name
+        loaded = loads_with_friction(fabric) if friction is None else friction
+        # Each sample task's design indices: one sample alone, a bend path, or (loaded) a load path.
+        layout = tuple(design_groups(samples, loaded))
         tasks.append(Task(("relax", i), relax_for_fit, (fabric,), cost=3.0, label=f"{name}: relax"))
         for j, indices in enumerate(layout):
             # A path: a few samples' worth of solves or more, so it starts before the single samples.
             what = (f"sample {indices[0] + 1}/{count}" if len(indices) == 1 else
                     f"path of samples {', '.join(str(k + 1) for k in indices)}/{count}")
-            tasks.append(Task(("samples", i, j), solve_design_group, (Result(("relax", i)), samples, indices, friction),
+            tasks.append(Task(("samples", i, j), solve_design_group, (Result(("relax", i)), samples, indices, loaded),
                               cost=1.0 + len(indices), label=f"{name}: {what}"))
         results = tuple(Result(("samples", i, j)) for j in range(len(layout)))
-        tasks.append(Task(("fit", i), fit_task, (fabric, Result(("relax", i)), model, friction, layout, *results),
+        tasks.append(Task(("fit", i), fit_task, (fabric, Result(("relax", i)), model, loaded, layout, *results),
                           cost=1.0, label=f"{name}: fit"))
         tasks.append(Task(("export", i), export_task, (Result(("fit", i)),), label=f"{name}: export"))
         wanted += [("fit", i), ("export", i)]

@@ -98,10 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "fitting the coupling s01 or b01 at the positive-definite bound |rho| = 0.99")
     fit.add_argument("--workers", type=int, default=None, metavar="N",
                      help="processes solving samples (default: every core)")
-    fit.add_argument("--friction", action="store_true",
-                     help="load the membrane samples from rest with the fibre's friction (the fabric's loading "
-                          "response, as a tensile test measures it) instead of the paper's frictionless minimisers; "
-                          "slower: every sample family is a path of 0.5 %% steps")
+    add_sample_friction_arguments(fit)
     fit.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                      help="solve the samples on this Dask scheduler's workers instead of local processes")
     fit.add_argument("--name", help="label for the output files (default: preset, pattern or file name)")
@@ -179,9 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     catalogue.add_argument("--samples", type=int, default=None, metavar="N",
                            help="about how many deformation samples per fabric (at least 16; default 55)")
     catalogue.add_argument("--model", choices=("full", "paper"), default="full", help="as for `yarnfit fit`")
-    catalogue.add_argument("--friction", action="store_true",
-                           help="load the membrane samples from rest with the fibre's friction, as `yarnfit fit "
-                                "--friction` (slower: one task per load path)")
+    add_sample_friction_arguments(catalogue)
     catalogue.add_argument("--validate", action="store_true",
                            help="also run the validation scenes (quick: stretch, sphere, cusick) on each fabric")
     catalogue.add_argument("--workers", type=int, default=None, metavar="N",
@@ -224,6 +219,19 @@ def build_parser() -> argparse.ArgumentParser:
                           help="run the scenes side by side on N worker processes (default: one per core; "
                                "1 runs them one after another in this process)")
     return parser
+
+
+def add_sample_friction_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--friction`` / ``--frictionless``: how the membrane samples are solved (``args.friction``:
+    True, False, or None for the structure's default, :func:`yarnfit.fabric_fit.loads_with_friction`)."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--friction", action="store_true", default=None,
+                       help="load the membrane samples from rest with the fibre's friction (the fabric's loading "
+                            "response, as a tensile test measures it; every sample family a path of 0.5 %% steps, "
+                            "3-4 times slower): the default for knits")
+    group.add_argument("--frictionless", dest="friction", action="store_false", default=None,
+                       help="solve the membrane samples as the paper's frictionless minimisers: the default for "
+                            "wovens")
 
 
 def add_fabric_arguments(parser: argparse.ArgumentParser) -> None:
@@ -638,7 +646,8 @@ def fit_summary(fitted, output, recording_path) -> str:
                      f"left out of the shell")
     lines += [f"  note            {note}" for note in fit.notes]
     lines.append("  samples         " + (f"membrane loaded from rest with friction μ {fitted.sample_friction:g} "
-                                         "(--friction); bends frictionless" if fitted.sample_friction > 0.0 else
+                                         "(--frictionless: the paper's minimisers); bends frictionless"
+                                         if fitted.sample_friction > 0.0 else
                                          "frictionless minimisers (the paper's; --friction loads them)"))
     t = fitted.seconds
     lines.append(f"  time            relax {t['relax']:.1f} s, samples {t['homogenize']:.1f} s, fit {t['fit']:.2f} s "

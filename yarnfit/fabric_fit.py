@@ -33,6 +33,24 @@ from .tasks import Backend
 DEFAULT_LEVELS = 4
 DEFAULT_SAMPLES = design_size(DEFAULT_LEVELS)
 
+# The structure families whose membrane samples are loaded with the fibre's friction unless the
+# caller says otherwise (docs/design.md §3, "Knits are fitted to their loading response").
+# A knit's loops slide through one another at their crossings, and friction there is what a
+# tensile test and a cut strip of it pull against: its loading response is 1.3–1.9 times the
+# paper's frictionless minimisers, and fitted to it the shell meets the largest yarn-level knit
+# strips within 20 % at 19 of 26 points where the frictionless fit meets 5 (session 45), for
+# 3–4 times the samples' time (the jerseys' fits stay well under a minute). A woven's crossings
+# barely slide below its jams: the cotton twill's two fits meet its strips alike (4 and 3 of 7),
+# while the loading paths of a polyester woven (range 40 %, 80 load steps) cost minutes
+# (the satin: 505 s against 34 s).
+FRICTION_LOADED_FAMILIES = frozenset({"knit"})
+
+
+def loads_with_friction(fabric: Fabric) -> bool:
+    """Whether ``fabric``'s membrane samples are loaded with friction when nobody says: knits
+    (:data:`FRICTION_LOADED_FAMILIES`). Reads a ``.pyp`` file to learn its family."""
+    return fabric.family in FRICTION_LOADED_FAMILIES
+
 
 class UnusableRelaxation(ValueError):
     """The repeat's relaxation did not converge or leaves yarns overlapping: nothing to fit."""
@@ -155,7 +173,7 @@ def fit_fabric(
     on_relax_start: Callable | None = None,
     coupling_limit: float | None = COUPLING_LIMIT,
     backend: Backend | None = None,
-    friction: bool = False,
+    friction: bool | None = None,
 ) -> FabricFit:
     """Relax ``fabric`` (unless ``relaxed`` is given), solve about ``samples`` samples over
     ``ranges`` (default :func:`yarnfit.homogenize.default_ranges`) on ``workers`` processes, and fit
@@ -167,7 +185,8 @@ def fit_fabric(
     ``friction``: load the membrane samples from rest with the fibre's friction
     (:func:`yarnfit.homogenize.solve_loading_samples`: the fabric's loading response, what a
     tensile test and a cut strip measure) instead of the paper's frictionless minimisers; bends
-    stay frictionless.
+    stay frictionless. ``None`` (the default): with friction for knits, without for the rest
+    (:func:`loads_with_friction`).
 
     Raises ``ValueError`` for bad options, :class:`UnusableRelaxation` for a relaxation that did
     not converge or leaves overlaps, :class:`yarnfit.fit.IndefiniteFitError` (only with
@@ -177,6 +196,8 @@ def fit_fabric(
     levels_for(samples)  # validates the count before the relaxation's minutes
     if model not in ("full", "paper"):
         raise ValueError(f"model must be 'full' or 'paper', got {model!r}")
+    if friction is None:
+        friction = loads_with_friction(fabric)
     seconds = {}
     start = time.perf_counter()
     relaxed = relax_for_fit(fabric, on_relax_iteration, on_relax_start) if relaxed is None else _usable(fabric, relaxed)
