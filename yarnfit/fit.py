@@ -119,7 +119,7 @@ RIDGE_FAN_STEP_DEG = 15.0
 RIDGE_PRINCIPAL_OFFSETS_DEG = (-3.0, -1.0, 0.0, 1.0, 3.0)
 # Mixed rays: every direction of that fan (over 360°) raised out of the normal-strain plane by these
 # elevations towards either sign of the shear, each tied to its mirror in the shear (one tangent per
-# pair: the membrane stays even in the shear, orthotropic). A fabric pulled on the bias shears its
+# pair, as the shear axis's two signs: the membrane stays even in the shear, orthotropic). A fabric pulled on the bias shears its
 # yarn frame and relaxes into small normal strains of its yarns (the twill at 4 %: E00, E11 ≈ −0.002,
 # −0.005 under 2 E01 = 0.088) that cost less together than the shear alone; a sum of separate
 # normal and shear rays can only add their energies, and left the wovens' bias pulls 20-30 % too
@@ -1047,8 +1047,9 @@ def ridge_candidates(eps: np.ndarray, linear: ShellMaterial) -> tuple[np.ndarray
             rays.append(np.stack([c * np.cos(around), c * np.sin(around), np.full(len(around), sign * s)], axis=1))
     directions, knots = [], []
     for n in np.concatenate(rays):
-        # A mixed ray and its mirror in the shear share their knots (their tangents are tied).
-        reach = float(max(np.max(eps @ n), np.max(eps @ (n * [1.0, 1.0, -1.0])) if _is_mixed(n) else -np.inf))
+        # A ray with a shear part and its mirror in the shear share their knots (their tangents
+        # are tied).
+        reach = float(max(np.max(eps @ n), np.max(eps @ (n * [1.0, 1.0, -1.0])) if _has_shear(n) else -np.inf))
         ray_knots = [0.0]
         if reach > RIDGE_LEAST_KNOT:
             ray_knots += np.geomspace(RIDGE_LEAST_KNOT, reach, RIDGE_KNOTS, endpoint=False).tolist()
@@ -1057,21 +1058,29 @@ def ridge_candidates(eps: np.ndarray, linear: ShellMaterial) -> tuple[np.ndarray
     return np.array(directions), np.array(knots)
 
 
-def _is_mixed(direction: np.ndarray) -> bool:
-    """A ray with both a normal-strain and a shear part."""
-    return bool(direction[2] != 0.0 and (direction[0] != 0.0 or direction[1] != 0.0))
+def _has_shear(direction: np.ndarray) -> bool:
+    """A ray with a shear part: a mixed ray or the shear axis."""
+    return bool(direction[2] != 0.0)
 
 
 def _shear_ties(directions: np.ndarray, knots: np.ndarray) -> np.ndarray:
-    """``(k, m)``: the candidates' tangents from ``m`` unknowns, a mixed ray's and its mirror in
-    the shear (``n2 → −n2``, the same knots) from one, so the membrane is even in the shear: an
-    orthotropic fabric's energy does not change when its shear changes sign. Every other
-    candidate has its own unknown."""
+    """``(k, m)``: the candidates' tangents from ``m`` unknowns, a shear-carrying ray's (mixed, or
+    the shear axis) and its mirror in the shear (``n2 → −n2``, the same knots) from one, so the
+    membrane is even in the shear: an orthotropic fabric's energy does not change when its shear
+    changes sign. Every ray in the normal-strain plane has its own unknowns.
+
+    The shear axis's two signs were left untied until session 46, and the jerseys' shells followed
+    their repeats' skew: pulled along −45° they pulled 3-9 times harder than along +45°, where the
+    bias samples are (polyester jersey's loading shell 15.0 against 1.71 N/m at 2 %). Which way a
+    jersey's loops lean is a broken symmetry its relaxation picks (docs/design.md §5, "The
+    jerseys' relaxations land on their mirror images"), set in a real jersey by its yarns' twist,
+    which the yarn model does not carry; so the shell follows the skew on average over the two
+    signs, as :class:`~yarnfit.shell.RidgeMembrane` says."""
     index = {(tuple(d), float(t)): j for j, (d, t) in enumerate(zip(directions.tolist(), knots))}
     unknown = np.empty(len(knots), dtype=np.int64)
     count = 0
     for j, (d, t) in enumerate(zip(directions.tolist(), knots)):
-        mirror = index.get(((d[0], d[1], -d[2]), float(t)), j) if _is_mixed(directions[j]) else j
+        mirror = index.get(((d[0], d[1], -d[2]), float(t)), j) if _has_shear(directions[j]) else j
         if mirror < j:
             unknown[j] = unknown[mirror]
         else:
