@@ -3,6 +3,7 @@ one row per failure, the table, a rerun from the cache, and an interrupted run t
 
 import csv
 import json
+import math
 import os
 import re
 import signal
@@ -25,6 +26,9 @@ from test_tasks import checkout_env, default_sigint
 # The smallest design (one magnitude per family and sign): the catalogue's machinery, not the fit,
 # is under test here.
 SAMPLES = 33
+# Two free-width pulls of a membrane even in the shear, mirrored: each balances its transverse
+# stresses to 1e-9 (shell.UNIAXIAL_STRESS_RTOL), so their forces agree far inside this.
+EVEN_PULL_RTOL = 1e-6
 # The issue's bound on a rerun of a finished catalogue (it loads the cached results only).
 RERUN_SECONDS = 5.0
 LABELS = """name,fibre,pattern,gsm,counts,yarn_spinning
@@ -95,6 +99,10 @@ def test_a_catalogue_on_a_dask_cluster(tmp_path):
     # Unless told, the knit's membrane samples are loaded with its fibre's friction, the wovens' not.
     assert [r["sample_friction"] for r in parquet[:2]] == [0.0, 0.0]
     assert parquet[4]["sample_friction"] == get_fiber("cotton").friction > 0.0
+    # ... and its shell is even in the shear: the same pull along either bias.
+    shell = MaterialFile.read(out / "jersey.json").shell
+    along, against = (shell.uniaxial_pull(angle, 1.05).force_n_per_m for angle in (math.pi / 4, -math.pi / 4))
+    assert against == pytest.approx(along, rel=EVEN_PULL_RTOL)
     assert float(rows[4]["weft_stretch_n_per_m"]) == jersey["weft_stretch_n_per_m"]
     assert parquet[2]["status"] == "failed" and parquet[2]["weft_stretch_n_per_m"] is None or \
         parquet[2]["weft_stretch_n_per_m"] != parquet[2]["weft_stretch_n_per_m"]

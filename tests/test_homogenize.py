@@ -45,7 +45,7 @@ from yarnfit.homogenize.equilibrium import CONTINUATION_HALVINGS, _green_slope, 
 from yarnfit.homogenize.surface import _spd_sqrt
 from yarnfit.homogenize.uniaxial import FREE_SLOPE_RTOL, _FreeStrainPoint, _next_free_strain, _transverse_slope
 from yarnfit.fabric_fit import (DEFAULT_LEVELS, DEFAULT_SAMPLES, FabricFit, fit_fabric, loads_with_friction,
-                                shell_thickness)
+                                shears_evenly, shell_thickness)
 from yarnfit.material_file import MaterialFile
 from yarnfit.fibers import Fiber, get_fiber
 from yarnfit.patterns import YarnPattern
@@ -777,14 +777,16 @@ def test_a_fit_with_friction_loads_its_membrane_samples_and_says_so():
     assert bends and all(a == b for a, b in bends)
 
 
-def test_knits_are_loaded_with_friction_unless_told_and_wovens_not():
+def test_knits_are_loaded_with_friction_and_shear_evenly_unless_told_and_wovens_not():
     # A knit's loading response is what its strips pull (docs/design.md §3); a woven's paths cost
-    # minutes for what its strips do not tell apart. The family of a .pyp file is read from it.
+    # minutes for what its strips do not tell apart. A knit's skew is a broken symmetry; a twill's
+    # line sets its. The family of a .pyp file is read from it.
     hylc = Path(__file__).parent / "data" / "hylc"
     assert loads_with_friction(Fabric.preset("cotton-jersey")) and loads_with_friction(Fabric.preset("polyester-jersey"))
     assert loads_with_friction(Fabric(name="s", fiber=get_fiber("polyester"), pattern_file=str(hylc / "stockinette.pyp")))
     assert not loads_with_friction(Fabric.preset("cotton-twill")) and not loads_with_friction(plain())
     assert not loads_with_friction(Fabric(name="b", fiber=get_fiber("cotton"), pattern_file=str(hylc / "basket.pyp")))
+    assert shears_evenly(Fabric.preset("wool-jersey")) and not shears_evenly(Fabric.preset("cotton-twill"))
 
 
 def test_loading_samples_refuse_bad_input():

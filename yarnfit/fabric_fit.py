@@ -46,6 +46,20 @@ DEFAULT_SAMPLES = design_size(DEFAULT_LEVELS)
 FRICTION_LOADED_FAMILIES = frozenset({"knit"})
 
 
+# The structure families whose shell is fitted even in the shear (fit.fit_shell(even_shear=True)).
+# A knit's loops are mirror-symmetric and lean one way or the other (its skew) only as a broken
+# symmetry its relaxation picks (docs/design.md §5), set in a real jersey by its yarns' twist, which
+# the yarn model does not carry: fitted to one side's lean its shell pulled 3-9 times harder along
+# −45° than along +45° (session 46). A woven's twill or satin line sets the side it shears stiffer
+# on, which its samples measure (the cotton twill's pure shear 9 times stiffer at −10 % than +10 %).
+EVEN_SHEAR_FAMILIES = frozenset({"knit"})
+
+
+def shears_evenly(fabric: Fabric) -> bool:
+    """Whether ``fabric``'s shell is fitted even in the shear: knits (:data:`EVEN_SHEAR_FAMILIES`)."""
+    return fabric.family in EVEN_SHEAR_FAMILIES
+
+
 def loads_with_friction(fabric: Fabric) -> bool:
     """Whether ``fabric``'s membrane samples are loaded with friction when nobody says: knits
     (:data:`FRICTION_LOADED_FAMILIES`). Reads a ``.pyp`` file to learn its family."""
@@ -155,7 +169,8 @@ def fit_solved(fabric: Fabric, relaxed: RelaxedRepeat, results: list[SampleResul
     samples loaded with friction ``sample_friction``)."""
     seconds = dict(seconds or {})
     start = time.perf_counter()
-    shell = fit_shell(results, shell_thickness(relaxed), model=model, coupling_limit=coupling_limit)
+    shell = fit_shell(results, shell_thickness(relaxed), model=model, coupling_limit=coupling_limit,
+                      even_shear=shears_evenly(fabric))
     seconds["fit"] = time.perf_counter() - start
     return FabricFit(fabric, relaxed, ranges or default_ranges(relaxed), results, shell, seconds, sample_friction)
 

@@ -493,6 +493,7 @@ def fit_shell(
     membrane: str = "nonlinear",
     residual_stress: bool = False,
     bending: str = "signed",
+    even_shear: bool = True,
 ) -> ShellFit:
     """Fit an orthotropic shell to yarn-level energies: the linear (StVK) model by weighted linear
     least squares, and (``membrane="nonlinear"``) the strain-stiffening membrane (module docstring).
@@ -519,6 +520,10 @@ def fit_shell(
             (``yarnfit.relax``), and fitted terms only took up what the membrane model missed
             (cotton twill: −19.6 / 35.9 N/m, which put its shear tangent at 2e-4 Pa once the
             compression-side terms came in, and the shell 20x off its own ±0.1 % shear samples).
+        even_shear: the stiffening membrane's shear axis shares one tangent between its two signs,
+            as its mixed rays always do (:func:`_shear_ties`): the membrane is even in the shear,
+            orthotropic. ``False`` lets a structure whose twill or satin line shears it stiffer one
+            way keep that (its shear axis's sides fitted apart).
 
     Returns:
         the :class:`ShellFit`. Per family: ``r2 = 1 − SS_res/SS_tot`` (unweighted, ``SS_tot`` about
@@ -677,7 +682,7 @@ def fit_shell(
     fit_stress = reference and residual_stress
     if membrane == "nonlinear" or fit_stress:
         membrane_used = [(s, e) for s, e, u in zip(used, relative, undeformed) if s.is_membrane and not u]
-        stiffening_fit = _fit_ridge_membrane(membrane_used, h, start, fit_stress)
+        stiffening_fit = _fit_ridge_membrane(membrane_used, h, start, fit_stress, even_shear)
         rest_stress.update(stiffening_fit[3])
     if fit_stress:
         shifted = relative - linear_terms[:, :3] @ np.array([rest_stress[n] for n in RESIDUAL_STRESS_NAMES["membrane"]])
@@ -898,6 +903,7 @@ def _residual_stress_columns(samples: list[SampleResult]) -> np.ndarray:
 
 def _fit_ridge_membrane(
     pairs: list[tuple[SampleResult, float]], h: float, linear: ShellMaterial, residual: bool = False,
+    even_shear: bool = True,
 ) -> tuple[RidgeMembrane | None, list[str], dict[str, list[float]], dict[str, float]]:
     """The strain-stiffening membrane (:class:`~yarnfit.shell.RidgeMembrane`) fitted to the
     membrane samples (module docstring).
@@ -905,7 +911,8 @@ def _fit_ridge_membrane(
     ``pairs``: each membrane sample with its energy relative to the undeformed one (J/m²);
     ``linear``: the linear fit, whose principal strain directions join the ridges' fan. Returns
     ``(the membrane or None, notes, Voigt strain range per direction, residual stress n0 n1 n2
-    (N/m))``; ``residual`` fits the residual-stress terms along.
+    (N/m))``; ``residual`` fits the residual-stress terms along; ``even_shear`` ties the shear
+    axis's two signs (:func:`_shear_ties`).
 
     The candidate ridges (:func:`ridge_candidates`) make ψ linear in the tangent stiffness of each
     ray's segments between knots (:func:`_ridge_columns`), so the fit is a non-negative linear
@@ -919,7 +926,7 @@ def _fit_ridge_membrane(
     eps = np.stack([membrane_strain(s.I) for s in samples])
     target = np.array([e for _, e in pairs])
     strain_range = {d: [float(eps[:, k].min()), float(eps[:, k].max())] for k, d in enumerate(("s00", "s11", "s22"))}
-    directions, knots = ridge_candidates(eps, linear)
+    directions, knots = ridge_candidates(eps, linear, even_shear)
     columns = _ridge_columns(eps, directions, knots, h)
     stress_names = []
     if residual:
@@ -998,7 +1005,7 @@ def _fit_ridge_membrane(
     for row, (i, j) in enumerate(pairs):
         jumps[row, i], jumps[row, j] = weight, -weight
     rows, b = np.vstack([rows, jumps]), np.concatenate([b, np.zeros(len(pairs))])
-    ties = _shear_ties(directions, knots)
+    ties = _shear_ties(directions, knots, even_shear)
     rows = np.hstack([rows[:, :len(knots)] @ ties, rows[:, len(knots):]])
     norms = np.linalg.norm(rows, axis=0)
     engaged = norms > 0.0  # a residual stress no sample strains has no say: left at 0
@@ -1023,7 +1030,7 @@ def _fit_ridge_membrane(
     return membrane, notes, strain_range, stress
 
 
-def ridge_candidates(eps: np.ndarray, linear: ShellMaterial) -> tuple[np.ndarray, np.ndarray]:
+def ridge_candidates(eps: np.ndarray, linear: ShellMaterial, even_shear: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """The candidate ridges of the strain-stiffening fit for membrane strains ``eps (n, 3)``:
     ``(directions (k, 3), knots (k,))``.
 
@@ -1032,7 +1039,8 @@ def ridge_candidates(eps: np.ndarray, linear: ShellMaterial) -> tuple[np.ndarray
     stiff combination, the yarn length, lies between fan directions: its near-rank-one stretch
     energies need it exactly), each with both signs; and ``±`` the shear axis. Knots per ray: 0 (a
     one-sided tangent at zero) and :data:`RIDGE_KNOTS` log-spaced from :data:`RIDGE_LEAST_KNOT` to
-    the largest ``n·ε`` the samples reach along it (none where they reach less than that)."""
+    the largest ``n·ε`` the samples reach along it (none where they reach less than that), along it
+    or its mirror in the shear for a ray tied to its mirror (:func:`_shear_ties`, ``even_shear``)."""
     principal = np.linalg.eigh(linear.S[:2, :2])[1].T
     angles = np.concatenate([np.arange(0.0, 180.0, RIDGE_FAN_STEP_DEG)]
                             + [math.degrees(math.atan2(v[1], v[0])) + np.array(RIDGE_PRINCIPAL_OFFSETS_DEG)
@@ -1049,7 +1057,8 @@ def ridge_candidates(eps: np.ndarray, linear: ShellMaterial) -> tuple[np.ndarray
     for n in np.concatenate(rays):
         # A ray with a shear part and its mirror in the shear share their knots (their tangents
         # are tied).
-        reach = float(max(np.max(eps @ n), np.max(eps @ (n * [1.0, 1.0, -1.0])) if _has_shear(n) else -np.inf))
+        reach = float(max(np.max(eps @ n),
+                          np.max(eps @ (n * [1.0, 1.0, -1.0])) if _tied_in_shear(n, even_shear) else -np.inf))
         ray_knots = [0.0]
         if reach > RIDGE_LEAST_KNOT:
             ray_knots += np.geomspace(RIDGE_LEAST_KNOT, reach, RIDGE_KNOTS, endpoint=False).tolist()
@@ -1058,16 +1067,20 @@ def ridge_candidates(eps: np.ndarray, linear: ShellMaterial) -> tuple[np.ndarray
     return np.array(directions), np.array(knots)
 
 
-def _has_shear(direction: np.ndarray) -> bool:
-    """A ray with a shear part: a mixed ray or the shear axis."""
-    return bool(direction[2] != 0.0)
+def _tied_in_shear(direction: np.ndarray, even_shear: bool) -> bool:
+    """A ray whose tangents are its mirror's in the shear: a mixed ray (normal and shear parts)
+    always, the shear axis when ``even_shear``."""
+    if direction[2] == 0.0:
+        return False
+    return bool(even_shear or direction[0] != 0.0 or direction[1] != 0.0)
 
 
-def _shear_ties(directions: np.ndarray, knots: np.ndarray) -> np.ndarray:
-    """``(k, m)``: the candidates' tangents from ``m`` unknowns, a shear-carrying ray's (mixed, or
-    the shear axis) and its mirror in the shear (``n2 → −n2``, the same knots) from one, so the
-    membrane is even in the shear: an orthotropic fabric's energy does not change when its shear
-    changes sign. Every ray in the normal-strain plane has its own unknowns.
+def _shear_ties(directions: np.ndarray, knots: np.ndarray, even_shear: bool = True) -> np.ndarray:
+    """``(k, m)``: the candidates' tangents from ``m`` unknowns, a mixed ray's and (``even_shear``)
+    the shear axis's and their mirrors in the shear (``n2 → −n2``, the same knots) from one, so
+    the membrane is even in the shear: an orthotropic fabric's energy does not change when its
+    shear changes sign. Every other candidate has its own unknown. A mixed ray is always tied:
+    untied, a jersey's took sides in the shear and its weft pull sheared (session 37).
 
     The shear axis's two signs were left untied until session 46, and the jerseys' shells followed
     their repeats' skew: pulled along −45° they pulled 3-9 times harder than along +45°, where the
@@ -1075,12 +1088,14 @@ def _shear_ties(directions: np.ndarray, knots: np.ndarray) -> np.ndarray:
     jersey's loops lean is a broken symmetry its relaxation picks (docs/design.md §5, "The
     jerseys' relaxations land on their mirror images"), set in a real jersey by its yarns' twist,
     which the yarn model does not carry; so the shell follows the skew on average over the two
-    signs, as :class:`~yarnfit.shell.RidgeMembrane` says."""
+    signs, as :class:`~yarnfit.shell.RidgeMembrane` says. A woven's twill or satin line sets the
+    side it shears stiffer on (the cotton twill's pure shear 9 times stiffer at −10 % than at
+    +10 %): ``even_shear=False`` keeps its shear axis's sides apart."""
     index = {(tuple(d), float(t)): j for j, (d, t) in enumerate(zip(directions.tolist(), knots))}
     unknown = np.empty(len(knots), dtype=np.int64)
     count = 0
     for j, (d, t) in enumerate(zip(directions.tolist(), knots)):
-        mirror = index.get(((d[0], d[1], -d[2]), float(t)), j) if _has_shear(directions[j]) else j
+        mirror = index.get(((d[0], d[1], -d[2]), float(t)), j) if _tied_in_shear(directions[j], even_shear) else j
         if mirror < j:
             unknown[j] = unknown[mirror]
         else:

@@ -196,7 +196,9 @@ class RidgeMembrane:
     and the normal strains beyond what its ridges' directions carry (the fit's ridges lie in the
     normal-strain plane, on the shear axis, and on rays between the two at 45° tied in pairs mirrored
     in the shear: an orthotropic membrane, whose coupling of shear and normal strains is even in the
-    shear; a jersey's skew, which is not, is followed only on average over the shear's two signs),
+    shear; a jersey's skew, which is not, is followed only on average over the shear's two signs,
+    its shear axis tied too; a woven's shear axis keeps one tangent per sign, as its twill line
+    shears it stiffer one way),
     and stiffening sharper than its knots resolve (the fit spaces them logarithmically over the
     sampled strains).
 
