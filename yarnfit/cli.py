@@ -228,7 +228,7 @@ def add_sample_friction_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--friction", action="store_true", default=None,
                        help="load the membrane samples from rest with the fibre's friction (the fabric's loading "
                             "response, as a tensile test measures it; every sample family a path of 0.5 %% steps, "
-                            "3-4 times slower): the default for knits")
+                            "about 3 times slower): the default for knits")
     group.add_argument("--frictionless", dest="friction", action="store_false", default=None,
                        help="solve the membrane samples as the paper's frictionless minimisers: the default for "
                             "wovens")
