@@ -782,8 +782,10 @@ def test_knits_are_loaded_with_friction_and_shear_evenly_unless_told_and_wovens_
     # minutes for what its strips do not tell apart. A knit's skew is a broken symmetry; a twill's
     # line sets its. The family of a .pyp file is read from it.
     hylc = Path(__file__).parent / "data" / "hylc"
-    assert loads_with_friction(Fabric.preset("cotton-jersey")) and loads_with_friction(Fabric.preset("polyester-jersey"))
-    assert loads_with_friction(Fabric(name="s", fiber=get_fiber("polyester"), pattern_file=str(hylc / "stockinette.pyp")))
+    assert loads_with_friction(Fabric.preset("cotton-jersey"))
+    assert loads_with_friction(Fabric.preset("polyester-jersey"))
+    stockinette = Fabric(name="s", fiber=get_fiber("polyester"), pattern_file=str(hylc / "stockinette.pyp"))
+    assert loads_with_friction(stockinette) and shears_evenly(stockinette)
     assert not loads_with_friction(Fabric.preset("cotton-twill")) and not loads_with_friction(plain())
     assert not loads_with_friction(Fabric(name="b", fiber=get_fiber("cotton"), pattern_file=str(hylc / "basket.pyp")))
     assert shears_evenly(Fabric.preset("wool-jersey")) and not shears_evenly(Fabric.preset("cotton-twill"))

@@ -190,8 +190,9 @@ def bench_relax() -> None:
 
 def bench_fit() -> None:
     """Full shell fits (default sample design, every core) of the five presets (knits loaded with
-    friction, as by default) and of the HYLC stockinette (frictionless): wall time by stage, the slowest sample, the engineering constants and R² per
-    sample family. A small fit runs first, untimed, so that every kernel is compiled."""
+    friction, as by default) and of the HYLC stockinette (frictionless): wall time by stage, the
+    slowest sample, the engineering constants and R² per sample family. A small fit runs first,
+    untimed, so that every kernel is compiled."""
     import warnings
     from pathlib import Path
 

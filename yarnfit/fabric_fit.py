@@ -39,8 +39,8 @@ DEFAULT_SAMPLES = design_size(DEFAULT_LEVELS)
 # tensile test and a cut strip of it pull against: its loading response is 1.3–1.9 times the
 # paper's frictionless minimisers, and fitted to it the shell meets the largest yarn-level knit
 # strips within 20 % at 19 of 26 points where the frictionless fit meets 5 (session 45), for
-# about 3 times the samples' time (the jerseys' fits 12.5–15.7 s on two cores, session 46). A woven's crossings
-# barely slide below its jams: the cotton twill's two fits meet its strips alike (4 and 3 of 7),
+# about 3 times the samples' time (the jerseys' fits 12.5–15.7 s on two cores, session 46). A
+# woven's crossings barely slide below its jams: the cotton twill's two fits meet its strips alike (4 and 3 of 7),
 # while the loading paths of a polyester woven (range 40 %, 80 load steps) cost minutes
 # (the satin: 505 s against 34 s).
 FRICTION_LOADED_FAMILIES = frozenset({"knit"})
