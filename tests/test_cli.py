@@ -153,6 +153,17 @@ FIT_BAD_INPUTS = {
 }
 
 
+@pytest.mark.parametrize("command", ["fit", "catalogue"])
+def test_the_help_gives_the_sample_designs_bounds(command):
+    # The parser does not import the fitting stack (a second of imports for every command), so
+    # its help writes the bounds out: they must be the design's.
+    from yarnfit.fabric_fit import DEFAULT_SAMPLES
+    from yarnfit.samples import design_size
+
+    out = run(command, "--help")
+    assert f"(at least {design_size(1)}; default {DEFAULT_SAMPLES})" in " ".join(out.stdout.split()), out.stdout
+
+
 @pytest.mark.parametrize("case", sorted(FIT_BAD_INPUTS))
 def test_fit_bad_input_is_one_line_and_exit_status_2(case, tmp_path):
     args, mentions = FIT_BAD_INPUTS[case]
