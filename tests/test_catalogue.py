@@ -19,6 +19,7 @@ from yarnfit.catalogue import TABLE_COLUMNS, Label, fabric_of, read_labels, run_
 from yarnfit.fabric_fit import fit_fabric
 from yarnfit.fibers import get_fiber
 from yarnfit.material_file import MaterialFile
+from yarnfit.samples import design_size
 from yarnfit.tasks import DaskBackend, LocalPool
 
 from test_tasks import checkout_env, default_sigint
@@ -103,6 +104,11 @@ def test_a_catalogue_on_a_dask_cluster(tmp_path):
     shell = MaterialFile.read(out / "jersey.json").shell
     along, against = (shell.uniaxial_pull(angle, 1.05).force_n_per_m for angle in (math.pi / 4, -math.pi / 4))
     assert against == pytest.approx(along, rel=EVEN_PULL_RTOL)
+    # A woven is pulled along both biases, a knit along one (fabric_fit.samples_both_biases).
+    families = {name: [s["family"] for s in json.loads((out / f"{name}.json").read_text())["samples"]]
+                for name in ("plain-200", "jersey")}
+    assert len(families["plain-200"]) == design_size(1, both_biases=True) and len(families["jersey"]) == SAMPLES
+    assert "negative_bias_uniaxial" in families["plain-200"] and "negative_bias_uniaxial" not in families["jersey"]
     assert float(rows[4]["weft_stretch_n_per_m"]) == jersey["weft_stretch_n_per_m"]
     assert parquet[2]["status"] == "failed" and parquet[2]["weft_stretch_n_per_m"] is None or \
         parquet[2]["weft_stretch_n_per_m"] != parquet[2]["weft_stretch_n_per_m"]
@@ -171,4 +177,5 @@ def test_an_interrupted_catalogue_resumes(tmp_path):
     # What the first run finished was loaded, not recomputed (a recomputed result is a new file).
     after = {p.name: p.stat().st_mtime_ns for p in (out / ".cache").glob("*.pkl")}
     assert {name: after[name] for name in before} == before
-    assert len(after) == 4 * (1 + SAMPLES + 2) > len(before)
+    # Per twill: its relaxation, its samples (a woven's design, both biases), its fit and export.
+    assert len(after) == 4 * (1 + design_size(1, both_biases=True) + 2) > len(before)

@@ -161,7 +161,8 @@ def test_the_help_gives_the_sample_designs_bounds(command):
     from yarnfit.samples import design_size
 
     out = run(command, "--help")
-    assert f"(at least {design_size(1)}; default {DEFAULT_SAMPLES})" in " ".join(out.stdout.split()), out.stdout
+    assert (f"(at least {design_size(1)}; default {DEFAULT_SAMPLES}; a woven, pulled along both biases, "
+            f"{design_size(1, both_biases=True) - design_size(1)} more)") in " ".join(out.stdout.split()), out.stdout
 
 
 @pytest.mark.parametrize("case", sorted(FIT_BAD_INPUTS))
@@ -208,7 +209,7 @@ def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documente
     data = json.loads(output.read_text())
     assert {"yarnfit_version", "inputs", "yarn", "shell", "engineering", "fit", "samples"} <= set(data)
     assert data["inputs"]["areal_density_kg_m2"] == pytest.approx(0.2)
-    assert len(data["samples"]) == 33
+    assert len(data["samples"]) == 39  # 33, and a woven's six pulls along its other bias
     for sample in data["samples"]:
         assert {"family", "I", "II", "energy_density_j_m2", "residual", "converged"} <= set(sample)
     weft = [s for s in data["samples"] if s["family"] == "weft_stretch" and s["converged"] and s["parameter"] != 0.0]

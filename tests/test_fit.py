@@ -79,6 +79,7 @@ LARGEST = {
     "weft_uniaxial": 0.1,
     "warp_uniaxial": 0.1,
     "bias_uniaxial": 0.1,
+    "negative_bias_uniaxial": 0.1,
     "weft_bend": 200.0,
     "warp_bend": 200.0,
     "bias_bend": 200.0,
@@ -108,6 +109,8 @@ def forms(family: str, x: float) -> tuple[np.ndarray, np.ndarray]:
         turn = np.sqrt(0.5) * np.array([[1.0, -1.0], [1.0, 1.0]])
         green = np.diag([0.5 * ((1 + x) ** 2 - 1), 0.5 * ((1 - 0.5 * x) ** 2 - 1)])
         I = np.eye(2) + 2.0 * turn @ green @ turn.T
+    elif family == "negative_bias_uniaxial":  # its mirror image along −45°
+        I = forms("bias_uniaxial", x)[0] * [[1.0, -1.0], [-1.0, 1.0]]
     elif family == "weft_bend":
         II = np.diag([x, 0.0])
     elif family == "warp_bend":
@@ -453,7 +456,7 @@ def test_a_stiffness_the_data_put_at_zero_is_reported_at_its_floor():
     # Shear energies slightly negative (a solver artefact): s22 would be negative, it stops at the
     # floor. (Without the bias pulls, which see shear too.)
     samples = [s for s in make_samples(TRUE, energy=lambda family, W: -1e-3 * W if family == "shear" else W)
-               if s.family != "bias_uniaxial"]
+               if s.family not in ("bias_uniaxial", "negative_bias_uniaxial")]
     fit = fit_linear(samples, H)
     assert fit.active_bounds == ["s22"]  # s22 is uncoupled: s01 stays free
     assert fit.parameters["s22"] == pytest.approx(DIAGONAL_FLOOR_REL * TRUE.s00, rel=ROUND_OFF_REL)
@@ -503,7 +506,7 @@ def test_undetermined_parameters_are_named():
     # pulls, which see shear too, are left out).
     samples = [
         sample("shear", np.eye(2), np.zeros((2, 2)), 0.0, 0.0, True, 0.0) if s.family == "shear" else s
-        for s in make_samples(TRUE) if s.family != "bias_uniaxial"
+        for s in make_samples(TRUE) if s.family not in ("bias_uniaxial", "negative_bias_uniaxial")
     ]
     with pytest.raises(ValueError, match="s22 undetermined"):
         fit_linear(samples, H)

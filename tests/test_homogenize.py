@@ -45,13 +45,14 @@ from yarnfit.homogenize.equilibrium import CONTINUATION_HALVINGS, _green_slope, 
 from yarnfit.homogenize.surface import _spd_sqrt
 from yarnfit.homogenize.uniaxial import FREE_SLOPE_RTOL, _FreeStrainPoint, _next_free_strain, _transverse_slope
 from yarnfit.fabric_fit import (DEFAULT_LEVELS, DEFAULT_SAMPLES, FabricFit, fit_fabric, loads_with_friction,
-                                shears_evenly, shell_thickness)
+                                samples_both_biases, shears_evenly, shell_thickness)
 from yarnfit.material_file import MaterialFile
 from yarnfit.fibers import Fiber, get_fiber
 from yarnfit.patterns import YarnPattern
 from yarnfit.relax import relax, relax_pattern
 from yarnfit.samples import (
     FAMILIES,
+    OTHER_BIAS_FAMILIES,
     Family,
     SampleRanges,
     SampleSpec,
@@ -130,6 +131,9 @@ LOADING_ENERGY_RTOL = 2e-3
 LOADING_WORK_RTOL = 0.04
 # Friction at 0.2 and 0.4 stiffens the plain weave's pull at 1 % by 11 % and 25 % (measured),
 # far beyond PATH_PULL_RTOL's noise: the ordering is a property of the path, not of round-off.
+# The plain weave's pulls along +45° and -45° (mirror images): energies 2e-10 and forces 4e-8
+# apart measured at 1 and 3 % (each search stops within its own step tolerance), forms 1e-8.
+MIRROR_RTOL = 1e-6
 # A square plain weave: weft and warp constants "equal within 5 %".
 SYMMETRY_RTOL = 0.05
 # The undeformed sample against a 1 % weft stretch: touching contacts without multipliers push with
@@ -247,7 +251,7 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
     ranges = SampleRanges(stretch=0.2, curvature=100.0)
     design = sample_design(ranges, 3)
     assert len(design) == design_size(3) == 2 + 3 * 13 + 18
-    assert {s.family for s in design} == set(FAMILIES)
+    assert {s.family for s in design} == set(FAMILIES) - set(OTHER_BIAS_FAMILIES)
     # First the undeformed sample, the energy reference of the membrane samples, then the unbent
     # bending sample (solved at zero membrane force), the bends' reference.
     assert design[0].family == "weft_stretch" and design[0].parameter == 0.0
@@ -269,6 +273,15 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
     assert [s.parameter for s in bias] == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.1, 6))
     stretch = (1.0 + SMALLEST_STRAIN) ** 2 - 1.0
     assert np.allclose(bias[0].I, np.eye(2) + 0.5 * stretch * np.ones((2, 2)))
+    # Asked for both biases, the same pulls along −45° too (a woven's design).
+    both = sample_design(ranges, 3, both_biases=True)
+    assert len(both) == design_size(3, both_biases=True) == len(design) + 6
+    assert {s.family for s in both} == set(FAMILIES)
+    other = [s for s in both if s.family == "negative_bias_uniaxial"]
+    assert [s.parameter for s in other] == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.1, 6))
+    assert np.allclose(other[0].I, np.eye(2) + 0.5 * stretch * np.array([[1.0, -1.0], [-1.0, 1.0]]))
+    assert [(s.family, s.parameter) for s in both if s.family != "negative_bias_uniaxial"] == [
+        (s.family, s.parameter) for s in design]
     for family, largest, values in (("shear", 0.2, strains), ("weft_bend", 100.0, curvatures),
                                     ("bias_bend", 100.0, curvatures), ("saddle_bend", 100.0, curvatures)):
         assert sorted(s.parameter for s in design[2:] if s.family == family) == pytest.approx(
@@ -584,6 +597,22 @@ def test_a_periodic_bias_pull_is_the_slope_of_its_searches_energy():
         assert ours <= other.fun * (1.0 + BIAS_ENERGY_RTOL)
 
 
+def test_a_mirror_symmetric_weave_pulls_alike_along_both_biases():
+    # The plain weave is its own mirror image across the weft (weft yarn i over warp yarn j where
+    # i + j is even, and -i + j is even with it): pulled along -45° it takes the mirror image of its
+    # +45° pull's form (I01 of the other sign) at the same energy and force, an independent check
+    # of the other bias's sample, whose solve differs from the bias's in every tiling and image.
+    relaxed = fitted().relaxed
+    for strain in (0.01, 0.03):
+        bias = solve_sample(relaxed, SampleSpec.at(Family.BIAS_UNIAXIAL, strain))
+        other = solve_sample(relaxed, SampleSpec.at(Family.NEGATIVE_BIAS_UNIAXIAL, strain))
+        assert bias.converged and other.converged
+        assert other.energy_density == pytest.approx(bias.energy_density, rel=MIRROR_RTOL)
+        assert other.pull_slope == pytest.approx(bias.pull_slope, rel=MIRROR_RTOL)
+        assert np.allclose(other.spec.I, bias.spec.I * [[1.0, -1.0], [-1.0, 1.0]], rtol=0.0, atol=MIRROR_RTOL)
+        assert bias.spec.I[0, 1] > 0.01 * strain  # the pull sheared its frame: the mirror is not trivial
+
+
 def test_a_periodic_pull_refuses_bad_input():
     relaxed = fitted().relaxed
     with pytest.raises(ValueError, match="axis"):
@@ -713,7 +742,8 @@ def test_loading_path_samples_without_friction_are_the_frictionless_samples():
     # reached along the path instead of from the affine start.
     relaxed = fitted().relaxed
     for family, parameters in ((Family.WEFT_STRETCH, [0.03, 0.01]), (Family.SHEAR, [-0.01, -0.03]),
-                               (Family.WEFT_UNIAXIAL, [0.01, 0.03]), (Family.BIAS_UNIAXIAL, [0.01])):
+                               (Family.WEFT_UNIAXIAL, [0.01, 0.03]), (Family.BIAS_UNIAXIAL, [0.01]),
+                               (Family.NEGATIVE_BIAS_UNIAXIAL, [0.01])):
         samples = loading_path_samples(relaxed, family, parameters, 0.0)
         assert [s.spec.parameter for s in samples] == parameters
         for sample in samples:
@@ -789,6 +819,10 @@ def test_knits_are_loaded_with_friction_and_shear_evenly_unless_told_and_wovens_
     assert not loads_with_friction(Fabric.preset("cotton-twill")) and not loads_with_friction(plain())
     assert not loads_with_friction(Fabric(name="b", fiber=get_fiber("cotton"), pattern_file=str(hylc / "basket.pyp")))
     assert shears_evenly(Fabric.preset("wool-jersey")) and not shears_evenly(Fabric.preset("cotton-twill"))
+    # A woven's twill line makes its two biases differ: its design pulls it along both.
+    assert samples_both_biases(Fabric.preset("cotton-twill")) and samples_both_biases(plain())
+    assert not samples_both_biases(Fabric.preset("cotton-jersey")) and not samples_both_biases(stockinette)
+    assert len(fitted().samples) == design_size(1, both_biases=True)
 
 
 def test_loading_samples_refuse_bad_input():

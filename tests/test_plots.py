@@ -18,12 +18,12 @@ import pytest
 
 import yarnfit
 from fabric_shell import FABRIC, H
-from test_fit_nonlinear import RANGES, REST_ENERGY, RESIDUAL, samples_of
+from test_fit_nonlinear import LEVELS, RANGES, REST_ENERGY, RESIDUAL, samples_of
 from yarnfit.engine import Residual
 from yarnfit.fit import fit_shell
 from yarnfit.material_file import MaterialFile
-from yarnfit.plots import N_PER_M_IN_N_PER_CM, PERCENT, fit_figures, validation_figures
-from yarnfit.samples import FAMILIES, SampleResult, SampleSpec, family_deformation
+from yarnfit.plots import N_PER_M_IN_N_PER_CM, PERCENT, TENSION_DIRECTIONS, fit_figures, validation_figures
+from yarnfit.samples import FAMILIES, SampleResult, SampleSpec, family_deformation, sample_design
 from yarnfit.shell import GF_CM2_PER_CM, membrane_strain
 from yarnfit.validate import DIRECTIONS
 
@@ -54,8 +54,10 @@ MEMBRANE_RESIDUAL = {k: v for k, v in RESIDUAL.items() if k.startswith("n")}
 @functools.lru_cache(maxsize=None)
 def material_data() -> str:
     """A material file's contents (as JSON text: every test decodes its own copy): the fit of the
-    exact samples, plus two samples that did not converge, one with an energy and one without."""
-    samples = samples_of(TRUE, REST_ENERGY, MEMBRANE_RESIDUAL)  # TRUE: FABRIC, below
+    exact samples of a woven's design (both biases), plus two samples that did not converge, one
+    with an energy and one without."""
+    samples = samples_of(TRUE, REST_ENERGY, MEMBRANE_RESIDUAL,  # TRUE: FABRIC, below
+                         specs=sample_design(RANGES, LEVELS, both_biases=True))
     samples.append(SampleResult(SampleSpec.at("weft_stretch", 0.15), 5.0, False, Residual(0.1, 0.1, 0.0, 0.0)))
     samples.append(SampleResult(SampleSpec.at("weft_stretch", 0.18), math.nan, False,
                                 Residual(math.nan, math.nan, math.nan, math.nan)))
@@ -170,7 +172,7 @@ def test_tension_table_is_the_shells_uniaxial_law_in_n_per_cm(tmp_path):
     strain = np.array([cell(r["strain [%]"]) for r in rows]) / 100.0
     assert strain[0] == 0.0 and strain[-1] == pytest.approx(RANGES.stretch, rel=1e-15)  # the fitted range
     engineering = file.data["engineering"]
-    for direction, degrees in DIRECTIONS.items():
+    for direction, degrees in TENSION_DIRECTIONS.items():
         force = np.array([cell(r[f"{direction} force per width [N/cm]"]) for r in rows])
         law = np.array([cell(r[f"{direction} small-strain law [N/cm]"]) for r in rows])
         for k in (1, len(rows) // 2, len(rows) - 1):
@@ -178,7 +180,7 @@ def test_tension_table_is_the_shells_uniaxial_law_in_n_per_cm(tmp_path):
             assert force[k] == pytest.approx(pulled * N_PER_CM_PER_N_PER_M, rel=1e-9)
         stiffness = shell.uniaxial_stiffness(math.radians(degrees))[0]
         np.testing.assert_allclose(law, stiffness * strain * N_PER_CM_PER_N_PER_M, rtol=1e-12)
-        if direction != "bias":  # the engineering constants' free-width stiffnesses, as the file has them
+        if "bias" not in direction:  # the engineering constants' free-width stiffnesses, as the file has them
             np.testing.assert_allclose(law, engineering[f"{direction}_stretch_n_per_m"] * strain
                                        * N_PER_CM_PER_N_PER_M, rtol=1e-12)
         # The stiffening membrane's force rises, above its small-strain law.

@@ -39,7 +39,7 @@ from typing import Callable
 from .fabric import DEFAULT_COUNTS_PER_CM, Fabric, counts_from_label
 from .checks import error_line
 from .fabric_fit import (DEFAULT_SAMPLES, design_groups, fit_solved, loads_with_friction, relax_for_fit,
-                         solve_design_group)
+                         samples_both_biases, solve_design_group)
 from .fibers import get_fiber
 from .material_file import MaterialFile
 from .outputs import write_atomically
@@ -303,7 +303,6 @@ def run_catalogue(
     if model not in ("full", "paper"):
         raise ValueError(f"model must be 'full' or 'paper', got {model!r}")
     out = Path(out_dir)
-    count = design_size(levels_for(samples))
     entries: dict[int, CatalogueEntry] = {}
     fabrics: dict[int, Fabric] = {}
     seen: dict[str, int] = {}
@@ -322,14 +321,17 @@ def run_catalogue(
     for i, fabric in fabrics.items():
         name = fabric.name
         loaded = loads_with_friction(fabric) if friction is None else friction
+        both_biases = samples_both_biases(fabric)
+        count = design_size(levels_for(samples), both_biases)
         # Each sample task's design indices: one sample alone, a bend path, or (loaded) a load path.
-        layout = tuple(design_groups(samples, loaded))
+        layout = tuple(design_groups(samples, loaded, both_biases))
         tasks.append(Task(("relax", i), relax_for_fit, (fabric,), cost=3.0, label=f"{name}: relax"))
         for j, indices in enumerate(layout):
             # A path: a few samples' worth of solves or more, so it starts before the single samples.
             what = (f"sample {indices[0] + 1}/{count}" if len(indices) == 1 else
                     f"path of samples {', '.join(str(k + 1) for k in indices)}/{count}")
-            tasks.append(Task(("samples", i, j), solve_design_group, (Result(("relax", i)), samples, indices, loaded),
+            tasks.append(Task(("samples", i, j), solve_design_group,
+                              (Result(("relax", i)), samples, indices, loaded, both_biases),
                               cost=1.0 + len(indices), label=f"{name}: {what}"))
         results = tuple(Result(("samples", i, j)) for j in range(len(layout)))
         tasks.append(Task(("fit", i), fit_task, (fabric, Result(("relax", i)), model, loaded, layout, *results),

@@ -28,8 +28,8 @@ from .tasks import Backend
 
 # Four magnitudes per family and sign, from 0.1 % (1 /m) to the range, free-width pulls along weft,
 # warp and the bias at six strains from 0.1 to 10 % (samples.uniaxial_strains), and the undeformed
-# sample (71 in all): each stretch and shear curve from four points and each free-width pull from
-# six, at about a second per small-strain sample.
+# sample (72 in all; a woven, pulled along both biases, 78): each stretch and shear curve from four
+# points and each free-width pull from six, at about a second per small-strain sample.
 DEFAULT_LEVELS = 4
 DEFAULT_SAMPLES = design_size(DEFAULT_LEVELS)
 
@@ -58,6 +58,18 @@ EVEN_SHEAR_FAMILIES = frozenset({"knit"})
 def shears_evenly(fabric: Fabric) -> bool:
     """Whether ``fabric``'s shell is fitted even in the shear: knits (:data:`EVEN_SHEAR_FAMILIES`)."""
     return fabric.family in EVEN_SHEAR_FAMILIES
+
+
+def samples_both_biases(fabric: Fabric) -> bool:
+    """Whether ``fabric``'s design pulls it along both biases (+45° and −45°,
+    :func:`yarnfit.samples.sample_design` with ``both_biases``): where its shell keeps the shear's
+    two signs apart (not :func:`shears_evenly`). Pulled along +45° alone, such a shell met the other
+    bias with its pure shear's stiffness, which a bias pull relaxes: the cotton twill's shell pulled
+    53 N/m at 2 % along −45° where its yarns pull 3.7 (and 0.36 / 0.34 along +45°; session 47). A
+    knit's shell is even in the shear and its jersey repeat pulls alike along both biases (cotton
+    jersey's frictionless pulls equal to four digits at 0.1–10 %): the other bias's samples would
+    only repeat the first's."""
+    return not shears_evenly(fabric)
 
 
 def loads_with_friction(fabric: Fabric) -> bool:
@@ -131,32 +143,35 @@ def _usable(fabric: Fabric, relaxed: RelaxedRepeat) -> RelaxedRepeat:
 
 
 def design_specs(relaxed: RelaxedRepeat, samples: int = DEFAULT_SAMPLES,
-                 ranges: SampleRanges | None = None) -> list[SampleSpec]:
+                 ranges: SampleRanges | None = None, both_biases: bool = False) -> list[SampleSpec]:
     """The samples a fit of about ``samples`` solves: :func:`yarnfit.samples.sample_design` over
-    ``ranges`` (default :func:`yarnfit.homogenize.default_ranges` of the relaxed repeat)."""
-    return sample_design(ranges or default_ranges(relaxed), levels_for(samples))
+    ``ranges`` (default :func:`yarnfit.homogenize.default_ranges` of the relaxed repeat), with the
+    other bias's pulls if ``both_biases`` (:func:`samples_both_biases`)."""
+    return sample_design(ranges or default_ranges(relaxed), levels_for(samples), both_biases)
 
 
-def design_groups(samples: int = DEFAULT_SAMPLES, friction: bool = False) -> list[tuple[int, ...]]:
+def design_groups(samples: int = DEFAULT_SAMPLES, friction: bool = False,
+                  both_biases: bool = False) -> list[tuple[int, ...]]:
     """:func:`~yarnfit.homogenize.sample_groups` of the design of about ``samples`` samples, known
     before the repeat is relaxed (a catalogue's task graph): default ranges (no in-plane
     compression) change the design's magnitudes from one fabric to the next, never which family and
     sign each sample is, which is all the groups depend on (so any ranges give them).
     :func:`solve_design_group` checks them against the relaxed repeat's own design."""
-    return sample_groups(sample_design(SampleRanges(stretch=0.1, curvature=10.0), levels_for(samples)), friction)
+    return sample_groups(sample_design(SampleRanges(stretch=0.1, curvature=10.0), levels_for(samples), both_biases),
+                         friction)
 
 
 def solve_design_group(relaxed: RelaxedRepeat, samples: int, indices: tuple[int, ...],
-                       friction: bool = False) -> list[SampleResult]:
-    """The samples ``indices`` of :func:`design_specs` (default ranges), one group of
-    :func:`design_groups` (with ``friction``: the membrane samples on load paths with the fibre's
+                       friction: bool = False, both_biases: bool = False) -> list[SampleResult]:
+    """The samples ``indices`` of :func:`design_specs` (default ranges, ``both_biases``), one group
+    of :func:`design_groups` (with ``friction``: the membrane samples on load paths with the fibre's
     friction), solved by :func:`~yarnfit.homogenize.solve_group`: one task of a fit whose design is
     only known once the repeat is relaxed (a catalogue's).
 
     Raises:
         ValueError: ``indices`` are not one group of the relaxed repeat's design.
     """
-    specs = design_specs(relaxed, samples)
+    specs = design_specs(relaxed, samples, both_biases=both_biases)
     if tuple(indices) not in sample_groups(specs, friction):
         raise ValueError(f"samples {list(indices)} are not one group of the {len(specs)}-sample design")
     return solve_group(relaxed, [specs[i] for i in indices], relaxed.fiber.friction if friction else None)
@@ -220,7 +235,7 @@ def fit_fabric(
     if on_relaxed is not None:
         on_relaxed(relaxed)
     ranges = ranges or default_ranges(relaxed)
-    specs = design_specs(relaxed, samples, ranges)
+    specs = design_specs(relaxed, samples, ranges, samples_both_biases(fabric))
     start = time.perf_counter()
     coefficient = relaxed.fiber.friction if friction else 0.0
     results = solve_samples(relaxed, specs, workers=workers, on_sample=on_sample, backend=backend,

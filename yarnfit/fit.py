@@ -118,9 +118,9 @@ RELATIVE_WEIGHT_FLOOR = SLACK_ENERGY_REL
 RIDGE_FAN_STEP_DEG = 15.0
 RIDGE_PRINCIPAL_OFFSETS_DEG = (-3.0, -1.0, 0.0, 1.0, 3.0)
 # Mixed rays: every direction of that fan (over 360°) raised out of the normal-strain plane by these
-# elevations towards either sign of the shear, each tied to its mirror in the shear (one tangent per
-# pair: the coupling of shear and normal strains stays even in the shear, orthotropic; a knit's
-# shear axis is tied too, _shear_ties). A fabric pulled on the bias shears its yarn frame and
+# elevations towards either sign of the shear; for a knit (even_shear) each tied to its mirror in
+# the shear, as its shear axis is (one tangent per pair: the membrane even in the shear,
+# orthotropic; _shear_ties), for a woven each with its own. A fabric pulled on the bias shears its yarn frame and
 # relaxes into small normal strains of its yarns (the twill at 4 %: E00, E11 ≈ −0.002, −0.005
 # under 2 E01 = 0.088) that cost less together than the shear alone; a sum of separate
 # normal and shear rays can only add their energies, and left the wovens' bias pulls 20-30 % too
@@ -128,6 +128,12 @@ RIDGE_PRINCIPAL_OFFSETS_DEG = (-3.0, -1.0, 0.0, 1.0, 3.0)
 # periodic pulls at 2 / 5 / 10 %: without mixed rays 29 of 30 weft and warp pulls and 9 of 15 bias
 # ones within 20 %; at 45°, 29 and 15; at 30° and 60°, 29 and 14, the satin's bias at 2 % +95 %;
 # untied, a jersey's mixed rays took sides in the shear and its weft pull sheared: −51 % at 10 %).
+# A woven's are untied since its design pulls it along both biases (session 47,
+# fabric_fit.samples_both_biases): tied, the pairs cannot be both the cotton twill's +45° pull
+# and its ten-times-stiffer −45° one, and the fit gave up its weft pull at 1 % for them (−55 %);
+# untied, its pulls along weft, warp and both biases met its periodic ones within 20 % at 18 of 20
+# points (0.1, 1, 2, 5, 10 %; the satin 16), the axis pulls shearing a little (2 E01 ≤ 0.04 at
+# 10 %), which the axis samples, their shear held at 0, do not measure.
 # Tried at 10° as well (session 46, not kept): a pure shear (normal strains held at 0) is several
 # times stiffer than the shear a bias pull reaches with the small normal strains of its mechanism,
 # and a ridge that charges the one and not the other lies close to the normal-strain plane. With 10°
@@ -530,10 +536,12 @@ def fit_shell(
             (``yarnfit.relax``), and fitted terms only took up what the membrane model missed
             (cotton twill: −19.6 / 35.9 N/m, which put its shear tangent at 2e-4 Pa once the
             compression-side terms came in, and the shell 20x off its own ±0.1 % shear samples).
-        even_shear: the stiffening membrane's shear axis shares one tangent between its two signs,
-            as its mixed rays always do (:func:`_shear_ties`): the membrane is even in the shear,
+        even_shear: the stiffening membrane's rays with a shear part share one tangent with their
+            mirrors in the shear (:func:`_shear_ties`): the membrane is even in the shear,
             orthotropic. ``False`` lets a structure whose twill or satin line shears it stiffer one
-            way keep that (its shear axis's sides fitted apart).
+            way keep that (each ray fitted on its own); its samples then want pulls along both
+            biases (``bias_uniaxial`` and ``negative_bias_uniaxial``), or the side without them is
+            set by the pure shear alone.
 
     Returns:
         the :class:`ShellFit`. Per family: ``r2 = 1 − SS_res/SS_tot`` (unweighted, ``SS_tot`` about
@@ -921,8 +929,8 @@ def _fit_ridge_membrane(
     ``pairs``: each membrane sample with its energy relative to the undeformed one (J/m²);
     ``linear``: the linear fit, whose principal strain directions join the ridges' fan. Returns
     ``(the membrane or None, notes, Voigt strain range per direction, residual stress n0 n1 n2
-    (N/m))``; ``residual`` fits the residual-stress terms along; ``even_shear`` ties the shear
-    axis's two signs (:func:`_shear_ties`).
+    (N/m))``; ``residual`` fits the residual-stress terms along; ``even_shear`` ties each ray with
+    a shear part to its mirror (:func:`_shear_ties`).
 
     The candidate ridges (:func:`ridge_candidates`) make ψ linear in the tangent stiffness of each
     ray's segments between knots (:func:`_ridge_columns`), so the fit is a non-negative linear
@@ -1078,19 +1086,17 @@ def ridge_candidates(eps: np.ndarray, linear: ShellMaterial, even_shear: bool = 
 
 
 def _tied_in_shear(direction: np.ndarray, even_shear: bool) -> bool:
-    """A ray whose tangents are its mirror's in the shear: a mixed ray (normal and shear parts)
-    always, the shear axis when ``even_shear``."""
-    if direction[2] == 0.0:
-        return False
-    return bool(even_shear or direction[0] != 0.0 or direction[1] != 0.0)
+    """A ray whose tangents are its mirror's in the shear: with ``even_shear``, every ray with a
+    shear part (the shear axis and the mixed rays)."""
+    return bool(even_shear and direction[2] != 0.0)
 
 
 def _shear_ties(directions: np.ndarray, knots: np.ndarray, even_shear: bool = True) -> np.ndarray:
-    """``(k, m)``: the candidates' tangents from ``m`` unknowns, a mixed ray's and (``even_shear``)
-    the shear axis's and their mirrors in the shear (``n2 → −n2``, the same knots) from one, so
-    the membrane is even in the shear: an orthotropic fabric's energy does not change when its
-    shear changes sign. Every other candidate has its own unknown. A mixed ray is always tied:
-    untied, a jersey's took sides in the shear and its weft pull sheared (session 37).
+    """``(k, m)``: the candidates' tangents from ``m`` unknowns; with ``even_shear`` a ray with a
+    shear part (a mixed ray, the shear axis) and its mirror in the shear (``n2 → −n2``, the same
+    knots) from one, so the membrane is even in the shear: an orthotropic fabric's energy does not
+    change when its shear changes sign. Every other candidate has its own unknown. Untied, a
+    jersey's mixed rays took sides in the shear and its weft pull sheared (session 37).
 
     The shear axis's two signs were left untied until session 46, and the jerseys' shells followed
     their repeats' skew: pulled along −45° they pulled 3-9 times harder than along +45°, where the
@@ -1100,7 +1106,8 @@ def _shear_ties(directions: np.ndarray, knots: np.ndarray, even_shear: bool = Tr
     which the yarn model does not carry; so the shell follows the skew on average over the two
     signs, as :class:`~yarnfit.shell.RidgeMembrane` says. A woven's twill or satin line sets the
     side it shears stiffer on (the cotton twill's pure shear 9 times stiffer at −10 % than at
-    +10 %): ``even_shear=False`` keeps its shear axis's sides apart."""
+    +10 %, its −45° pull ten times its +45° one): ``even_shear=False`` keeps every ray's sides
+    apart, the design pulling it along both biases (:func:`yarnfit.fabric_fit.samples_both_biases`)."""
     index = {(tuple(d), float(t)): j for j, (d, t) in enumerate(zip(directions.tolist(), knots))}
     unknown = np.empty(len(knots), dtype=np.int64)
     count = 0

@@ -93,7 +93,10 @@ DEFAULT_CURVATURE_RANGE_PER_CM = 2.5
 FIGURE_INCHES = (6.4, 4.4)
 PNG_DPI = 150
 # One colour per direction (matplotlib's default cycle), the same in every figure.
-DIRECTION_COLORS = {"weft": "tab:blue", "warp": "tab:orange", "bias": "tab:green"}
+DIRECTION_COLORS = {"weft": "tab:blue", "warp": "tab:orange", "bias": "tab:green", "other bias": "tab:red"}
+# The tension figure's directions (degrees from weft): the stretch test's, and the other bias, which
+# a woven's twill or satin line makes differ from the first (a knit's shell pulls alike along both).
+TENSION_DIRECTIONS = {**DIRECTIONS, "other bias": -45.0}
 # The stretch figures: the shell strips in blues and purples (line and dots, one colour per strip
 # size), the yarn-level swatch orange (dashed, squares), a measurement black (diamonds, no line: the
 # lab's points as they are), the shell's law a thin grey line under everything.
@@ -150,7 +153,8 @@ def fit_figures(material: str | os.PathLike | Mapping | MaterialFile, out_dir: s
       density [J/m^2]`` (as plotted), ``energy density as solved [J/m^2]`` (the file's Ū; samples
       only) and ``converged`` (samples only).
     - ``<fabric>-tension.png``, ``.svg``, ``.csv``: the shell's uniaxial tension in weft, warp and
-      bias, every other stress free (:meth:`ShellMaterial.uniaxial_pull`), force per width in N/cm
+      both biases (+45° and −45°, "other bias"), every other stress free
+      (:meth:`ShellMaterial.uniaxial_pull`), force per width in N/cm
       against strain in %, from 0 to the fitted stretch range, beside its small-strain law
       (:meth:`ShellMaterial.uniaxial_stiffness`, dashed). CSV columns: ``strain [%]``, then per
       direction ``<direction> force per width [N/cm]`` and ``<direction> small-strain law [N/cm]``.
@@ -245,7 +249,7 @@ def _tension_figure(fabric: str, base: Path, shell: ShellMaterial, stretch_range
     strain = np.linspace(0.0, stretch_range, CURVE_POINTS)
     figure, ax = _figure()
     columns = {"strain [%]": PERCENT * strain}
-    for direction, degrees in DIRECTIONS.items():
+    for direction, degrees in TENSION_DIRECTIONS.items():
         angle = math.radians(degrees)
         force = np.full(strain.shape, math.nan)
         for k, e in enumerate(strain):

@@ -34,6 +34,7 @@ __all__ = [
     "Group",
     "MEMBRANE_FAMILIES",
     "OPTIONAL_FAMILIES",
+    "OTHER_BIAS_FAMILIES",
     "SampleRanges",
     "SampleResult",
     "SampleSpec",
@@ -112,7 +113,7 @@ class Family(StrEnum):
     - ``determines``: the shell parameter whose diagonal or coupling the family pins (``None`` for
       the uniaxial families, which add a tensile test's free width);
     - ``uniaxial_angle``: the direction (rad from weft) of a uniaxial tension with every other
-      stress free (weft 0, warp π/2, bias π/4; the solve finds the free strains, the spec holds the
+      stress free (weft 0, warp π/2, bias π/4, the other bias −π/4; the solve finds the free strains, the spec holds the
       pure stretch along the pull as the search's start), else ``None``; ``uniaxial_axis``: 0
       (weft) or 1 (warp) for those along a yarn axis (one free strain, the transverse stretch μ),
       else ``None``;
@@ -147,6 +148,11 @@ class Family(StrEnum):
                      _stretched(1))
     BIAS_UNIAXIAL = ("bias_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0.25 * math.pi, True, _UNIAXIAL_TENSION,
                      _pulled(0.25 * math.pi))
+    # The other bias (−45°), sampled only where the shell keeps the shear's two signs apart
+    # (sample_design(both_biases=True): a woven, whose twill or satin line makes the two biases
+    # differ; a knit's jersey repeat pulls alike along both).
+    NEGATIVE_BIAS_UNIAXIAL = ("negative_bias_uniaxial", Group.MEMBRANE, "λ − 1", "", None, -0.25 * math.pi, True,
+                              _UNIAXIAL_TENSION, _pulled(-0.25 * math.pi))
     WEFT_BEND = ("weft_bend", Group.BENDING, "curvature", "1/m", "b00", None, False, _BOTH_SIGNS,
                  _bent(lambda e: np.diag([e, 0.0])))
     WARP_BEND = ("warp_bend", Group.BENDING, "curvature", "1/m", "b11", None, False, _BOTH_SIGNS,
@@ -180,6 +186,8 @@ MEMBRANE_FAMILIES = tuple(f for f in Family if f.group is Group.MEMBRANE)
 BENDING_FAMILIES = tuple(f for f in Family if f.group is Group.BENDING)
 OPTIONAL_FAMILIES = tuple(f for f in Family if f.optional)
 UNIAXIAL_FAMILIES = tuple(f for f in Family if f.uniaxial_angle is not None)
+# The families a design samples only when asked for both biases (sample_design(both_biases=True)).
+OTHER_BIAS_FAMILIES = (Family.NEGATIVE_BIAS_UNIAXIAL,)
 
 
 def family_deformation(family: str, parameter: float) -> tuple[np.ndarray, np.ndarray]:
@@ -439,7 +447,7 @@ def _free_membrane_strain(value: object, number: Callable[[object, str], float])
 REFERENCE_SAMPLES = 2
 # Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
 # four bend families of both signs; plus weft, warp and bias uniaxial tension at UNIAXIAL_LEVELS strains
-# each (uniaxial_strains).
+# each (uniaxial_strains), and with both biases the other bias's (−45°) too.
 SAMPLES_PER_LEVEL = 13
 # Uniaxial tension (the transverse direction free) per direction: log-spaced from SMALLEST_STRAIN
 # to the range or UNIAXIAL_LARGEST_STRAIN, whichever is less. The strain-stiffening membrane follows
@@ -461,7 +469,7 @@ SAMPLES_PER_LEVEL = 13
 # its own frictional pulls within 15 % at all nine (six levels: warp +27 %, bias +13 %).
 UNIAXIAL_LEVELS = 6
 UNIAXIAL_LARGEST_STRAIN = 0.10
-UNIAXIAL_SAMPLES = len(UNIAXIAL_FAMILIES) * UNIAXIAL_LEVELS  # weft, warp, bias
+UNIAXIAL_SAMPLES = (len(UNIAXIAL_FAMILIES) - len(OTHER_BIAS_FAMILIES)) * UNIAXIAL_LEVELS  # weft, warp, bias
 # Smallest sampled strain (λ − 1, and I12 for shear): the design's levels are spaced
 # logarithmically from here up to the range, so the small-strain stiffness that a drape, a low-load
 # tensile test or a robot's grasp sees is measured, not extrapolated from a few per cent. 0.1 %
@@ -500,7 +508,7 @@ class SampleRanges:
                              f"got {self.compression!r}")
 
 
-def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
+def sample_design(ranges: SampleRanges, levels: int = 2, both_biases: bool = False) -> list[SampleSpec]:
     """The samples (paper §4.6, plus saddles for b01): ``levels`` magnitudes per family and sign,
     in :data:`FAMILIES` order (:meth:`Family.deformation` gives each one's ``I`` and ``II``). The
     magnitudes (:func:`magnitudes`) are spaced logarithmically from :data:`SMALLEST_STRAIN` (and
@@ -518,7 +526,9 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
       (its stretch μ minimises Ū; the spec holds μ = 1, the result the μ found);
     - bias uniaxial tension: the same strains along 45°, the transverse strain and the pull
       frame's shear free (the spec holds the pure stretch along the pull, the result the form
-      found): a shear with the normal strains relaxed, which no other family samples;
+      found): a shear with the normal strains relaxed, which no other family samples; with
+      ``both_biases`` along −45° as well (:data:`OTHER_BIAS_FAMILIES`): the shear's other sign,
+      for a fabric whose two biases differ (a twill's line, a satin's step);
     - weft, warp bends: ``II = diag(κ, 0)`` / ``diag(0, κ)``, ``κ = ±`` the curvature magnitudes;
     - bias bends: cylinders at ±45°, ``II = κ/2 [[1, ±1], [±1, 1]]``;
     - saddles: ``II = ±κ diag(1, −1)`` (the only samples that separate b01 from b22).
@@ -537,7 +547,7 @@ def sample_design(ranges: SampleRanges, levels: int = 2) -> list[SampleSpec]:
             _UNIAXIAL_TENSION: uniaxial_strains(largest),
         }
         for family in FAMILIES:
-            if family.group is group:
+            if family.group is group and (both_biases or family not in OTHER_BIAS_FAMILIES):
                 specs += [SampleSpec.at(family, float(value)) for value in layouts[family.layout]]
     order = {family: k for k, family in enumerate(FAMILIES)}
     return [identity_sample(), free_rest_sample()] + sorted(specs, key=lambda spec: order[spec.family])
@@ -559,14 +569,17 @@ def uniaxial_strains(largest: float) -> np.ndarray:
     return magnitudes(min(float(largest), UNIAXIAL_LARGEST_STRAIN), SMALLEST_STRAIN, UNIAXIAL_LEVELS)
 
 
-def design_size(levels: int) -> int:
-    """Samples in a design of ``levels`` magnitudes per family and sign."""
-    return REFERENCE_SAMPLES + SAMPLES_PER_LEVEL * levels + UNIAXIAL_SAMPLES
+def design_size(levels: int, both_biases: bool = False) -> int:
+    """Samples in a design of ``levels`` magnitudes per family and sign (``both_biases``: with
+    the uniaxial pulls along −45°, :func:`sample_design`)."""
+    other = len(OTHER_BIAS_FAMILIES) * UNIAXIAL_LEVELS if both_biases else 0
+    return REFERENCE_SAMPLES + SAMPLES_PER_LEVEL * levels + UNIAXIAL_SAMPLES + other
 
 
 def levels_for(samples: int) -> int:
     """Magnitudes per family and sign for about ``samples`` samples in all (at least
-    ``design_size(1)``)."""
+    ``design_size(1)``), counted without the other bias's pulls (a design with ``both_biases``
+    has :data:`UNIAXIAL_LEVELS` more)."""
     smallest = design_size(1)
     if not (isinstance(samples, int) and samples >= smallest):
         raise ValueError(f"the sample design needs at least {smallest} samples (one per family and sign), "

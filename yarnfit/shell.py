@@ -194,11 +194,11 @@ class RidgeMembrane:
     What it cannot represent: an energy that is not convex in the Green strain (a membrane that
     buckles in its own plane), hysteresis and friction (it is elastic), a coupling between shear
     and the normal strains beyond what its ridges' directions carry (the fit's ridges lie in the
-    normal-strain plane, on the shear axis, and on rays between the two at 45° tied in pairs mirrored
-    in the shear: an orthotropic membrane, whose coupling of shear and normal strains is even in the
-    shear; a jersey's skew, which is not, is followed only on average over the shear's two signs,
-    its shear axis tied too; a woven's shear axis keeps one tangent per sign, as its twill line
-    shears it stiffer one way),
+    normal-strain plane, on the shear axis, and on rays between the two at 45°; for a knit those
+    with a shear part tied in pairs mirrored in the shear: an orthotropic membrane, whose coupling
+    of shear and normal strains is even in the shear, so a jersey's skew is followed only on
+    average over the shear's two signs; a woven's keep one tangent per sign, as its twill line
+    shears it stiffer one way, fitted to pulls along both biases),
     and stiffening sharper than its knots resolve (the fit spaces them logarithmically over the
     sampled strains).
 

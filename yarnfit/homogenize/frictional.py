@@ -237,11 +237,11 @@ def _frictional_step(search: Callable[..., _Pass], start: _Trial, coefficient: f
 
 def _bias_pass(relaxed: RelaxedRepeat, stretch: float, anchors: FrictionAnchors, anchor_form: np.ndarray,
                warm: _Trial, contacts: ContactSet, guess: np.ndarray, probe: float,
-               options: QuasiStaticOptions) -> _Pass:
-    """One lagged pass of a bias pull: the bias search's two free strains (:func:`_search_bias`)
-    from ``guess`` with ``warm``'s equilibrium, minimising Ū plus the friction of ``anchors``
-    (``probe`` unused: the search probes its own Hessian)."""
-    search = _search_bias(relaxed, stretch - 1.0, options, BIAS_ANGLE, start=(guess, warm.result.state, warm.form),
+               options: QuasiStaticOptions, angle: float = BIAS_ANGLE) -> _Pass:
+    """One lagged pass of a pull at ``angle`` (rad from weft) off the yarn axes: the bias search's
+    two free strains (:func:`_search_bias`) from ``guess`` with ``warm``'s equilibrium, minimising
+    Ū plus the friction of ``anchors`` (``probe`` unused: the search probes its own Hessian)."""
+    search = _search_bias(relaxed, stretch - 1.0, options, angle, start=(guess, warm.result.state, warm.form),
                           friction=(anchors, anchor_form), contacts=contacts)
     trial = _Trial(search.free, search.form, search.tiled, search.result, search.anchors, None)
     return _Pass(trial, search.iterations, "minimum" if search.failure is None else "failed")
@@ -266,18 +266,19 @@ def frictional_periodic_pull(relaxed: RelaxedRepeat, axis: int, strains: Sequenc
 
 def frictional_periodic_bias_pull(relaxed: RelaxedRepeat, strains: Sequence[float], coefficient: float,
                                   options: QuasiStaticOptions | None = None, strain_step: float = FRICTION_STRAIN_STEP,
-                                  progress: Callable[[str], None] | None = None) -> list[PeriodicPull]:
-    """As :func:`frictional_periodic_pull` on the bias (45° from weft), each pass the bias search
-    with the transverse strain and the pull frame's shear both free (:func:`_search_bias`); width
-    ``√det I / λ``."""
-    return _frictional_path(relaxed, "bias", strains, coefficient, options, strain_step, progress)
+                                  progress: Callable[[str], None] | None = None,
+                                  angle: float = BIAS_ANGLE) -> list[PeriodicPull]:
+    """As :func:`frictional_periodic_pull` on the bias (``angle`` from weft, rad: 45° unless told;
+    −45° is the other bias), each pass the bias search with the transverse strain and the pull
+    frame's shear both free (:func:`_search_bias`); width ``√det I / λ``."""
+    return _frictional_path(relaxed, "bias", strains, coefficient, options, strain_step, progress, angle)
 
 
 def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[float], coefficient: float,
                      options: QuasiStaticOptions | None, strain_step: float,
-                     progress: Callable[[str], None] | None) -> list[PeriodicPull]:
-    """The frictional pull along ``direction`` (``"weft"``, ``"warp"``, ``"bias"``) from rest
-    through ``strains`` (:func:`frictional_periodic_pull`)."""
+                     progress: Callable[[str], None] | None, angle: float = BIAS_ANGLE) -> list[PeriodicPull]:
+    """The frictional pull along ``direction`` (``"weft"``, ``"warp"``, ``"bias"``: at ``angle``
+    from weft) from rest through ``strains`` (:func:`frictional_periodic_pull`)."""
     strains = [positive_number(e, "strain") for e in strains]
     if not strains or strains != sorted(set(strains)):
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
@@ -286,10 +287,10 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
     strain_step = positive_number(strain_step, "strain_step")
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
     if direction == "bias":
-        pull_direction = np.array([math.cos(BIAS_ANGLE), math.sin(BIAS_ANGLE)])
+        pull_direction = np.array([math.cos(angle), math.sin(angle)])
 
         def search(stretch):
-            return lambda *args: _bias_pass(relaxed, stretch, *args, options)
+            return lambda *args: _bias_pass(relaxed, stretch, *args, options, angle)
         free = np.zeros(2)
     else:
         axis = ("weft", "warp").index(direction)

@@ -152,7 +152,8 @@ def _uniaxial_path(relaxed: RelaxedRepeat, family: Family, grid: Sequence[float]
     if family.uniaxial_axis is not None:
         pulls = frictional_periodic_pull(relaxed, family.uniaxial_axis, grid, coefficient, options, strain_step)
     else:
-        pulls = frictional_periodic_bias_pull(relaxed, grid, coefficient, options, strain_step)
+        pulls = frictional_periodic_bias_pull(relaxed, grid, coefficient, options, strain_step,
+                                              angle=family.uniaxial_angle)
     return [SampleResult(
         spec=SampleSpec(family, pull.form if pull.form is not None else np.full((2, 2), math.nan), flat, pull.strain),
         energy_density=pull.energy_density + pull.friction_work, converged=pull.converged, residual=pull.residual,
