@@ -113,8 +113,9 @@ class Family(StrEnum):
     - ``determines``: the shell parameter whose diagonal or coupling the family pins (``None`` for
       the uniaxial families, which add a tensile test's free width);
     - ``uniaxial_angle``: the direction (rad from weft) of a uniaxial tension with every other
-      stress free (weft 0, warp π/2, bias π/4, the other bias −π/4; the solve finds the free strains, the spec holds the
-      pure stretch along the pull as the search's start), else ``None``; ``uniaxial_axis``: 0
+      stress free (weft 0, warp π/2, bias π/4, the other bias −π/4; the solve finds the free
+      strains, the spec holds the pure stretch along the pull as the search's start), else
+      ``None``; ``uniaxial_axis``: 0
       (weft) or 1 (warp) for those along a yarn axis (one free strain, the transverse stretch μ),
       else ``None``;
     - ``optional``: the fit does without it (the pure families determine every parameter);
