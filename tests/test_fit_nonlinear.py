@@ -251,6 +251,20 @@ def test_a_stiffening_material_in_the_span_is_followed_within_what_the_smoothing
     assert again == fit.material
 
 
+def test_the_linear_model_beside_it_keeps_the_first_bias():
+    """The linear model is even in the shear and cannot follow two biases that differ (fitted to
+    both the cotton twill's s22 went to its floor): it is fitted without the other bias's pulls, as
+    before they were sampled, while the stiffening membrane follows them."""
+    samples = samples_of(LEANING_ON_ONE_BIAS, specs=sample_design(RANGES, LEVELS, both_biases=True))
+    both = fit_shell(samples, H, even_shear=False)
+    first = fit_shell([s for s in samples if s.family != "negative_bias_uniaxial"], H, even_shear=False)
+    for name, value in first.linear.parameters.items():
+        assert both.linear.parameters[name] == pytest.approx(value, rel=1e-12, abs=0.0), name
+    want = LEANING_ON_ONE_BIAS.uniaxial_pull(-math.pi / 4, 1.05).force_n_per_m
+    assert (abs(both.material.uniaxial_pull(-math.pi / 4, 1.05).force_n_per_m / want - 1.0)
+            < abs(first.material.uniaxial_pull(-math.pi / 4, 1.05).force_n_per_m / want - 1.0))
+
+
 # A leaning repeat's shear samples (a jersey's skew, whose sign its relaxation picks): the positive
 # side's energies this many times the negative side's, as wool jersey's loading samples (5× at
 # 4.5 %) and polyester jersey's (0.2×) are.
