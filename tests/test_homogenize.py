@@ -611,6 +611,9 @@ def test_a_mirror_symmetric_weave_pulls_alike_along_both_biases():
         assert other.pull_slope == pytest.approx(bias.pull_slope, rel=MIRROR_RTOL)
         assert np.allclose(other.spec.I, bias.spec.I * [[1.0, -1.0], [-1.0, 1.0]], rtol=0.0, atol=MIRROR_RTOL)
         assert bias.spec.I[0, 1] > 0.01 * strain  # the pull sheared its frame: the mirror is not trivial
+    other = periodic_bias_pull(relaxed, 0.01, other=True)
+    assert other.direction == "other bias" and other.converged
+    assert other.force_n_per_m == pytest.approx(periodic_bias_pull(relaxed, 0.01).force_n_per_m, rel=MIRROR_RTOL)
 
 
 def test_a_periodic_pull_refuses_bad_input():

@@ -24,7 +24,7 @@ class PeriodicPull:
     :func:`periodic_bias_pull`).
 
     Attributes:
-        direction: ``"weft"``, ``"warp"`` or ``"bias"`` (45° from weft).
+        direction: ``"weft"``, ``"warp"``, ``"bias"`` (45° from weft) or ``"other bias"`` (−45°).
         strain: the pull's engineering strain λ − 1.
         force_n_per_m: force per reference width, dŪ/dλ (N/m).
         width_ratio: the distance between the strip's long edges (which stay lines along the
@@ -91,11 +91,14 @@ def _periodic_pull(relaxed: RelaxedRepeat, family: Family, direction: str, strai
 
 
 def periodic_bias_pull(relaxed: RelaxedRepeat, strain: float,
-                       options: QuasiStaticOptions | None = None) -> PeriodicPull:
+                       options: QuasiStaticOptions | None = None, other: bool = False) -> PeriodicPull:
     """The infinite fabric of ``relaxed`` pulled to the engineering ``strain`` (λ − 1) on the bias
-    (45° from weft) with every other stress free: the bias uniaxial sample (:func:`_solve_bias`:
-    the transverse strain and the pull frame's shear both free) and its force per reference width
-    ``λ dŪ/de`` (N/m), ``e`` the pull's Green strain, ``λ`` times the sample's ``pull_slope``. The
-    reference a cut bias strip converges to as it widens. Warns
-    :class:`~yarnfit.engine.ConvergenceWarning` when the search does not converge."""
+    (45° from weft; ``other``: the other bias, −45°, direction ``"other bias"``) with every other
+    stress free: the bias uniaxial sample (:func:`_solve_bias`: the transverse strain and the pull
+    frame's shear both free) and its force per reference width ``λ dŪ/de`` (N/m), ``e`` the pull's
+    Green strain, ``λ`` times the sample's ``pull_slope``. The reference a cut bias strip
+    converges to as it widens. Warns :class:`~yarnfit.engine.ConvergenceWarning` when the search
+    does not converge."""
+    if other:
+        return _periodic_pull(relaxed, Family.NEGATIVE_BIAS_UNIAXIAL, "other bias", strain, options)
     return _periodic_pull(relaxed, Family.BIAS_UNIAXIAL, "bias", strain, options)
