@@ -120,9 +120,9 @@ RIDGE_PRINCIPAL_OFFSETS_DEG = (-3.0, -1.0, 0.0, 1.0, 3.0)
 # Mixed rays: every direction of that fan (over 360°) raised out of the normal-strain plane by these
 # elevations towards either sign of the shear; for a knit (even_shear) each tied to its mirror in
 # the shear, as its shear axis is (one tangent per pair: the membrane even in the shear,
-# orthotropic; _shear_ties), for a woven each with its own. A fabric pulled on the bias shears its yarn frame and
-# relaxes into small normal strains of its yarns (the twill at 4 %: E00, E11 ≈ −0.002, −0.005
-# under 2 E01 = 0.088) that cost less together than the shear alone; a sum of separate
+# orthotropic; _shear_ties), for a woven each with its own. A fabric pulled on the bias shears
+# its yarn frame and relaxes into small normal strains of its yarns (the twill at 4 %: E00, E11 ≈
+# −0.002, −0.005 under 2 E01 = 0.088) that cost less together than the shear alone; a sum of separate
 # normal and shear rays can only add their energies, and left the wovens' bias pulls 20-30 % too
 # soft once their samples were weighted (session 37, the presets' samples refitted against their
 # periodic pulls at 2 / 5 / 10 %: without mixed rays 29 of 30 weft and warp pulls and 9 of 15 bias
