@@ -891,6 +891,39 @@ def test_the_material_file_reads_back(tmp_path):
     assert len(data["samples"]) == len(result.samples)
 
 
+def test_the_periodic_pulls_script_prints_the_shell_against_the_periodic_pulls(tmp_path, capsys):
+    # validation/periodic_pulls.py, on the plain weave's file at 1 %: one row per direction, the
+    # periodic pulls as periodic_pull and periodic_bias_pull give them, the shell's own pull beside
+    # each, and a count of the verdicts.
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "periodic_pulls", Path(__file__).parent.parent / "validation" / "periodic_pulls.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    result = fitted()
+    path = result.write(tmp_path / "plain.json")
+    assert script.main([str(path), "--strains", "0.01"]) == 0
+    out = capsys.readouterr().out
+    rows = [line.split(" | ") for line in out.splitlines() if line.startswith("| ") and "%" in line]
+    assert [row[0] for row in rows] == ["| weft (0°)", "| warp (90°)", "| bias (45°)", "| other bias (-45°)"]
+    relaxed = result.relaxed
+    expected = [periodic_pull(relaxed, 0, 0.01), periodic_pull(relaxed, 1, 0.01), periodic_bias_pull(relaxed, 0.01),
+                periodic_bias_pull(relaxed, 0.01, other=True)]
+    shell = result.material
+    verdicts = 0
+    for row, pull, degrees in zip(rows, expected, (0.0, 90.0, 45.0, -45.0)):
+        assert float(row[2]) == pytest.approx(pull.force_n_per_m, rel=1e-3)  # printed to 4 digits
+        mine = shell.uniaxial_pull(math.radians(degrees), 1.01).force_n_per_m
+        assert float(row[4].split()[0]) == pytest.approx(mine, rel=1e-3)
+        within = abs(mine / pull.force_n_per_m - 1.0) <= script.FORCE_RTOL
+        assert row[-1].rstrip(" |") == ("within" if within else "MISSED")
+        verdicts += within
+    assert f"at {verdicts} of 4 converged points" in out
+    with pytest.raises(SystemExit):
+        script.main([str(path), "--strains", "0.02,0.01"])
+
+
 # -- continuation ----------------------------------------------------------------------------------
 
 # Two converged solves of the same sample (force residual ≤ 1e-8 of the force scale) agree on Ū to
