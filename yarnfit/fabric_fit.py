@@ -66,9 +66,12 @@ def samples_both_biases(fabric: Fabric) -> bool:
     two signs apart (not :func:`shears_evenly`). Pulled along +45° alone, such a shell met the other
     bias with its pure shear's stiffness, which a bias pull relaxes: the cotton twill's shell pulled
     53 N/m at 2 % along −45° where its yarns pull 3.7 (and 0.36 / 0.34 along +45°; session 47). A
-    knit's shell is even in the shear and its jersey repeat pulls alike along both biases (cotton
-    jersey's frictionless pulls equal to four digits at 0.1–10 %): the other bias's samples would
-    only repeat the first's."""
+    knit's shell is even in the shear and its jersey repeat pulls alike along both biases without
+    friction (cotton jersey's pulls equal to four digits at 0.1–10 %): the other bias's samples
+    would only repeat the first's. (With friction, on the loading paths a knit's samples follow,
+    the wool and polyester jerseys' two biases part at 5–10 % as their skew slides: wool 9.39 /
+    24.3 N/m along −45° against 8.31 / 16.4 along +45°, polyester 4.06 / 7.96 against 4.47 / 12.3,
+    cotton alike; the even shell follows the +45° side, along which the strips are cut.)"""
     return not shears_evenly(fabric)
 
 
