@@ -2,6 +2,7 @@
 prints its summary and writes the recording the README documents."""
 
 import json
+import math
 import re
 import subprocess
 import sys
@@ -14,6 +15,7 @@ import rerun as rr
 
 import yarnfit
 from yarnfit.patterns import read_pyp
+from yarnfit.validate import PULL_DIRECTIONS
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
@@ -196,6 +198,15 @@ def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documente
     for key, label in (("weft_stretch_n_per_m", "weft stretch"), ("shear_n_per_m", "shear")):
         value, unit = summary[label].split()[-2:]
         assert unit == "N/m" and float(value) == pytest.approx(engineering[key], rel=1e-4)
+    # The material's own pulls along weft, warp and both biases at 2 and 5 %, width free.
+    pulled = summary["pulled"]
+    assert pulled.endswith("N/m at 2 / 5 % (width free)"), pulled
+    for direction, degrees in PULL_DIRECTIONS.items():
+        match = re.search(rf"{direction} \({degrees:g}°\) (\S+) / (\S+),? ", pulled)
+        assert match, (direction, pulled)
+        for text, strain in zip(match.groups(), (0.02, 0.05)):
+            assert float(text.rstrip(",")) == pytest.approx(
+                material.uniaxial_pull(math.radians(degrees), 1.0 + strain).force_n_per_m, rel=1e-3)
     # Bending in SI beside the textile unit (KES-F gf·cm²/cm).
     fields = summary["bending weft"].split()
     assert fields[-3:-1] == ["N·m", f"{engineering['bending_weft_nm'] / GF_CM2_PER_CM:.4g}"]

@@ -22,10 +22,10 @@ from test_fit_nonlinear import LEVELS, RANGES, REST_ENERGY, RESIDUAL, samples_of
 from yarnfit.engine import Residual
 from yarnfit.fit import fit_shell
 from yarnfit.material_file import MaterialFile
-from yarnfit.plots import N_PER_M_IN_N_PER_CM, PERCENT, TENSION_DIRECTIONS, fit_figures, validation_figures
+from yarnfit.plots import N_PER_M_IN_N_PER_CM, PERCENT, fit_figures, validation_figures
 from yarnfit.samples import FAMILIES, SampleResult, SampleSpec, family_deformation, sample_design
 from yarnfit.shell import GF_CM2_PER_CM, membrane_strain
-from yarnfit.validate import DIRECTIONS
+from yarnfit.validate import DIRECTIONS, PULL_DIRECTIONS
 
 # The textile units from their definitions, independently of yarnfit's constants:
 # 1 N/cm = 1 N / 1e-2 m = 100 N/m, so N/m × 0.01 = N/cm;
@@ -172,7 +172,7 @@ def test_tension_table_is_the_shells_uniaxial_law_in_n_per_cm(tmp_path):
     strain = np.array([cell(r["strain [%]"]) for r in rows]) / 100.0
     assert strain[0] == 0.0 and strain[-1] == pytest.approx(RANGES.stretch, rel=1e-15)  # the fitted range
     engineering = file.data["engineering"]
-    for direction, degrees in TENSION_DIRECTIONS.items():
+    for direction, degrees in PULL_DIRECTIONS.items():
         force = np.array([cell(r[f"{direction} force per width [N/cm]"]) for r in rows])
         law = np.array([cell(r[f"{direction} small-strain law [N/cm]"]) for r in rows])
         for k in (1, len(rows) // 2, len(rows) - 1):

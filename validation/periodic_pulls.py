@@ -27,9 +27,8 @@ from yarnfit.engine import ConvergenceWarning
 from yarnfit.homogenize import (frictional_periodic_bias_pull, frictional_periodic_pull, periodic_bias_pull,
                                 periodic_pull)
 from yarnfit.material_file import MaterialFile
+from yarnfit.validate import PULL_DIRECTIONS
 
-# The pulls' directions, degrees from weft.
-DIRECTIONS = {"weft": 0.0, "warp": 90.0, "bias": 45.0, "other bias": -45.0}
 # The strains pulled to by default: from the design's smallest (0.1 %) to the uniaxial samples'
 # largest (10 %), and the stretch tests' 2 and 5 %.
 STRAINS = (0.001, 0.01, 0.02, 0.05, 0.10)
@@ -41,7 +40,7 @@ FORCE_RTOL = 0.20
 def periodic_pulls(relaxed, direction: str, strains, friction: float) -> list:
     """The periodic pulls along ``direction`` at ``strains`` (ascending): one frictional load path
     with friction ``friction``, or frictionless samples one by one if it is 0."""
-    angle = math.radians(DIRECTIONS[direction])
+    angle = math.radians(PULL_DIRECTIONS[direction])
     if friction > 0.0:
         if direction in ("weft", "warp"):
             return frictional_periodic_pull(relaxed, ("weft", "warp").index(direction), strains, friction)
@@ -79,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
           "linear width | verdict (nonlinear) |")
     print("|---|---|---|---|---|---|---|---|---|")
     within, judged, linear_within = 0, 0, 0
-    for direction, degrees in DIRECTIONS.items():
+    for direction, degrees in PULL_DIRECTIONS.items():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)  # a pull that did not converge says so below
             pulls = periodic_pulls(relaxed, direction, strains, friction)

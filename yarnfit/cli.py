@@ -639,6 +639,7 @@ def fit_summary(fitted, output, recording_path) -> str:
         lines.append(f"  linear R²       {linear_quality}")
     if fit.membrane == "nonlinear":
         lines.append(f"  stiffening      {_stiffening_summary(fit)}")
+    lines.append(f"  pulled          {_pull_summary(fitted.material)}")
     if fit.reference_energy or any(fit.residual_stress.values()):
         r = fit.residual_stress
         stress = (f"residual stress {r['n0']:.3g} / {r['n1']:.3g} N/m weft / warp (fitted), "
@@ -680,6 +681,31 @@ def relax_summary(result, fabric, recording_path, output) -> str:
     if output:
         lines.append(f"  relaxed repeat    {output}")
     return "\n".join(lines)
+
+
+# The strains of the fit summary's pulls: the stretch test's 2 and 5 %.
+SUMMARY_PULL_STRAINS = (0.02, 0.05)
+
+
+def _pull_summary(material) -> str:
+    """The material's own uniaxial pull (every other stress free) along weft, warp and both
+    biases at :data:`SUMMARY_PULL_STRAINS`, N/m: where a woven's twill line shows (its two biases
+    apart) and the stiffening past the small-strain constants above."""
+    import math
+
+    from .validate import PULL_DIRECTIONS
+
+    strains = " / ".join(f"{100 * e:g}" for e in SUMMARY_PULL_STRAINS)
+    parts = []
+    for direction, degrees in PULL_DIRECTIONS.items():
+        forces = []
+        for strain in SUMMARY_PULL_STRAINS:
+            try:
+                forces.append(f"{material.uniaxial_pull(math.radians(degrees), 1.0 + strain).force_n_per_m:.4g}")
+            except ValueError:  # no free width balances the pull there (a StVK width collapsing)
+                forces.append("-")
+        parts.append(f"{direction} ({degrees:g}°) {' / '.join(forces)}")
+    return f"{', '.join(parts)} N/m at {strains} % (width free)"
 
 
 def _stiffening_summary(fit) -> str:

@@ -45,7 +45,7 @@ from .material_file import MaterialFile
 from .record import EXCLUDED_COLOR, SAMPLE_COLOR, SHELL_COLOR, shell_curve
 from .samples import FAMILIES, Group, SampleResult
 from .shell import GF_CM2_PER_CM, ShellMaterial
-from .validate import DIRECTIONS
+from .validate import DIRECTIONS, PULL_DIRECTIONS
 from .validate.reference import FORCE_UNITS, Reference, read_reference
 
 __all__ = [
@@ -94,9 +94,6 @@ FIGURE_INCHES = (6.4, 4.4)
 PNG_DPI = 150
 # One colour per direction (matplotlib's default cycle), the same in every figure.
 DIRECTION_COLORS = {"weft": "tab:blue", "warp": "tab:orange", "bias": "tab:green", "other bias": "tab:red"}
-# The tension figure's directions (degrees from weft): the stretch test's, and the other bias, which
-# a woven's twill or satin line makes differ from the first (a knit's shell pulls alike along both).
-TENSION_DIRECTIONS = {**DIRECTIONS, "other bias": -45.0}
 # The stretch figures: the shell strips in blues and purples (line and dots, one colour per strip
 # size), the yarn-level swatch orange (dashed, squares), a measurement black (diamonds, no line: the
 # lab's points as they are), the shell's law a thin grey line under everything.
@@ -249,7 +246,7 @@ def _tension_figure(fabric: str, base: Path, shell: ShellMaterial, stretch_range
     strain = np.linspace(0.0, stretch_range, CURVE_POINTS)
     figure, ax = _figure()
     columns = {"strain [%]": PERCENT * strain}
-    for direction, degrees in TENSION_DIRECTIONS.items():
+    for direction, degrees in PULL_DIRECTIONS.items():
         angle = math.radians(degrees)
         force = np.full(strain.shape, math.nan)
         for k, e in enumerate(strain):
