@@ -40,14 +40,15 @@ FORCE_RTOL = 0.20
 def periodic_pulls(relaxed, direction: str, strains, friction: float) -> list:
     """The periodic pulls along ``direction`` at ``strains`` (ascending): one frictional load path
     with friction ``friction``, or frictionless samples one by one if it is 0."""
-    angle = math.radians(PULL_DIRECTIONS[direction])
-    if friction > 0.0:
-        if direction in ("weft", "warp"):
-            return frictional_periodic_pull(relaxed, ("weft", "warp").index(direction), strains, friction)
-        return frictional_periodic_bias_pull(relaxed, strains, friction, angle=angle)
     if direction in ("weft", "warp"):
-        return [periodic_pull(relaxed, ("weft", "warp").index(direction), strain) for strain in strains]
-    return [periodic_bias_pull(relaxed, strain, other=direction == "other bias") for strain in strains]
+        axis = ("weft", "warp").index(direction)
+        if friction > 0.0:
+            return frictional_periodic_pull(relaxed, axis, strains, friction)
+        return [periodic_pull(relaxed, axis, strain) for strain in strains]
+    other = direction == "other bias"
+    if friction > 0.0:
+        return frictional_periodic_bias_pull(relaxed, strains, friction, other=other)
+    return [periodic_bias_pull(relaxed, strain, other=other) for strain in strains]
 
 
 def _against(value: float, reference: float) -> str:

@@ -267,18 +267,20 @@ def frictional_periodic_pull(relaxed: RelaxedRepeat, axis: int, strains: Sequenc
 def frictional_periodic_bias_pull(relaxed: RelaxedRepeat, strains: Sequence[float], coefficient: float,
                                   options: QuasiStaticOptions | None = None, strain_step: float = FRICTION_STRAIN_STEP,
                                   progress: Callable[[str], None] | None = None,
-                                  angle: float = BIAS_ANGLE) -> list[PeriodicPull]:
-    """As :func:`frictional_periodic_pull` on the bias (``angle`` from weft, rad: 45° unless told;
-    −45° is the other bias), each pass the bias search with the transverse strain and the pull
-    frame's shear both free (:func:`_search_bias`); width ``√det I / λ``."""
-    return _frictional_path(relaxed, "bias", strains, coefficient, options, strain_step, progress, angle)
+                                  other: bool = False) -> list[PeriodicPull]:
+    """As :func:`frictional_periodic_pull` on the bias (45° from weft; ``other``: the other bias,
+    −45°, direction ``"other bias"``, as :func:`~yarnfit.homogenize.periodic_bias_pull`), each
+    pass the bias search with the transverse strain and the pull frame's shear both free
+    (:func:`_search_bias`); width ``√det I / λ``."""
+    return _frictional_path(relaxed, "other bias" if other else "bias", strains, coefficient, options, strain_step,
+                            progress)
 
 
 def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[float], coefficient: float,
                      options: QuasiStaticOptions | None, strain_step: float,
-                     progress: Callable[[str], None] | None, angle: float = BIAS_ANGLE) -> list[PeriodicPull]:
-    """The frictional pull along ``direction`` (``"weft"``, ``"warp"``, ``"bias"``: at ``angle``
-    from weft) from rest through ``strains`` (:func:`frictional_periodic_pull`)."""
+                     progress: Callable[[str], None] | None) -> list[PeriodicPull]:
+    """The frictional pull along ``direction`` (``"weft"``, ``"warp"``, ``"bias"`` at 45° from weft,
+    ``"other bias"`` at −45°) from rest through ``strains`` (:func:`frictional_periodic_pull`)."""
     strains = [positive_number(e, "strain") for e in strains]
     if not strains or strains != sorted(set(strains)):
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
@@ -286,7 +288,8 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
         raise ValueError(f"friction coefficient must be finite and non-negative, got {coefficient!r}")
     strain_step = positive_number(strain_step, "strain_step")
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
-    if direction == "bias":
+    if direction in ("bias", "other bias"):
+        angle = BIAS_ANGLE if direction == "bias" else -BIAS_ANGLE
         pull_direction = np.array([math.cos(angle), math.sin(angle)])
 
         def search(stretch):

@@ -37,7 +37,7 @@ import numpy as np
 from ..engine import ConvergenceWarning, QuasiStaticOptions
 from ..engine.lagged import FRICTION_STRAIN_STEP
 from ..relax import RelaxedRepeat
-from ..samples import Family, Group, SampleResult, SampleSpec, stretch_share
+from ..samples import OTHER_BIAS_FAMILIES, Family, Group, SampleResult, SampleSpec, stretch_share
 from .equilibrium import MAX_ITERATIONS, _solve_from
 from .frictional import (_frictional_step, _Pass, _rest, _Trial, frictional_periodic_bias_pull,
                          frictional_periodic_pull)
@@ -153,7 +153,7 @@ def _uniaxial_path(relaxed: RelaxedRepeat, family: Family, grid: Sequence[float]
         pulls = frictional_periodic_pull(relaxed, family.uniaxial_axis, grid, coefficient, options, strain_step)
     else:
         pulls = frictional_periodic_bias_pull(relaxed, grid, coefficient, options, strain_step,
-                                              angle=family.uniaxial_angle)
+                                              other=family in OTHER_BIAS_FAMILIES)
     return [SampleResult(
         spec=SampleSpec(family, pull.form if pull.form is not None else np.full((2, 2), math.nan), flat, pull.strain),
         energy_density=pull.energy_density + pull.friction_work, converged=pull.converged, residual=pull.residual,
