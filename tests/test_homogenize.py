@@ -33,6 +33,7 @@ from yarnfit.homogenize import (
     loading_path_samples,
     periodic_bias_pull,
     periodic_pull,
+    periodic_pulls_along,
     solve_sample,
     solve_loading_samples,
     solve_samples,
@@ -148,7 +149,7 @@ def plain(gsm=200.0, counts=(2500.0, 2500.0)):
 
 @functools.lru_cache(maxsize=None)
 def fitted(gsm=200.0):
-    return fit_fabric(plain(gsm), samples=33, workers=1)
+    return fit_fabric(plain(gsm), samples=design_size(1), workers=1)
 
 
 # -- the mid-surface -------------------------------------------------------------------------------
@@ -294,7 +295,7 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
     assert magnitudes(5e-4, SMALLEST_STRAIN, 2) == pytest.approx([2.5e-4, 5e-4])
     with pytest.raises(ValueError, match="compression"):
         SampleRanges(stretch=0.2, curvature=100.0, compression=-0.1)
-    with pytest.raises(ValueError, match="at least 33"):
+    with pytest.raises(ValueError, match=f"at least {design_size(1)}"):
         levels_for(25)
     assert [levels_for(n) for n in (33, 46, 59, 72)] == [1, 2, 3, 4]
     assert levels_for(DEFAULT_SAMPLES) == DEFAULT_LEVELS
@@ -708,6 +709,28 @@ def test_a_frictional_periodic_pull_refuses_bad_input():
     for mu in (-0.1, math.inf):
         with pytest.raises(ValueError, match="friction"):
             frictional_periodic_pull(relaxed, 0, (0.01,), mu)
+
+
+def test_a_pull_named_by_its_direction_is_the_pull_along_it():
+    # Straight weft yarns: pulled along the weft they give E A ε / d with friction or without
+    # (nothing touches), along the warp and both biases nothing resists (the yarns part freely).
+    r, d, E = 1e-4, 3e-4, 2e9
+    relaxed = straight_yarns(E, r, d)
+    for mu in (0.0, 0.3):
+        for pull, strain in zip(periodic_pulls_along(relaxed, "weft", (0.01, 0.02), mu), (0.01, 0.02)):
+            assert pull.direction == "weft" and pull.strain == strain and pull.converged
+            assert pull.force_n_per_m == pytest.approx(E * math.pi * r**2 * strain / d, rel=STRAIGHT_PULL_RTOL)
+    weft = periodic_pull(relaxed, 0, 0.01).force_n_per_m
+    for direction in ("warp", "bias", "other bias"):
+        pull, = periodic_pulls_along(relaxed, direction, (0.01,))
+        assert pull.direction == direction and pull.converged
+        assert abs(pull.force_n_per_m) <= BIAS_FREE_RATIO * weft
+    with pytest.raises(ValueError, match="direction"):
+        periodic_pulls_along(relaxed, "diagonal", (0.01,))
+    with pytest.raises(ValueError, match="ascending"):
+        periodic_pulls_along(relaxed, "weft", (0.02, 0.01))
+    with pytest.raises(ValueError, match="friction"):
+        periodic_pulls_along(relaxed, "weft", (0.01,), math.nan)  # refused, not taken for frictionless
 
 
 @pytest.mark.parametrize("verdicts, converged", [(("failed", "minimum"), True), (("minimum", "failed"), False),

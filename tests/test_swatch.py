@@ -181,18 +181,20 @@ def test_jaw_reaction_equals_sum_of_yarn_forces():
     assert out["points"][1]["force_n_per_m"] * swatch.width == pytest.approx(cut_force, rel=FORCE_RTOL)
 
 
-def test_bias_strip_rotates_the_repeat():
-    # A bias strip is the repeat turned by 45° (material x goes to world (1, -1)/√2): the straight
-    # wefts are cut into diagonal pieces across the strip.
+@pytest.mark.parametrize("direction, sign", [("bias", -1.0), ("other bias", 1.0)])
+def test_bias_strip_rotates_the_repeat(direction, sign):
+    # A bias strip is the repeat turned by 45° (material x goes to world (1, -1)/√2; along the other
+    # bias, −45°, to (1, 1)/√2): the straight wefts are cut into diagonal pieces across the strip.
     model, material = straight_weft_repeat()
-    swatch = cut_swatch(model, model.node_rest_position, material, direction="bias", gauge=4 * PX, width=2 * PY,
-                        clamp=PX)
-    # Every piece lies at 45° in the strip frame: direction (1, -1)/√2 or its opposite.
+    swatch = cut_swatch(model, model.node_rest_position, material, direction=direction, gauge=4 * PX,
+                        width=2 * PY, clamp=PX)
+    assert swatch.angle_deg == -45.0 * sign
+    # Every piece lies at 45° in the strip frame: direction (1, ∓1)/√2 or its opposite.
     m = swatch.model
     edge = swatch.position[m.edge_nodes[:, 1]] - swatch.position[m.edge_nodes[:, 0]]
     edge /= np.linalg.norm(edge, axis=1, keepdims=True)
     assert np.allclose(np.abs(edge[:, 0]), math.sqrt(0.5), atol=1e-12)
-    assert np.allclose(edge[:, 0] * edge[:, 1], -0.5, atol=1e-12)
+    assert np.allclose(edge[:, 0] * edge[:, 1], 0.5 * sign, atol=1e-12)
 
 
 def test_edge_draw_in_is_what_the_narrowing_does_not_explain():

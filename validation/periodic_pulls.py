@@ -24,8 +24,7 @@ import warnings
 import numba
 
 from yarnfit.engine import ConvergenceWarning
-from yarnfit.homogenize import (frictional_periodic_bias_pull, frictional_periodic_pull, periodic_bias_pull,
-                                periodic_pull)
+from yarnfit.homogenize import periodic_pulls_along
 from yarnfit.material_file import MaterialFile
 from yarnfit.validate import PULL_DIRECTIONS
 
@@ -35,20 +34,6 @@ STRAINS = (0.001, 0.01, 0.02, 0.05, 0.10)
 # A point's verdict: the shell's force within this fraction of the periodic pull's, the 20 % the
 # shell-vs-swatch acceptance of issue 14 asks.
 FORCE_RTOL = 0.20
-
-
-def periodic_pulls(relaxed, direction: str, strains, friction: float) -> list:
-    """The periodic pulls along ``direction`` at ``strains`` (ascending): one frictional load path
-    with friction ``friction``, or frictionless samples one by one if it is 0."""
-    if direction in ("weft", "warp"):
-        axis = ("weft", "warp").index(direction)
-        if friction > 0.0:
-            return frictional_periodic_pull(relaxed, axis, strains, friction)
-        return [periodic_pull(relaxed, axis, strain) for strain in strains]
-    other = direction == "other bias"
-    if friction > 0.0:
-        return frictional_periodic_bias_pull(relaxed, strains, friction, other=other)
-    return [periodic_bias_pull(relaxed, strain, other=other) for strain in strains]
 
 
 def _against(value: float, reference: float) -> str:
@@ -82,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     for direction, degrees in PULL_DIRECTIONS.items():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)  # a pull that did not converge says so below
-            pulls = periodic_pulls(relaxed, direction, strains, friction)
+            pulls = periodic_pulls_along(relaxed, direction, strains, friction)
         for strain, reference in zip(strains, pulls):
             cells = []
             verdicts = {}

@@ -13,7 +13,7 @@ node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what say
 has to be.
 
     python validation/swatch_convergence.py MATERIAL.json [--sizes 2x1.5,4x3,8x6] \\
-        [--directions weft,warp,bias] [--selvedge] [--frictionless] [--json OUT.json] [--from-json A.json,B.json]
+        [--directions weft,warp,bias,other bias] [--selvedge] [--frictionless] [--json OUT.json] [--from-json A.json,B.json]
 
 The force and width measured at mid-length converge as the cut loops at the long sides and the
 jaws' constraint become a smaller part of the strip; the table shows how fast. Its edge draw-in
@@ -60,8 +60,7 @@ import numba
 
 from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
-from yarnfit.homogenize import (frictional_periodic_bias_pull, frictional_periodic_pull, periodic_bias_pull,
-                                periodic_pull)
+from yarnfit.homogenize import periodic_pulls_along
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, read_uniform, stretch_swatch
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
@@ -172,19 +171,6 @@ def _micrometres(value) -> str:
     return "—" if value is None else f"{1e6 * value:.3g}"
 
 
-def periodic_pull_along(relaxed, direction: str, strain: float):
-    """The periodic repeat pulled to ``strain`` along ``direction`` (weft, warp or bias) with
-    every other stress free (:func:`yarnfit.homogenize.periodic_pull`,
-    :func:`~yarnfit.homogenize.periodic_bias_pull`): the limit a strip tends to as it widens and
-    the reference the shell was fitted towards (weft and warp; the fit has no bias pulls yet);
-    None for another direction."""
-    if direction in ("weft", "warp"):
-        return periodic_pull(relaxed, 0 if direction == "weft" else 1, strain)
-    if direction == "bias":
-        return periodic_bias_pull(relaxed, strain)
-    return None
-
-
 def frictional_pulls(relaxed, curves: dict, reading: "Reading", coefficient: float) -> dict:
     """``{(direction, strain): PeriodicPull}``: the periodic repeat pulled along weft, warp or
     the bias with the fibre's friction ``coefficient`` to each strain ``reading`` takes the largest
@@ -196,26 +182,17 @@ def frictional_pulls(relaxed, curves: dict, reading: "Reading", coefficient: flo
         return pulls
     for direction, curve in largest_strips(curves).items():
         strains = sorted({point.strain for point in reading.read(curve) if point is not None})
-        if direction == "bias":
-            path = frictional_periodic_bias_pull(relaxed, strains, coefficient)
-        elif direction in ("weft", "warp"):
-            path = frictional_periodic_pull(relaxed, 0 if direction == "weft" else 1, strains, coefficient)
-        else:
-            continue
+        path = periodic_pulls_along(relaxed, direction, strains, coefficient)
         for pull in path:
             pulls[direction, pull.strain] = pull
     return pulls
 
 
 def periodic_pulls(relaxed, directions) -> dict:
-    """``{(direction, strain): PeriodicPull}`` at each of STRAINS (:func:`periodic_pull_along`)."""
-    pulls = {}
-    for direction in directions:
-        for strain in STRAINS:
-            pull = periodic_pull_along(relaxed, direction, strain)
-            if pull is not None:
-                pulls[direction, strain] = pull
-    return pulls
+    """``{(direction, strain): PeriodicPull}``: the frictionless periodic pulls along each of
+    ``directions`` at each of STRAINS (:func:`yarnfit.homogenize.periodic_pulls_along`)."""
+    return {(direction, pull.strain): pull
+            for direction in directions for pull in periodic_pulls_along(relaxed, direction, STRAINS)}
 
 
 def _against(value: float, reference: float) -> str:
@@ -380,7 +357,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("material", help="a material file written by `yarnfit fit`")
     parser.add_argument("--sizes", default="2x1.5,4x3,8x6", help="gauge x width between the jaws, in repeats")
-    parser.add_argument("--directions", default="weft,warp", help="comma-separated: weft, warp, bias")
+    parser.add_argument("--directions", default="weft,warp",
+                        help="comma-separated: weft, warp, bias, other bias (−45°)")
     parser.add_argument("--selvedge", action="store_true",
                         help="join the yarns running across each strip at its long sides (a flat knit's selvedges)")
     parser.add_argument("--frictionless", action="store_true",
@@ -418,8 +396,8 @@ def main(argv: list[str] | None = None) -> int:
 
     def periodic(direction: str, strain: float):
         """The periodic pull at ``strain``: solved at STRAINS already, else now."""
-        return pulls[direction, strain] if (direction, strain) in pulls else periodic_pull_along(relaxed, direction,
-                                                                                                   strain)
+        return pulls[direction, strain] if (direction, strain) in pulls else periodic_pulls_along(relaxed, direction,
+                                                                                                    [strain])[0]
 
     coefficient = 0.0 if args.frictionless else relaxed.fiber.friction
     counts, rubbings = {}, {}

@@ -35,7 +35,7 @@ such paths, for a shell fitted to the fabric's loading response: ``yarnfit fit -
 """
 
 from .equilibrium import MAX_ITERATIONS
-from .frictional import frictional_periodic_bias_pull, frictional_periodic_pull
+from .frictional import frictional_periodic_bias_pull, frictional_periodic_pull, periodic_pulls_along
 from .groups import group_tasks, sample_groups, solve_group, solve_loading_samples, solve_samples
 from .loading import loading_path_samples
 from .pull import PeriodicPull, periodic_bias_pull, periodic_pull
@@ -55,6 +55,7 @@ __all__ = [
     "loading_path_samples",
     "periodic_bias_pull",
     "periodic_pull",
+    "periodic_pulls_along",
     "sample_groups",
     "solve_group",
     "solve_sample",

@@ -49,13 +49,13 @@ from ..engine.lagged import FRICTION_STRAIN_STEP, LAG_TOLERANCE, MAX_LAG_PASSES,
 from ..relax import RelaxedRepeat
 from .bias import BIAS_ANGLE, _search_bias
 from .equilibrium import MAX_ITERATIONS, _axis_change, _green_slope, _solve_from
-from .pull import PeriodicPull
+from .pull import PeriodicPull, periodic_bias_pull, periodic_pull
 from .surface import TiledRepeat, _form_map, tile_repeat
 from .uniaxial import (FREE_STRAIN_GUESS, FREE_STRAIN_HALVINGS, FREE_STRAIN_PROBE, FREE_STRAIN_RANGE,
                        FREE_STRAIN_SOLVES, FREE_STRAIN_TOLERANCE, SEARCH_ENERGY_RTOL, SMALLEST_FREE_STRETCH,
                        _FreeStrainPoint, _next_free_strain)
 
-__all__ = ["frictional_periodic_bias_pull", "frictional_periodic_pull"]
+__all__ = ["frictional_periodic_bias_pull", "frictional_periodic_pull", "periodic_pulls_along"]
 
 _NO_RESIDUAL = Residual(math.nan, math.nan, math.nan, math.nan)
 
@@ -276,16 +276,41 @@ def frictional_periodic_bias_pull(relaxed: RelaxedRepeat, strains: Sequence[floa
                             progress)
 
 
-def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[float], coefficient: float,
-                     options: QuasiStaticOptions | None, strain_step: float,
-                     progress: Callable[[str], None] | None) -> list[PeriodicPull]:
-    """The frictional pull along ``direction`` (``"weft"``, ``"warp"``, ``"bias"`` at 45° from weft,
-    ``"other bias"`` at −45°) from rest through ``strains`` (:func:`frictional_periodic_pull`)."""
+def periodic_pulls_along(relaxed: RelaxedRepeat, direction: str, strains: Sequence[float], friction: float = 0.0,
+                         options: QuasiStaticOptions | None = None) -> list[PeriodicPull]:
+    """The periodic pulls along ``direction`` by name (``"weft"``, ``"warp"``, ``"bias"`` at 45°
+    from weft, ``"other bias"`` at −45°: :class:`~yarnfit.homogenize.PeriodicPull`'s directions)
+    at each of ``strains`` (engineering, ascending, > 0): with ``friction`` μ > 0 one frictional
+    load path from rest (:func:`frictional_periodic_pull`, :func:`frictional_periodic_bias_pull`),
+    at 0 the frictionless pulls one by one (:func:`~yarnfit.homogenize.periodic_pull`,
+    :func:`~yarnfit.homogenize.periodic_bias_pull`), as the shell's samples are solved."""
+    if direction not in ("weft", "warp", "bias", "other bias"):
+        raise ValueError(f"direction must be 'weft', 'warp', 'bias' or 'other bias', got {direction!r}")
+    strains = _checked_path(strains, friction)
+    if friction > 0.0:
+        return _frictional_path(relaxed, direction, strains, friction, options, FRICTION_STRAIN_STEP, None)
+    if direction in ("weft", "warp"):
+        return [periodic_pull(relaxed, ("weft", "warp").index(direction), e, options) for e in strains]
+    return [periodic_bias_pull(relaxed, e, options, other=direction == "other bias") for e in strains]
+
+
+def _checked_path(strains: Sequence[float], coefficient: float) -> list[float]:
+    """``strains`` as floats, refused unless positive and ascending, and a friction
+    ``coefficient`` refused unless finite and non-negative."""
     strains = [positive_number(e, "strain") for e in strains]
     if not strains or strains != sorted(set(strains)):
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
     if not (math.isfinite(coefficient) and coefficient >= 0.0):
         raise ValueError(f"friction coefficient must be finite and non-negative, got {coefficient!r}")
+    return strains
+
+
+def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[float], coefficient: float,
+                     options: QuasiStaticOptions | None, strain_step: float,
+                     progress: Callable[[str], None] | None) -> list[PeriodicPull]:
+    """The frictional pull along ``direction`` (``"weft"``, ``"warp"``, ``"bias"`` at 45° from weft,
+    ``"other bias"`` at −45°) from rest through ``strains`` (:func:`frictional_periodic_pull`)."""
+    strains = _checked_path(strains, coefficient)
     strain_step = positive_number(strain_step, "strain_step")
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
     if direction in ("bias", "other bias"):

@@ -23,8 +23,8 @@ SCENES = ("stretch", "yarn", *DRAPES, "body")
 # The directions a strip is pulled in: the pull axis's angle from the weft, in degrees.
 DIRECTIONS = {"weft": 0.0, "warp": 90.0, "bias": 45.0}
 # ... and the directions a shell's and a repeat's own pulls are reported in: those and the other
-# bias, which a woven's twill or satin line makes differ from the first (the strips are cut along
-# +45° only).
+# bias, which a woven's twill or satin line makes differ from the first (the suite's strips are cut
+# along +45° only; validation/swatch_convergence.py cuts a strip along any of these).
 PULL_DIRECTIONS = {**DIRECTIONS, "other bias": -45.0}
 
 # Field metadata of a SceneResult: left out of the summary (arrays kept for callers), or left out

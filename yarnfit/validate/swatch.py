@@ -123,7 +123,7 @@ from ..engine.tiling import YarnPiece, cut_rectangle
 from ..jsonfile import finite_or_none
 from ..material_file import MaterialFile
 from ..record import Recording, folded_panels, markdown_table
-from . import DIRECTIONS, SceneResult
+from . import PULL_DIRECTIONS, SceneResult
 from .strip import (Swatch, cut_forces, edge_draw_in, extent_width, free_side_ends, mid_strain, mid_width,
                     middle_compression)
 
@@ -170,14 +170,15 @@ def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | Rod
                gauge: float, width: float, clamp: float, selvedge: bool = False) -> Swatch:
     """Cut a strip from the flat periodic ``model`` at ``position`` (its relaxed rest state, frames
     its rest frames): ``gauge`` × ``width`` between the jaws plus a ``clamp`` band at each end (m),
-    pulled along ``direction`` (a key of :data:`DIRECTIONS`); with ``selvedge``, the yarns running
-    across it are joined at its long sides (:func:`join_selvedges`). See the module docstring."""
-    if direction not in DIRECTIONS:
-        raise ValueError(f"direction must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
+    pulled along ``direction`` (a key of :data:`PULL_DIRECTIONS`: the suite's directions or the
+    other bias, −45°); with ``selvedge``, the yarns running across it are joined at its long sides
+    (:func:`join_selvedges`). See the module docstring."""
+    if direction not in PULL_DIRECTIONS:
+        raise ValueError(f"direction must be one of {', '.join(PULL_DIRECTIONS)}, got {direction!r}")
     for value, what in ((gauge, "gauge"), (width, "width"), (clamp, "clamp")):
         if not (math.isfinite(value) and value > 0):
             raise ValueError(f"{what} must be a positive length in m, got {value!r}")
-    angle = math.radians(DIRECTIONS[direction])
+    angle = math.radians(PULL_DIRECTIONS[direction])
     c, s = math.cos(angle), math.sin(angle)
     # World (x along the pull u, y across v) from material coordinates, about the repeat's centre.
     rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -206,7 +207,7 @@ def cut_swatch(model: RodModel, position: np.ndarray, material: RodSection | Rod
         raise ValueError("no yarn reaches into both jaws: the strip transmits no force")
     return Swatch(model=built, position=np.array(built.node_rest_position), moving=moving, fixed=fixed,
                   length=length, width=width, gauge=gauge, clamp=clamp,
-                  radius=float(built.edge_radius.max()), direction=direction, angle_deg=DIRECTIONS[direction])
+                  radius=float(built.edge_radius.max()), direction=direction, angle_deg=PULL_DIRECTIONS[direction])
 
 
 def join_selvedges(pieces: Sequence[YarnPiece], width: float, gauge: float, reach: float) -> list[YarnPiece]:
