@@ -1,7 +1,7 @@
 """The free-strain quasi-Newton (:mod:`yarnfit.homogenize.search`) on functions whose least point
 is known in closed form: a convex quadratic (its minimiser by a linear solve), the same inside a
-box (the projected minimiser, by scipy's bounded least squares on its square root), and a
-backtracking step's parabola."""
+box (the projected minimiser, by scipy's bounded least squares on its square root), a
+backtracking step's parabola, and a kink between two branches (the lower one's end)."""
 
 import numpy as np
 import pytest
@@ -106,3 +106,73 @@ def test_a_search_asked_every_step_stops_at_spent_slopes():
     assert early < late
     assert 0.0 <= stopped.energy - least <= SPENT_FACTOR * SPENT_DECREASE
     assert walked.energy - least <= SPENT_FACTOR * SPENT_DECREASE
+
+
+# A kink in one free strain, at the scale of the plain weave's bias pull at 1 % (250 g/m²): Ū =
+# KINK_FLOOR + ½ k (x − c)² on its lower branch while x < KINK_AT (the pull's own energy, which the
+# free strain only modulates; its slope there −0.76 J/m², its curvature 7600), and above it
+# another branch KINK_JUMP higher whose slope points back (KINK_BACK): the least Ū is where the
+# lower branch ends, Ū(KINK_AT). Its energy tolerance, as the bias search's (SEARCH_ENERGY_RTOL).
+KINK_FLOOR, KINK_CURVATURE, KINK_CENTRE = 0.1, 7600.0, -0.0077
+KINK_AT, KINK_JUMP, KINK_BACK = -0.0078, 0.005, 1.3
+KINK_ENERGY_RTOL = 1e-3
+
+
+def kinked(free: np.ndarray) -> Trial:
+    """Ū and its slope on the branch ``free`` (1,) lands on (:data:`KINK_AT`)."""
+    x = float(free[0])
+    energy = KINK_FLOOR + 0.5 * KINK_CURVATURE * (x - KINK_CENTRE) ** 2
+    slope = KINK_CURVATURE * (x - KINK_CENTRE)
+    if x >= KINK_AT:
+        energy, slope = energy + KINK_JUMP + KINK_BACK * (x - KINK_AT), slope + KINK_BACK
+    return Trial(np.array(free, dtype=np.float64), None, None, energy, np.array([slope]))
+
+
+def test_a_search_between_two_branches_ends_at_the_kink_when_asked():
+    def run(kink_energy_rtol):
+        solved = []
+
+        def solve_at(free):
+            solved.append(kinked(free))
+            return solved[-1]
+
+        start = solve_at(np.zeros(1))
+        hessian, probes = probe_hessian(solve_at, lambda free: True, start, np.full(1, 1e-3))
+        current = min([start] + probes, key=lambda trial: trial.energy)
+        return quasi_newton(solve_at, lambda free: True, current, hessian, lambda: len(solved), 40, 0.05,
+                            STEP_TOLERANCE, lambda trial, w, v: False, kink_energy_rtol=kink_energy_rtol)
+
+    least = kinked(np.array([KINK_AT - 1e-15])).energy
+    found, failure, _ = run(KINK_ENERGY_RTOL)
+    assert failure is None
+    # On the lower branch, short of its end by no more than the energy tolerance allows (its
+    # slope there 0.76 J/m²: 1.3e-4), Ū within the tolerance of the least.
+    slope = KINK_CURVATURE * (KINK_CENTRE - KINK_AT)
+    assert 0.0 < KINK_AT - found.free[0] <= KINK_ENERGY_RTOL * least / slope
+    assert 0.0 <= found.energy - least <= KINK_ENERGY_RTOL * least
+    # Without it the search does not settle: its slope never vanishes at the kink.
+    _, failure, _ = run(None)
+    assert failure is not None
+
+
+def test_a_kink_needs_a_branch_above_that_points_back_and_nothing_left_to_gain():
+    from yarnfit.homogenize.search import kink_minimum
+
+    hessian = np.diag([4.0, 4.0])
+    lower = Trial(np.array([0.0, 0.0]), None, None, 1.0, np.array([-0.1, 0.0]))
+    upper = Trial(np.array([1e-4, 0.0]), None, None, 1.1, np.array([0.2, 0.0]))
+    assert kink_minimum([upper, lower], hessian, 0.05, KINK_ENERGY_RTOL) is lower
+    # The other trial on the same branch (within the tolerance): no kink, the slopes decide.
+    same = upper._replace(energy=1.0 + 0.5 * KINK_ENERGY_RTOL)
+    assert kink_minimum([same, lower], hessian, 0.05, KINK_ENERGY_RTOL) is None
+    # Its slope not pointing back, or the lower one's not towards it: no kink between them.
+    assert kink_minimum([upper._replace(slopes=np.array([-0.2, 0.0])), lower], hessian, 0.05,
+                        KINK_ENERGY_RTOL) is None
+    assert kink_minimum([upper, lower._replace(slopes=np.array([0.1, 0.0]))], hessian, 0.05,
+                        KINK_ENERGY_RTOL) is None
+    # Too far apart for what Ū may still fall towards it (0.1 × 0.02 > 1e-3 of Ū).
+    far = upper._replace(free=np.array([0.02, 0.0]))
+    assert kink_minimum([far, lower], hessian, 0.05, KINK_ENERGY_RTOL) is None
+    # A slope across the gap that a Newton step would still gain from (½ 0.2² / 4 = 5e-3 of Ū).
+    across = lower._replace(slopes=np.array([-0.1, 0.2]))
+    assert kink_minimum([upper, across], hessian, 0.05, KINK_ENERGY_RTOL) is None

@@ -75,7 +75,9 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
     the positions). It starts from the pure stretch along the pull and stops when the Newton step
     is below :data:`BIAS_STEP_TOLERANCE`, or when no step lowers Ū any more and the slopes are below
     :data:`FREE_SLOPE_RTOL` of the pure stretch's with the decrease of Ū they promise below
-    :data:`SEARCH_ENERGY_RTOL` of Ū; not converged otherwise or after :data:`FREE_STRAIN_SOLVES`.
+    :data:`SEARCH_ENERGY_RTOL` of Ū, or at the least Ū solved where two contact states meet
+    (:func:`~.search.kink_minimum`, within :data:`SEARCH_ENERGY_RTOL` of Ū); not converged
+    otherwise or after :data:`FREE_STRAIN_SOLVES`.
 
     A frictional load step's pass (:mod:`.frictional`) starts instead from ``start = (free (2,),
     state, its first form)``, an equilibrium of the path warm-started at those free strains, and
@@ -172,7 +174,8 @@ def _search_bias(relaxed: RelaxedRepeat, strain: float, options: QuasiStaticOpti
                 or slope * BIAS_STEP_LIMIT <= FLAT_ENERGY_RTOL * abs(start_energy))
 
     current, failure, _ = quasi_newton(solve_at, admissible, current, hessian, lambda: len(solved), FREE_STRAIN_SOLVES,
-                                       BIAS_STEP_LIMIT, BIAS_STEP_TOLERANCE, balanced)
+                                       BIAS_STEP_LIMIT, BIAS_STEP_TOLERANCE, balanced,
+                                       kink_energy_rtol=SEARCH_ENERGY_RTOL)
     return _BiasSearch(current.free, form(current.free), current.result, current.tiled, iterations, failure, current.slopes,
                        current.anchors)
 
