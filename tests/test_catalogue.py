@@ -26,7 +26,7 @@ from test_tasks import checkout_env, default_sigint
 
 # The smallest design (one magnitude per family and sign): the catalogue's machinery, not the fit,
 # is under test here.
-SAMPLES = 33
+SAMPLES = design_size(1)  # the smallest design
 # Two free-width pulls of a membrane even in the shear, mirrored: each balances its transverse
 # stresses to 1e-9 (shell.UNIAXIAL_STRESS_RTOL), so their forces agree far inside this.
 EVEN_PULL_RTOL = 1e-6

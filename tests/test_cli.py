@@ -15,6 +15,7 @@ import rerun as rr
 
 import yarnfit
 from yarnfit.patterns import read_pyp
+from yarnfit.samples import design_size
 from yarnfit.validate import PULL_DIRECTIONS
 
 
@@ -146,8 +147,11 @@ def test_relax_prints_a_summary_and_writes_the_documented_recording(tmp_path):
 # -- a shell fit ----------------------------------------------------------------------------------
 
 
+# --samples for a fit in a test: the smallest design (one magnitude per family and sign).
+SMALLEST_DESIGN = str(design_size(1))
+
 FIT_BAD_INPUTS = {
-    "too few samples": (["fit", "cotton-twill", "--samples", "5"], ["--samples", "33", "5"]),
+    "too few samples": (["fit", "cotton-twill", "--samples", "5"], ["--samples", SMALLEST_DESIGN, "5"]),
     "unknown model": (["fit", "cotton-twill", "--model", "bogus"], ["--model", "bogus", "full", "paper"]),
     "no workers": (["fit", "cotton-twill", "--workers", "0"], ["--workers"]),
     "unknown fibre": (["fit", "--fiber", "kevlarish", "--pattern", "plain", "--gsm", "150"], ["kevlarish"]),
@@ -185,9 +189,9 @@ def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documente
 
     recording, output = tmp_path / "plain-fit.rrd", tmp_path / "plain.json"
     out = subprocess.run([str(Path(sys.executable).parent / "yarnfit"), "fit", "--fiber", "cotton", "--pattern",
-                          "plain", "--gsm", "200", "--samples", "33", "--workers", "2", "--rerun", str(recording),
-                          "-o", str(output), "--figures", str(tmp_path / "figures")], capture_output=True, text=True,
-                         timeout=600)
+                          "plain", "--gsm", "200", "--samples", SMALLEST_DESIGN, "--workers", "2",
+                          "--rerun", str(recording), "-o", str(output), "--figures", str(tmp_path / "figures")],
+                         capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     # Progress went to stderr: the relaxation, then samples done with the time left.
     assert "relaxed in" in out.stderr and re.search(r"samples (\d+)/\1: .* s left\]", out.stderr), out.stderr
@@ -220,7 +224,7 @@ def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documente
     data = json.loads(output.read_text())
     assert {"yarnfit_version", "inputs", "yarn", "shell", "engineering", "fit", "samples"} <= set(data)
     assert data["inputs"]["areal_density_kg_m2"] == pytest.approx(0.2)
-    assert len(data["samples"]) == 39  # 33, and a woven's six pulls along its other bias
+    assert len(data["samples"]) == design_size(1, both_biases=True)  # and a woven's pulls along its other bias
     for sample in data["samples"]:
         assert {"family", "I", "II", "energy_density_j_m2", "residual", "converged"} <= set(sample)
     weft = [s for s in data["samples"] if s["family"] == "weft_stretch" and s["converged"] and s["parameter"] != 0.0]
@@ -247,7 +251,7 @@ def test_a_strict_fit_that_asks_for_an_indefinite_shell_fails_naming_the_family(
     recording, output = tmp_path / "x.rrd", tmp_path / "x.json"
     out = subprocess.run([str(Path(sys.executable).parent / "yarnfit"), "fit", "cotton-jersey", "--strict",
                           "--frictionless", "--yarn-model", "solid", "--figures", str(tmp_path / "figures"),
-                          "--samples", "33", "--rerun", str(recording), "-o", str(output)],
+                          "--samples", SMALLEST_DESIGN, "--rerun", str(recording), "-o", str(output)],
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 1, (out.stdout, out.stderr)
     last = out.stderr.strip().splitlines()[-1]
@@ -258,7 +262,7 @@ def test_a_strict_fit_that_asks_for_an_indefinite_shell_fails_naming_the_family(
 
     out = subprocess.run([str(Path(sys.executable).parent / "yarnfit"), "fit", "cotton-jersey",
                           "--frictionless", "--yarn-model", "solid", "--figures", str(tmp_path / "figures"),
-                          "--samples", "33", "--rerun", str(recording), "-o", str(output)],
+                          "--samples", SMALLEST_DESIGN, "--rerun", str(recording), "-o", str(output)],
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     # The default run ends on the bound of the block the strict run found indefinite, and says so.

@@ -23,7 +23,7 @@ from yarnfit.homogenize import tile_repeat
 from yarnfit.fabric_fit import fit_fabric
 from yarnfit.fibers import get_fiber
 from yarnfit.record import EXCLUDED_COLOR, SAMPLE_TIMELINE, FitRecording
-from yarnfit.samples import Family, SampleResult, family_deformation, identity_sample
+from yarnfit.samples import Family, SampleResult, design_size, family_deformation, identity_sample
 from yarnfit.shell import GF_CM2_PER_CM
 
 # Strips are stored as float32; positions are ~1e-3 m, so float32 round-off is ~1e-10 m.
@@ -43,7 +43,7 @@ TILES = [(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)]
 def fitted():
     """A real fit, as small as the sample design allows (15 samples, ~10 s)."""
     fabric = Fabric(name="plain", fiber=get_fiber("cotton"), structure="plain", areal_density=0.2)
-    return fit_fabric(fabric, samples=33, workers=1)
+    return fit_fabric(fabric, samples=design_size(1), workers=1)
 
 
 def record(fabric_fit, path, samples=True):

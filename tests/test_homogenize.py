@@ -251,7 +251,7 @@ def test_images_on_a_cylinder_are_rotations_about_its_axis():
 def test_the_design_samples_every_family_in_tension_and_compression_only_on_request():
     ranges = SampleRanges(stretch=0.2, curvature=100.0)
     design = sample_design(ranges, 3)
-    assert len(design) == design_size(3) == 2 + 3 * 13 + 18
+    assert len(design) == design_size(3) == 2 + 3 * 13 + 3 * 7  # and weft, warp, bias pulls at seven strains
     assert {s.family for s in design} == set(FAMILIES) - set(OTHER_BIAS_FAMILIES)
     # First the undeformed sample, the energy reference of the membrane samples, then the unbent
     # bending sample (solved at zero membrane force), the bends' reference.
@@ -266,20 +266,20 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
     # Uniaxial tension log-spaced from SMALLEST_STRAIN to UNIAXIAL_LARGEST_STRAIN (10 %) at
     # UNIAXIAL_LEVELS strains; each starts from the pure stretch.
     uniaxial = [s for s in design if s.family == "warp_uniaxial"]
-    assert [s.parameter for s in uniaxial] == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.1, 6))
+    assert [s.parameter for s in uniaxial] == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.1, 7))
     assert np.allclose(uniaxial[0].I, np.diag([1.0, (1.0 + SMALLEST_STRAIN) ** 2]))
-    assert uniaxial_strains(0.05) == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.05, 6))  # a range below 10 %
+    assert uniaxial_strains(0.05) == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.05, 7))  # a range below 10 %
     # On the bias at the same strains, starting from the pure stretch along 45°.
     bias = [s for s in design if s.family == "bias_uniaxial"]
-    assert [s.parameter for s in bias] == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.1, 6))
+    assert [s.parameter for s in bias] == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.1, 7))
     stretch = (1.0 + SMALLEST_STRAIN) ** 2 - 1.0
     assert np.allclose(bias[0].I, np.eye(2) + 0.5 * stretch * np.ones((2, 2)))
     # Asked for both biases, the same pulls along −45° too (a woven's design).
     both = sample_design(ranges, 3, both_biases=True)
-    assert len(both) == design_size(3, both_biases=True) == len(design) + 6
+    assert len(both) == design_size(3, both_biases=True) == len(design) + 7
     assert {s.family for s in both} == set(FAMILIES)
     other = [s for s in both if s.family == "negative_bias_uniaxial"]
-    assert [s.parameter for s in other] == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.1, 6))
+    assert [s.parameter for s in other] == pytest.approx(np.geomspace(SMALLEST_STRAIN, 0.1, 7))
     assert np.allclose(other[0].I, np.eye(2) + 0.5 * stretch * np.array([[1.0, -1.0], [-1.0, 1.0]]))
     assert [(s.family, s.parameter) for s in both if s.family != "negative_bias_uniaxial"] == [
         (s.family, s.parameter) for s in design]
@@ -297,7 +297,7 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
         SampleRanges(stretch=0.2, curvature=100.0, compression=-0.1)
     with pytest.raises(ValueError, match=f"at least {design_size(1)}"):
         levels_for(25)
-    assert [levels_for(n) for n in (33, 46, 59, 72)] == [1, 2, 3, 4]
+    assert [levels_for(n) for n in (36, 49, 62, 75)] == [1, 2, 3, 4]  # 2 + 13 levels + 21 pulls
     assert levels_for(DEFAULT_SAMPLES) == DEFAULT_LEVELS
 
 

@@ -13,6 +13,7 @@ import yarnfit
 from yarnfit.fabric import Fabric
 from yarnfit.fabric_fit import fit_fabric
 from yarnfit.material_file import IncompatibleMaterial, MaterialFile
+from yarnfit.samples import design_size
 from yarnfit.fibers import get_fiber
 from yarnfit.validate.swatch import run_yarn
 
@@ -29,7 +30,7 @@ REBUILD_ITERATIONS = 30
 def fitted():
     fabric = Fabric(name="plain", fiber=get_fiber("cotton"), structure="plain", areal_density=0.2,
                     counts=(2500.0, 2500.0))
-    return fit_fabric(fabric, samples=33, workers=1)
+    return fit_fabric(fabric, samples=design_size(1), workers=1)
 
 
 def test_what_fit_writes_reads_back(tmp_path):
