@@ -49,7 +49,7 @@ from ..engine.lagged import FRICTION_STRAIN_STEP, LAG_TOLERANCE, MAX_LAG_PASSES,
 from ..relax import RelaxedRepeat
 from .bias import BIAS_ANGLE, _search_bias
 from .equilibrium import MAX_ITERATIONS, _axis_change, _green_slope, _solve_from
-from .pull import PeriodicPull, periodic_bias_pull, periodic_pull
+from .pull import PULL_FAMILIES, PeriodicPull, _periodic_pull
 from .surface import TiledRepeat, _form_map, tile_repeat
 from .uniaxial import (FREE_STRAIN_GUESS, FREE_STRAIN_HALVINGS, FREE_STRAIN_PROBE, FREE_STRAIN_RANGE,
                        FREE_STRAIN_SOLVES, FREE_STRAIN_TOLERANCE, SEARCH_ENERGY_RTOL, SMALLEST_FREE_STRETCH,
@@ -284,14 +284,12 @@ def periodic_pulls_along(relaxed: RelaxedRepeat, direction: str, strains: Sequen
     load path from rest (:func:`frictional_periodic_pull`, :func:`frictional_periodic_bias_pull`),
     at 0 the frictionless pulls one by one (:func:`~yarnfit.homogenize.periodic_pull`,
     :func:`~yarnfit.homogenize.periodic_bias_pull`), as the shell's samples are solved."""
-    if direction not in ("weft", "warp", "bias", "other bias"):
-        raise ValueError(f"direction must be 'weft', 'warp', 'bias' or 'other bias', got {direction!r}")
-    strains = _checked_path(strains, friction)
+    if direction not in PULL_FAMILIES:
+        raise ValueError(f"direction must be one of {', '.join(map(repr, PULL_FAMILIES))}, got {direction!r}")
     if friction > 0.0:
         return _frictional_path(relaxed, direction, strains, friction, options, FRICTION_STRAIN_STEP, None)
-    if direction in ("weft", "warp"):
-        return [periodic_pull(relaxed, ("weft", "warp").index(direction), e, options) for e in strains]
-    return [periodic_bias_pull(relaxed, e, options, other=direction == "other bias") for e in strains]
+    strains = _checked_path(strains, friction)  # refuses a NaN or negative coefficient as well
+    return [_periodic_pull(relaxed, direction, e, options) for e in strains]
 
 
 def _checked_path(strains: Sequence[float], coefficient: float) -> list[float]:
@@ -313,15 +311,16 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
     strains = _checked_path(strains, coefficient)
     strain_step = positive_number(strain_step, "strain_step")
     options = options or QuasiStaticOptions(max_iterations=MAX_ITERATIONS)
-    if direction in ("bias", "other bias"):
-        angle = BIAS_ANGLE if direction == "bias" else -BIAS_ANGLE
+    family = PULL_FAMILIES[direction]
+    if family.uniaxial_axis is None:
+        angle = family.uniaxial_angle
         pull_direction = np.array([math.cos(angle), math.sin(angle)])
 
         def search(stretch):
             return lambda *args: _bias_pass(relaxed, stretch, *args, options, angle)
         free = np.zeros(2)
     else:
-        axis = ("weft", "warp").index(direction)
+        axis = family.uniaxial_axis
         pull_direction = np.eye(2)[axis]
 
         def search(stretch):

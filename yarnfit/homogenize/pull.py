@@ -13,8 +13,12 @@ import numpy as np
 from ..checks import positive_number
 from ..engine import QuasiStaticOptions, Residual
 from ..relax import RelaxedRepeat
-from ..samples import UNIAXIAL_FAMILIES, Family, SampleSpec
+from ..samples import Family, SampleSpec
 from .sample import solve_sample
+
+# A periodic pull's direction (PeriodicPull.direction) and the uniaxial family it is a sample of.
+PULL_FAMILIES = {"weft": Family.WEFT_UNIAXIAL, "warp": Family.WARP_UNIAXIAL, "bias": Family.BIAS_UNIAXIAL,
+                 "other bias": Family.NEGATIVE_BIAS_UNIAXIAL}
 
 
 @dataclass(frozen=True)
@@ -66,15 +70,15 @@ def periodic_pull(relaxed: RelaxedRepeat, axis: int, strain: float,
     follow. Warns :class:`~yarnfit.engine.ConvergenceWarning` when the sample does not converge."""
     if axis not in (0, 1):
         raise ValueError(f"axis must be 0 (weft) or 1 (warp), got {axis!r}")
-    family = next(f for f in UNIAXIAL_FAMILIES if f.uniaxial_axis == axis)
-    return _periodic_pull(relaxed, family, ("weft", "warp")[axis], strain, options)
+    return _periodic_pull(relaxed, ("weft", "warp")[axis], strain, options)
 
 
-def _periodic_pull(relaxed: RelaxedRepeat, family: Family, direction: str, strain: float,
+def _periodic_pull(relaxed: RelaxedRepeat, direction: str, strain: float,
                    options: QuasiStaticOptions | None) -> PeriodicPull:
-    """:class:`PeriodicPull` ``direction`` of the uniaxial ``family``'s sample at ``strain``
-    (:func:`solve_sample`): force ``λ`` times its ``pull_slope``; width the free transverse
-    stretch along a yarn axis, ``√det I / λ`` off it."""
+    """:class:`PeriodicPull` ``direction`` (a key of :data:`PULL_FAMILIES`): its uniaxial family's
+    sample at ``strain`` (:func:`solve_sample`), force ``λ`` times its ``pull_slope``; width the
+    free transverse stretch along a yarn axis, ``√det I / λ`` off it."""
+    family = PULL_FAMILIES[direction]
     strain = positive_number(strain, "strain")
     start = time.perf_counter()
     sample = solve_sample(relaxed, SampleSpec.at(family, strain), options)
@@ -99,6 +103,4 @@ def periodic_bias_pull(relaxed: RelaxedRepeat, strain: float,
     Green strain, ``λ`` times the sample's ``pull_slope``. The reference a cut bias strip
     converges to as it widens. Warns :class:`~yarnfit.engine.ConvergenceWarning` when the search
     does not converge."""
-    if other:
-        return _periodic_pull(relaxed, Family.NEGATIVE_BIAS_UNIAXIAL, "other bias", strain, options)
-    return _periodic_pull(relaxed, Family.BIAS_UNIAXIAL, "bias", strain, options)
+    return _periodic_pull(relaxed, "other bias" if other else "bias", strain, options)

@@ -78,29 +78,22 @@ def quasi_newton(solve_at: Callable[[np.ndarray], Trial | None], admissible: Cal
     With ``kink_energy_rtol`` (no ``bound``), a search that would end unconverged ends instead at
     the least Ū it solved when that is a minimum at a kink (:func:`kink_minimum`): two contact
     states meet there, and the search went back and forth between them."""
-    tried = [current]
+    kinks = kink_energy_rtol is not None and bound is None
+    tried = [current]  # every trial solved, for kink_minimum
+    if kinks:
+        solve_trial = solve_at
 
-    def solve_and_keep(free: np.ndarray) -> Trial | None:
-        point = solve_at(free)
-        if point is not None:
-            tried.append(point)
-        return point
+        def solve_at(free: np.ndarray) -> Trial | None:
+            point = solve_trial(free)
+            if point is not None:
+                tried.append(point)
+            return point
 
-    current, failure, hessian = _quasi_newton(solve_and_keep, admissible, current, hessian, solves, max_solves,
-                                              step_limit, step_tolerance, balanced, settled, bound, interpolate,
-                                              balanced_ends)
-    if failure is not None and kink_energy_rtol is not None and bound is None:
-        least = kink_minimum(tried, hessian, step_limit, kink_energy_rtol)
-        if least is not None:
-            return least, None, hessian
-    return current, failure, hessian
+    def unconverged(current: Trial, failure: str, hessian: np.ndarray) -> tuple[Trial, str | None, np.ndarray]:
+        """The search's end where it did not converge: at the kink it found, if asked and there is one."""
+        least = kink_minimum(tried, hessian, step_limit, kink_energy_rtol) if kinks else None
+        return (current, failure, hessian) if least is None else (least, None, hessian)
 
-
-def _quasi_newton(solve_at, admissible, current: Trial, hessian: np.ndarray, solves, max_solves: int,
-                  step_limit: float, step_tolerance: float, balanced, settled, bound: np.ndarray | None,
-                  interpolate: bool, balanced_ends: bool) -> tuple[Trial, str | None, np.ndarray]:
-    """:func:`quasi_newton`'s steps (its arguments), without the kink at the end."""
-    failure = "the search ran out of solves"
     accepted_trials = [_projected(current, bound)]
     while solves() < max_solves:
         held = _held(current, bound)
@@ -138,8 +131,9 @@ def _quasi_newton(solve_at, admissible, current: Trial, hessian: np.ndarray, sol
         if accepted is None:
             # No step lowers Ū: its changes are round-off here. Found if the slopes are spent;
             # else the search is stuck.
-            spent = balanced(current._replace(slopes=slopes), w, v)
-            return current, None if spent else "no step of the free strains lowered Ū", hessian
+            if balanced(current._replace(slopes=slopes), w, v):
+                return current, None, hessian
+            return unconverged(current, "no step of the free strains lowered Ū", hessian)
         moved, change = accepted.free - current.free, accepted.slopes - current.slopes
         if float(moved @ change) > 0.0:  # BFGS keeps the Hessian positive definite
             hs = hessian @ moved
@@ -148,7 +142,7 @@ def _quasi_newton(solve_at, admissible, current: Trial, hessian: np.ndarray, sol
         accepted_trials.append(_projected(current, bound))
         if settled is not None and settled(accepted_trials):
             return current, None, hessian
-    return current, failure, hessian
+    return unconverged(current, "the search ran out of solves", hessian)
 
 
 def kink_minimum(trials: list[Trial], hessian: np.ndarray, step_limit: float, energy_rtol: float) -> Trial | None:
