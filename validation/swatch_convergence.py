@@ -61,6 +61,7 @@ import numba
 from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
 from yarnfit.homogenize import periodic_pulls_along
+from yarnfit.validate.shell_strip import ShellStripCurve, shell_strip_limit
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, read_uniform, stretch_swatch
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
@@ -92,11 +93,13 @@ def parse_sizes(text: str) -> list[tuple[float, float]]:
 
 
 def solve_curves(file: MaterialFile, sizes, directions, selvedge: bool = False,
-                 friction: bool = True) -> tuple[object, dict]:
+                 friction: bool = True, json_path: str | None = None) -> tuple[object, dict]:
     """``(relaxed repeat, {label: curve})``: each direction's strips at each size (with
     ``selvedge``, the yarns running across a strip joined at its long sides:
     :func:`yarnfit.validate.swatch.join_selvedges`; with ``friction``, the fibre's friction at the
-    contacts), pulled to STRAINS on one core; prints each strip's row as it finishes."""
+    contacts), pulled to STRAINS on one core; prints each strip's row as it finishes and, with
+    ``json_path``, writes the curves finished so far there (a strip takes up to hours: a run
+    stopped part way keeps what it finished, for ``--from-json``)."""
     relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
     repeat = float(max(relaxed.repeat_size))
     section = relaxed.yarn.section()
@@ -113,7 +116,15 @@ def solve_curves(file: MaterialFile, sizes, directions, selvedge: bool = False,
             curve["repeats"] = [gauge, width]
             curves[f"{direction} {gauge:g}x{width:g}"] = curve
             print(convergence_row(curve), f"({time.perf_counter() - start:.0f} s)", flush=True)
+            if json_path:
+                write_curves(json_path, relaxed.name, curves)
     return relaxed, curves
+
+
+def write_curves(path: str, name: str, curves: dict) -> None:
+    """The curves as ``--from-json`` reads them."""
+    with open(path, "w") as out:
+        json.dump({"material": name, "curves": curves}, out, indent=1)
 
 
 def convergence_row(curve: dict) -> str:
@@ -281,22 +292,56 @@ def largest_strips(curves: dict) -> dict:
     return largest
 
 
+def shell_strips(file: MaterialFile, curves: dict) -> dict[str, ShellStripCurve]:
+    """``{direction: curve}``: the nonlinear shell pulled between the jaws of the largest strip of
+    each direction, its gauge and width, to STRAINS (:func:`yarnfit.validate.shell_strip.
+    shell_strip_limit`: the same test as the yarn strip's, read the same way)."""
+    strips = {}
+    for direction, curve in largest_strips(curves).items():
+        start = time.perf_counter()
+        strips[direction] = shell_strip_limit(file.shell, curve["angle_deg"], curve["gauge_m"], curve["width_m"],
+                                              STRAINS, progress=lambda text: print("   ", text, flush=True))
+        print(f"shell strip {direction} ({strips[direction].nodes} nodes, rows {strips[direction].rows}): "
+              f"{time.perf_counter() - start:.0f} s", flush=True)
+    return strips
+
+
+@dataclass(frozen=True)
+class Tally:
+    """Of a reading's converged points: how many were judged and how many the nonlinear shell
+    meets pulled free (``within``), how many its shell strip between the same jaws was judged at
+    and meets, and how many frictional periodic pulls were judged and meet."""
+
+    judged: int = 0
+    within: int = 0
+    strip_judged: int = 0
+    strip_within: int = 0
+    rubbed: int = 0
+    rubbed_within: int = 0
+
+
+def _meets(force: float, compression: float, reference_force: float, reference_compression: float) -> bool:
+    ratio = force / reference_force if reference_force > 0 else math.inf
+    return abs(ratio - 1.0) <= SHELL_FORCE_RTOL and abs(compression - reference_compression) <= SHELL_COMPRESSION_ATOL
+
+
 def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Callable,
-               frictional: dict) -> tuple[list[str], int, int, int, int]:
-    """Table rows of the shell (nonlinear and linear), the periodic repeat's pull
+               frictional: dict, strips: dict[str, ShellStripCurve]) -> tuple[list[str], Tally]:
+    """Table rows of the shell (nonlinear and linear) pulled free, the nonlinear shell's strip
+    between the same jaws (``strips``, :func:`shell_strips`: at the jaws' level for the jaws'
+    reading, else read at the strain the yarn strip's middle reached), the periodic repeat's pull
     (``periodic(direction, strain)``, a :class:`PeriodicPull` or None) and its frictional pull
     (``frictional[direction, strain]``, :func:`frictional_pulls`) against the largest strip per
-    direction read by ``reading``; the number of converged points and of those where the nonlinear
-    shell meets both criteria; the number of converged frictional pulls and of those that do."""
+    direction read by ``reading``, and their :class:`Tally`."""
     shells = {"nonlinear": file.shell, "linear": file.linear_shell}  # the linear (StVK) fit from the same samples
-    rows, judged, within, rubbed, rubbed_within = [], 0, 0, 0, 0
+    rows, judged, within, rubbed, rubbed_within, strip_judged, strip_within = [], 0, 0, 0, 0, 0, 0
     for direction, curve in largest_strips(curves).items():
         angle = math.radians(curve["angle_deg"])
         gauge, width = curve["repeats"]
         for level, point in zip(STRAINS, reading.read(curve)):
             if point is None:
                 rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * level:g} % | — | not reached | — | "
-                            + " | ".join(["— | —"] * 4) + " | not reached |")
+                            + " | ".join(["— | —"] * 5) + " | not reached | — |")
                 continue
             force, strain, narrowing = point.force, point.strain, point.compression
             pull = periodic(direction, strain)
@@ -307,23 +352,37 @@ def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Cal
                          + ("" if pull.converged else " (not converged)"))
             if pull is not None and pull.converged and point.converged:
                 rubbed += 1
-                rubbed_within += (abs(pull.force_n_per_m / force - 1.0) <= SHELL_FORCE_RTOL
-                                  and abs(pull.width_ratio - narrowing) <= SHELL_COMPRESSION_ATOL)
+                rubbed_within += _meets(pull.force_n_per_m, pull.width_ratio, force, narrowing)
             verdicts = {}
             for name, shell in shells.items():
                 pull = shell.uniaxial_pull(angle, 1.0 + strain)
-                ratio = pull.force_n_per_m / force if force > 0 else math.inf
-                verdicts[name] = (abs(ratio - 1.0) <= SHELL_FORCE_RTOL
-                                  and abs(pull.width_ratio - narrowing) <= SHELL_COMPRESSION_ATOL)
+                verdicts[name] = _meets(pull.force_n_per_m, pull.width_ratio, force, narrowing)
                 cells.append(f"{_against(pull.force_n_per_m, force)} | {pull.width_ratio:.3f}")
+            strip = strips[direction]
+            if reading.name == "jaws":
+                state = strip.at_strain(point.level)
+                same = (state.force_n_per_m, state.compression_ratio, state.converged)
+            else:
+                read = strip.read([strain])[0]
+                same = None if read is None else (read.force_n_per_m, read.compression_ratio, read.converged)
+            if same is None:
+                cells.append("not reached | —")
+            else:
+                cells.append(f"{_against(same[0], force)} | {same[1]:.3f}" + ("" if same[2] else " (not converged)"))
             if point.converged:
                 judged += 1
                 within += verdicts["nonlinear"]
+                if same is not None and same[2]:
+                    strip_judged += 1
+                    strip_within += _meets(same[0], same[1], force, narrowing)
             verdict = ("not converged" if not point.converged else
                        "within" if verdicts["nonlinear"] else "MISSED")
+            strip_verdict = ("—" if not point.converged or same is None or not same[2] else
+                             "within" if _meets(same[0], same[1], force, narrowing) else "MISSED")
             rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * point.level:g} % | {force:.4g} | "
-                        f"{100 * strain:.3g} %{point.note} | {narrowing:.3f} | " + " | ".join(cells) + f" | {verdict} |")
-    return rows, judged, within, rubbed, rubbed_within
+                        f"{100 * strain:.3g} %{point.note} | {narrowing:.3f} | " + " | ".join(cells)
+                        + f" | {verdict} | {strip_verdict} |")
+    return rows, Tally(judged, within, strip_judged, strip_within, rubbed, rubbed_within)
 
 
 def fit_rows(file: MaterialFile, curves: dict, pulls: dict) -> list[str]:
@@ -380,7 +439,7 @@ def main(argv: list[str] | None = None) -> int:
         relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
     else:
         relaxed, curves = solve_curves(file, parse_sizes(args.sizes), args.directions.split(","), args.selvedge,
-                                       not args.frictionless)
+                                       not args.frictionless, args.json)
         name = relaxed.name
         print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
     strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
@@ -400,18 +459,19 @@ def main(argv: list[str] | None = None) -> int:
                                                                                                     [strain])[0]
 
     coefficient = 0.0 if args.frictionless else relaxed.fiber.friction
+    strips = shell_strips(file, curves)
     counts, rubbings = {}, {}
     for reading in READINGS:
         rubbing = rubbings[reading.name] = frictional_pulls(relaxed, curves, reading, coefficient)
-        rows, judged, within, rubbed, rubbed_within = shell_rows(file, curves, reading, periodic, rubbing)
-        counts[reading.name] = (within, judged, rubbed_within, rubbed)
+        rows, counts[reading.name] = shell_rows(file, curves, reading, periodic, rubbing, strips)
         print_table(f"{name}: shell and periodic repeat against the largest strip per direction, read as "
                     f"{reading.title} (force within {SHELL_FORCE_RTOL:.0%}, compression within "
                     f"{SHELL_COMPRESSION_ATOL}; % against the strip)",
                     ["direction", "repeats", "level", "swatch N/m", "strain pulled to", "swatch compression",
                      "periodic N/m", "periodic compression", f"periodic with friction μ {coefficient:g} N/m",
                      "its compression", "nonlinear N/m", "nonlinear compression", "linear N/m",
-                     "linear compression", "verdict (nonlinear)"], rows)
+                     "linear compression", "nonlinear strip, same jaws, N/m", "its compression",
+                     "verdict (nonlinear)", "verdict (its strip)"], rows)
     fitted_to = pulls
     if file.sample_friction > 0.0:
         # A shell fitted to loading paths: its own error is against the frictional pull at the
@@ -429,15 +489,15 @@ def main(argv: list[str] | None = None) -> int:
                      "nonlinear N/m", "nonlinear compression"], rows)
     print()
     for reading in READINGS:
-        within, judged, rubbed_within, rubbed = counts[reading.name]
-        print(f"shell (nonlinear) vs largest swatch, {reading.name}: within at {within} of {judged} converged points: "
-              f"{'within' if within == judged else 'MISSED'}")
-        if rubbed:
-            print(f"periodic pull with friction vs largest swatch, {reading.name}: within at {rubbed_within} of "
-                  f"{rubbed} converged points")
-    if args.json:
-        with open(args.json, "w") as out:
-            json.dump({"material": name, "curves": curves}, out, indent=1)
+        tally = counts[reading.name]
+        print(f"shell (nonlinear) pulled free vs largest swatch, {reading.name}: within at {tally.within} of "
+              f"{tally.judged} converged points: {'within' if tally.within == tally.judged else 'MISSED'}")
+        print(f"shell (nonlinear) strip between the same jaws vs largest swatch, {reading.name}: within at "
+              f"{tally.strip_within} of {tally.strip_judged} converged points: "
+              f"{'within' if tally.strip_within == tally.strip_judged else 'MISSED'}")
+        if tally.rubbed:
+            print(f"periodic pull with friction vs largest swatch, {reading.name}: within at {tally.rubbed_within} of "
+                  f"{tally.rubbed} converged points")
     return 0
 
 

@@ -99,7 +99,7 @@ def mid_strain(swatch: Swatch, position: np.ndarray) -> float:
     constraining jaws the middle strains more or less than that. NaN where a mark holds no node."""
     rest = swatch.position
     inner = np.abs(rest[:, 1] - centre_line(swatch)) <= 0.25 * swatch.width
-    return _between_marks(rest, position, 0, mid_length(swatch, rest), 0.5 * EXTENSOMETER_SPAN * swatch.gauge,
+    return between_marks(rest, position, 0, mid_length(swatch, rest), 0.5 * EXTENSOMETER_SPAN * swatch.gauge,
                           MARK_BAND * swatch.gauge, inner) - 1.0
 
 
@@ -112,11 +112,11 @@ def middle_compression(swatch: Swatch, position: np.ndarray) -> float:
     width more (:func:`mid_width`). NaN where a mark holds no node."""
     rest = swatch.position
     inner = np.abs(rest[:, 0] - mid_length(swatch, rest)) <= 0.25 * swatch.gauge
-    return _between_marks(rest, position, 1, centre_line(swatch), 0.25 * swatch.width, MARK_BAND * swatch.width,
+    return between_marks(rest, position, 1, centre_line(swatch), 0.25 * swatch.width, MARK_BAND * swatch.width,
                           inner)
 
 
-def _between_marks(rest: np.ndarray, position: np.ndarray, axis: int, centre: float, offset: float, band: float,
+def between_marks(rest: np.ndarray, position: np.ndarray, axis: int, centre: float, offset: float, band: float,
                    inner: np.ndarray) -> float:
     """The distance along ``axis`` between two material marks at ``centre ± offset`` (m, at
     rest), each the mean coordinate of the ``inner`` nodes within ``band`` of it at rest, at

@@ -513,7 +513,14 @@ def read_uniform(curve: dict, strains: Sequence[float]) -> list[UniformReading |
     state, the power law of the first two, through the origin), the width ratio linear in the
     strain. ``None`` for a strain the middle did not reach (beyond
     :data:`UNIFORM_EXTRAPOLATION_RTOL`) or a curve with no middle reading."""
-    m, f, c, ok, source = uniform_curve(curve)
+    return read_curve(*uniform_curve(curve), strains)
+
+
+def read_curve(m: np.ndarray, f: np.ndarray, c: np.ndarray, ok: np.ndarray, source: str,
+               strains: Sequence[float]) -> list[UniformReading | None]:
+    """:func:`read_uniform` on a uniform part given as arrays (the middle's strain, pull per width
+    (N/m), width ratio and converged flag ``(n,)`` each, rest first, in load order, and their
+    ``source``): a shell strip's (:mod:`yarnfit.validate.shell_strip`) is read as a yarn strip's."""
     readings: list[UniformReading | None] = []
     for target in strains:
         target = float(target)

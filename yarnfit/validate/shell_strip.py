@@ -1,0 +1,489 @@
+"""The fitted shell in the yarn strip's own test: a strip of the shell's membrane, clamped by two
+jaws and pulled quasi-statically, read as the yarn strip is read (issue 14's acceptance, like for
+like).
+
+Why: a strip held by its jaws is not a free pull. A woven's bias strip, cut 8 × 6 repeats, has its
+ends held unsheared by the jaws and its middle sheared more than their travel (the twill's middle
+strains 1.6–1.8 times it, the satin's nearly twice): its middle's pull at its strain is not what a
+long strip pulled free (:meth:`yarnfit.shell.ShellMaterial.uniaxial_pull`) gives at that strain.
+The shell pulled between the same jaws is: if the shell summarises its yarns, it reproduces the
+jaws' constraint as the yarns do.
+
+The model: the strip's gauge ``G × W`` (m, between the jaws' inner edges; x along the pull, y
+across, centred on the strip's middle as :class:`yarnfit.validate.strip.Swatch` is), meshed with
+linear triangles whose edges follow the yarns (:func:`strip_mesh`: a mesh whose edges do not lie
+along a nearly inextensible yarn locks, since a constant-strain triangle cannot shear without
+stretching every direction but its own edges'); the membrane energy ``Π = Σ h A ψ(E)`` of the
+material's Green strain ``E`` in its weft/warp frame (``h`` the thickness, ``A`` a triangle's
+reference area, ``ψ`` :meth:`~yarnfit.shell.ShellMaterial.membrane_energy`), in plane (no bending,
+no wrinkling: a bias strip's compression across it is carried in plane); the nodes at or beyond
+either jaw's inner edge held, the ``+x`` jaw moved ``strain × G`` along x. Each strain is reached
+in load steps of at most :data:`STRAIN_STEP` (the yarn strip's friction step), each a Newton solve
+on the total-Lagrangian stiffness (material and geometric parts), warm-started from the last state
+stretched affinely between the jaws, stopped on the free nodes' force imbalance
+(:data:`FORCE_RTOL` of the jaws' pull) and reporting it.
+
+What is read, as :mod:`yarnfit.validate.strip` reads the yarn strip: the jaws' pull over the whole
+width; the middle half of the width's pull across planes over the middle half of the gauge (the
+mean over that region of the traction on reference planes across x, ``(F S N)_x``, per reference
+width); the middle's strain between two extensometer marks; the middle half's width ratio between
+two transverse marks; the width at mid-length. Cut yarn ends at a strip's long sides, which carry
+little, the shell does not have: the middle half is read where they matter least.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
+
+from ..shell import ShellMaterial
+from .strip import EXTENSOMETER_SPAN, MARK_BAND, between_marks
+from .swatch import UniformReading, read_curve
+
+# Rows of triangles across the strip's width (a bias mesh's rows are half a cell apart): the
+# coarser of shell_strip_limit's two meshes (24 and 48 rows: see its docstring for the convergence
+# they give; tests/test_shell_strip.py checks it on a woven-like membrane).
+ROWS_ACROSS = 24
+# Largest jaw travel per load step (strain): as the yarn strip's frictional steps
+# (yarnfit.engine.lagged.FRICTION_STRAIN_STEP), so the two curves are read between steps as fine.
+STRAIN_STEP = 0.005
+# A load step has converged when every free node's force imbalance is below this fraction of the
+# jaws' pull (N): the pull is what is read, and 1e-8 of it is far below any reading's precision
+# while far above round-off (a satin's bias pull is ~1e-5 of the stresses its yarns could carry;
+# the imbalance's round-off is ~1e-16 of those).
+FORCE_RTOL = 1e-8
+# ... or below this multiple of the stiffest node's stiffness (the Hessian's largest diagonal
+# entry, N/m) times the largest displacement (m): the imbalance's round-off floor (a displacement's
+# last digits through the stiffest yarn), which a near-mechanism's pull can fall below (the twill's
+# linear fit, shear stiffness ~1e-12 of its yarns', pulls ~1e-11 N at 2 %). Newton's imbalances
+# stall at 1e-16 … 1e-14 of that product.
+FORCE_ROUNDOFF = 1e-13
+# Newton iterations per load step before a step is reported unconverged: a membrane with a
+# piecewise-quadratic energy converges in a handful once its kinks are crossed.
+MAX_NEWTON = 100
+# Backtracking: the step is halved until the energy falls (Armijo, this fraction of the linear
+# decrease) or it is this small, then the Hessian is shifted (it can be indefinite where the strip
+# is compressed across).
+ARMIJO = 1e-4
+LEAST_STEP = 1e-6
+# Angles (degrees from weft) whose yarns the two meshes follow: 0 / 90 (yarns along the strip and
+# across it: square cells split on a diagonal) and ±45 (yarns at ±45°: rows half a cell apart,
+# shifted half a cell, so the edges run along x and both diagonals).
+ALIGNED_ANGLES = (0.0, 90.0, -90.0)
+BIAS_ANGLES = (45.0, -45.0)
+
+
+@dataclass(frozen=True)
+class StripMesh:
+    """A shell strip's reference mesh, in the strip frame (x along the pull, y across, centred).
+
+    Attributes:
+        rest: ``(n, 2)`` node positions at rest (m).
+        triangles: ``(m, 3)`` node indices, counter-clockwise.
+        moving, fixed: node indices held by the ``+x`` and ``−x`` jaws.
+        gauge, width: the gauge between the jaws' inner edges and the width (m).
+    """
+
+    rest: np.ndarray
+    triangles: np.ndarray
+    moving: np.ndarray
+    fixed: np.ndarray
+    gauge: float
+    width: float
+
+
+@dataclass(frozen=True)
+class ShellStripState:
+    """One load step of a shell strip.
+
+    Attributes:
+        strain: the jaws' travel over the gauge.
+        force_n_per_m: the moving jaw's pull over the whole reference width (N/m).
+        middle_force_n_per_m: the middle half of the width's pull over the middle half of the gauge
+            per reference width (N/m).
+        mid_strain: the middle's strain between the extensometer marks.
+        middle_compression_ratio: the middle half's width ratio between the transverse marks.
+        compression_ratio: the width at mid-length over the initial width.
+        imbalance_n: the largest free-node force imbalance at the end of the solve (N).
+        iterations: Newton iterations of the step.
+        converged: whether the imbalance fell below :data:`FORCE_RTOL` of the jaws' pull (or its
+            round-off floor, :data:`FORCE_ROUNDOFF`).
+    """
+
+    strain: float
+    force_n_per_m: float
+    middle_force_n_per_m: float
+    mid_strain: float
+    middle_compression_ratio: float
+    compression_ratio: float
+    imbalance_n: float
+    iterations: int
+    converged: bool
+
+
+@dataclass(frozen=True)
+class ShellStripCurve:
+    """A shell strip pulled through its load steps (:func:`pull_shell_strip`), rest first:
+    ``rows`` the mesh's rows across, or the two meshes it was extrapolated from
+    (:func:`shell_strip_limit`; ``nodes`` then the finer's)."""
+
+    angle_deg: float
+    gauge: float
+    width: float
+    nodes: int
+    states: tuple[ShellStripState, ...]
+    rows: tuple[int, ...] = (ROWS_ACROSS,)
+
+    @property
+    def converged(self) -> bool:
+        return all(state.converged for state in self.states)
+
+    def at_strain(self, strain: float) -> ShellStripState:
+        """The state whose jaw strain is ``strain`` (one of the strains it was pulled to)."""
+        for state in self.states:
+            if math.isclose(state.strain, strain, rel_tol=1e-9, abs_tol=1e-15):
+                return state
+        raise ValueError(f"the shell strip was not pulled to {strain!r}")
+
+    def uniform_curve(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The middle's strain, pull (N/m), width ratio and converged flag ``(n,)`` each through
+        every load step, as :func:`yarnfit.validate.swatch.uniform_curve` gives a yarn strip's."""
+        columns = [(s.mid_strain, s.middle_force_n_per_m, s.middle_compression_ratio, s.converged)
+                   for s in self.states]
+        strain, force, width, converged = (np.array(column) for column in zip(*columns))
+        return strain, force, width, converged.astype(bool)
+
+    def read(self, strains: Sequence[float]) -> list[UniformReading | None]:
+        """The middle's pull and width at each of the middle's ``strains``, read off its load
+        steps as a yarn strip's (:func:`yarnfit.validate.swatch.read_curve`)."""
+        return read_curve(*self.uniform_curve(), "steps", strains)
+
+
+def strip_mesh(angle_deg: float, gauge: float, width: float, rows: int = ROWS_ACROSS) -> StripMesh:
+    """The mesh of a strip pulled at ``angle_deg`` from weft (one of :data:`ALIGNED_ANGLES` or
+    :data:`BIAS_ANGLES`), ``gauge × width`` (m) between its jaws, ``rows`` rows of triangles
+    across, cells as near square as the gauge allows. Its edges lie along the yarns (see the
+    module docstring); the jaws hold the nodes at or beyond their inner edges ``x = ±gauge/2``
+    (a bias mesh's shifted rows end in a half cell at each jaw)."""
+    for value, what in ((gauge, "gauge"), (width, "width")):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{what} must be a positive length in m, got {value!r}")
+    if not (isinstance(rows, (int, np.integer)) and rows >= 2):
+        raise ValueError(f"rows must be an integer of at least 2, got {rows!r}")
+    bias = any(math.isclose(angle_deg, a) for a in BIAS_ANGLES)
+    if not bias and not any(math.isclose(angle_deg, a) for a in ALIGNED_ANGLES):
+        raise ValueError(f"a shell strip's mesh follows its yarns at {', '.join(f'{a:g}' for a in ALIGNED_ANGLES)}"
+                         f" or {', '.join(f'{a:g}' for a in BIAS_ANGLES)}°, got {angle_deg!r}")
+    # Row spacing dy; cell length a along x (a bias cell is two rows high, a = 2 dy, so its
+    # diagonals run at 45°).
+    dy = width / rows
+    cell = 2.0 * dy if bias else dy
+    columns = max(1, round(gauge / cell))
+    cell = gauge / columns
+    if bias:
+        dy = 0.5 * cell  # the diagonals at exactly 45°: rows follow the cells along x
+        rows = max(2, round(width / dy))
+        dy = width / rows
+    xs, index, count = [], [], 0
+    for j in range(rows + 1):
+        x = np.arange(columns + 1) * cell
+        if bias and j % 2 == 1:  # shifted half a cell, a node at each jaw's edge
+            x = np.concatenate([[0.0], (np.arange(columns) + 0.5) * cell, [gauge]])
+        index.append(np.arange(len(x)) + count)
+        xs.append(x)
+        count += len(x)
+    rest = np.concatenate([np.column_stack([x - 0.5 * gauge, np.full(len(x), j * dy - 0.5 * width)])
+                           for j, x in enumerate(xs)])
+    triangles = []
+    for j in range(rows):
+        triangles.extend(_zip_rows(index[j], index[j + 1], rest))
+    triangles = np.array(triangles, dtype=np.int64)
+    slack = 1e-9 * gauge
+    moving = np.flatnonzero(rest[:, 0] >= 0.5 * gauge - slack)
+    fixed = np.flatnonzero(rest[:, 0] <= -0.5 * gauge + slack)
+    return StripMesh(rest=rest, triangles=triangles, moving=moving, fixed=fixed, gauge=gauge, width=width)
+
+
+def _zip_rows(low: np.ndarray, high: np.ndarray, rest: np.ndarray) -> list[tuple[int, int, int]]:
+    """Triangles (counter-clockwise) between two rows of nodes (``rest (n, 2)``), each sorted by
+    x, both starting and ending at the same x: each triangle advances one row by a node, the row
+    whose advance makes the shorter new edge across (the lower row on a tie). Two unshifted rows
+    give squares split on one diagonal; a row shifted half a cell gives edges along x and both
+    diagonals, and half cells whose edges run across at its ends."""
+    i, j, triangles = 0, 0, []
+    while i < len(low) - 1 or j < len(high) - 1:
+        advance_low = j == len(high) - 1 or (
+            i < len(low) - 1 and np.linalg.norm(rest[low[i + 1]] - rest[high[j]])
+            <= np.linalg.norm(rest[low[i]] - rest[high[j + 1]]) * (1.0 + 1e-12))
+        if advance_low:
+            triangles.append((int(low[i]), int(low[i + 1]), int(high[j])))
+            i += 1
+        else:
+            triangles.append((int(low[i]), int(high[j + 1]), int(high[j])))
+            j += 1
+    return triangles
+
+
+class _Membrane:
+    """The strip's membrane energy over its mesh: energy, nodal gradient and stiffness (material
+    and geometric parts) at current positions ``x (n, 2)``, the material's Green strain taken in
+    its weft/warp frame."""
+
+    def __init__(self, material: ShellMaterial, mesh: StripMesh, angle_deg: float):
+        self.material, self.mesh = material, mesh
+        c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+        # Material coordinates of the strip frame's reference points: the pull direction u is
+        # (c, s) in weft/warp coordinates, across it v = (−s, c) (as cut_swatch turns a strip).
+        self.to_material = np.array([[c, -s], [s, c]])
+        rest = mesh.rest @ self.to_material.T
+        t = mesh.triangles
+        edges = np.stack([rest[t[:, 1]] - rest[t[:, 0]], rest[t[:, 2]] - rest[t[:, 0]]], axis=2)  # (m, 2, 2)
+        self.area = 0.5 * np.linalg.det(edges)
+        if np.any(self.area <= 0.0):
+            raise ValueError("the strip's mesh has a degenerate or inverted triangle")
+        inverse = np.linalg.inv(edges)  # rows: ∂(barycentric 1, 2)/∂X
+        # Shape-function gradients in material coordinates, (m, 3, 2).
+        self.gradient_of_shape = np.concatenate([-inverse.sum(axis=1, keepdims=True), inverse], axis=1)
+        self.h = material.thickness
+        dofs = 2 * t[:, :, None] + np.arange(2)[None, None, :]  # (m, 3, 2)
+        dofs = dofs.reshape(len(t), 6)
+        self.rows = np.repeat(dofs, 6, axis=1).ravel()
+        self.cols = np.tile(dofs, (1, 6)).ravel()
+
+    def kinematics(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(F, ε)`` per triangle at nodal displacements ``u (n, 2)`` (m): ``F = ∂x/∂X`` (current
+        strip frame from material frame) ``(m, 2, 2)`` and the Voigt Green strain ``(m, 3)``,
+        formed from the displacement gradient ``D`` as ``½ (R D + (R D)ᵀ + Dᵀ D)`` (``F = Rᵀ + D``):
+        from positions, ``½ (FᵀF − Id)`` loses the digits of a gauge-long coordinate over a cell,
+        which a satin's stiff yarns turn into a force imbalance above the bias pull's tolerance."""
+        D = np.einsum("mai,maj->mij", u[self.mesh.triangles], self.gradient_of_shape)
+        RD = np.einsum("ik,mkj->mij", self.to_material, D)
+        E = 0.5 * (RD + np.swapaxes(RD, 1, 2) + np.einsum("mki,mkj->mij", D, D))
+        return self.to_material.T[None] + D, np.stack([E[:, 0, 0], E[:, 1, 1], 2.0 * E[:, 0, 1]], axis=1)
+
+    def energy(self, u: np.ndarray) -> float:
+        return float(self.h * np.dot(self.area, self.material.membrane_energy(self.kinematics(u)[1])))
+
+    def first_piola(self, F: np.ndarray, eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(h F S (N/m), S (Pa))`` per triangle, ``(m, 2, 2)`` each: the first Piola–Kirchhoff
+        stress resultant and the second Piola–Kirchhoff stress in material coordinates."""
+        sigma = self.material.membrane_stress(eps)
+        S = np.stack([np.stack([sigma[:, 0], sigma[:, 2]], axis=1), np.stack([sigma[:, 2], sigma[:, 1]], axis=1)],
+                     axis=1)
+        return self.h * np.einsum("mij,mjk->mik", F, S), S
+
+    def gradient(self, u: np.ndarray) -> np.ndarray:
+        """``∂Π/∂u (n, 2)`` (N)."""
+        P, _ = self.first_piola(*self.kinematics(u))
+        per_node = self.area[:, None, None] * np.einsum("mij,maj->mai", P, self.gradient_of_shape)
+        out = np.zeros_like(u)
+        np.add.at(out, self.mesh.triangles, per_node)
+        return out
+
+    def stiffness(self, u: np.ndarray) -> scipy.sparse.csr_matrix:
+        """``∂²Π/∂u²`` ``(2n, 2n)``, the material part ``h A Bᵀ D B`` and the geometric part
+        ``h A (gₐᵀ S g_b) Id``."""
+        F, eps = self.kinematics(u)
+        D = self.material.membrane_tangent(eps)
+        _, S = self.first_piola(F, eps)
+        g = self.gradient_of_shape
+        # B (m, 3, 3 nodes, 2): δε = Σ_a B_a δx_a with rows δE00, δE11, 2 δE01.
+        B = np.stack([g[:, :, 0, None] * F[:, None, :, 0],
+                      g[:, :, 1, None] * F[:, None, :, 1],
+                      g[:, :, 1, None] * F[:, None, :, 0] + g[:, :, 0, None] * F[:, None, :, 1]], axis=1)
+        B = B.reshape(len(F), 3, 6)
+        material = np.einsum("mpi,mpq,mqj->mij", B, D, B)
+        geometric = np.einsum("mai,mij,mbj->mab", g, S, g)  # (m, 3, 3)
+        geometric = np.einsum("mab,kl->makbl", geometric, np.eye(2)).reshape(len(F), 6, 6)
+        local = (self.h * self.area)[:, None, None] * (material + geometric)
+        n = 2 * len(u)
+        return scipy.sparse.coo_matrix((local.ravel(), (self.rows, self.cols)), shape=(n, n)).tocsr()
+
+    def middle_traction(self, u: np.ndarray) -> float:
+        """The mean over the middle region (half the gauge by half the width, triangles by their
+        centroid, area-weighted) of the pull across reference planes normal to x, ``(P N)_x`` with
+        ``N`` the strip's x in material coordinates (N/m)."""
+        mesh = self.mesh
+        centroid = mesh.rest[mesh.triangles].mean(axis=1)
+        inner = (np.abs(centroid[:, 0]) <= 0.25 * mesh.gauge) & (np.abs(centroid[:, 1]) <= 0.25 * mesh.width)
+        P, _ = self.first_piola(*self.kinematics(u))
+        normal = self.to_material[:, 0]
+        traction = np.einsum("mj,j->m", P[:, 0, :], normal)
+        return float(np.dot(self.area[inner], traction[inner]) / self.area[inner].sum())
+
+
+def pull_shell_strip(material: ShellMaterial, angle_deg: float, gauge: float, width: float,
+                     strains: Sequence[float], *, rows: int = ROWS_ACROSS, strain_step: float = STRAIN_STEP,
+                     progress: Callable[[str], None] | None = None) -> ShellStripCurve:
+    """Pull a strip of ``material``'s membrane, cut at ``angle_deg`` from weft, ``gauge × width``
+    (m) between its jaws, to each of ``strains`` (ascending, > 0) in load steps of at most
+    ``strain_step`` (see the module docstring). Every load step is kept (``states``, rest first).
+    A step that does not converge is kept and flagged, and reported through ``progress``."""
+    strains = [float(e) for e in strains]
+    if not strains or any(not (math.isfinite(e) and e > 0) for e in strains) or strains != sorted(strains):
+        raise ValueError(f"strains must be positive and ascending, got {strains!r}")
+    if not (math.isfinite(strain_step) and strain_step > 0):
+        raise ValueError(f"strain_step must be positive, got {strain_step!r}")
+    material.check_positive_definite()
+    mesh = strip_mesh(angle_deg, gauge, width, rows)
+    membrane = _Membrane(material, mesh, angle_deg)
+    held = np.zeros(2 * len(mesh.rest), dtype=bool)
+    for nodes in (mesh.moving, mesh.fixed):
+        held[2 * nodes] = held[2 * nodes + 1] = True
+    free = np.flatnonzero(~held)
+    u = np.zeros_like(mesh.rest)  # displacements (m): the unknowns, see _Membrane.kinematics
+    states = [_read(membrane, u, 0.0, 0.0, 0, True)]
+    reached, before = 0.0, None
+    for target in strains:
+        steps = max(1, math.ceil((target - reached) / strain_step - 1e-9))
+        for k in range(1, steps + 1):
+            strain = reached + (target - reached) * k / steps
+            previous = states[-1].strain
+            # Warm start: the last two equilibria extrapolated to this strain (the first step: the
+            # rest state stretched affinely between the jaws, which move apart symmetrically, the
+            # strip's middle staying at x = 0).
+            if before is None:
+                guess = u.copy()
+                guess[:, 0] = mesh.rest[:, 0] * strain
+            else:
+                guess = u + (u - before[1]) * (strain - previous) / (previous - before[0])
+            before, u = (previous, u), guess
+            u[mesh.moving] = (0.5 * strain * gauge, 0.0)
+            u[mesh.fixed] = (-0.5 * strain * gauge, 0.0)
+            u, imbalance, iterations, converged = _solve(membrane, u, free)
+            state = _read(membrane, u, strain, imbalance, iterations, converged)
+            if not converged and progress is not None:
+                progress(f"shell strip at {100 * strain:.3g} %: not converged (imbalance {imbalance:.3g} N after "
+                         f"{iterations} Newton iterations)")
+            states.append(state)
+        reached = target
+    return ShellStripCurve(angle_deg=float(angle_deg), gauge=float(gauge), width=float(width), nodes=len(mesh.rest),
+                           states=tuple(states), rows=(int(rows),))
+
+
+def shell_strip_limit(material: ShellMaterial, angle_deg: float, gauge: float, width: float,
+                      strains: Sequence[float], *, rows: int = ROWS_ACROSS,
+                      progress: Callable[[str], None] | None = None) -> ShellStripCurve:
+    """The shell strip in the limit of a fine mesh: pulled on ``rows`` and ``2 rows`` rows
+    (:func:`pull_shell_strip`), each reading of each load step extrapolated as ``2 fine − coarse``
+    (Richardson, first order). Why: a strip held by its jaws shears in regions bounded by the
+    yarns through the jaws' corners, and the strain jumps across those lines, which a triangle
+    mesh resolves to first order in its cell: a woven's bias strip's middle pull falls 5–9 % from
+    24 to 48 rows and half that again to 96; extrapolated from 24 and 48 it is within 2.5 % of
+    the same from 48 and 96 (the satin's and twill's 8 × 6 bias strips, ``docs/design.md`` §8).
+    ``imbalance_n`` is the larger of the two, ``iterations`` their sum, ``converged`` both."""
+    coarse = pull_shell_strip(material, angle_deg, gauge, width, strains, rows=rows, progress=progress)
+    fine = pull_shell_strip(material, angle_deg, gauge, width, strains, rows=2 * rows, progress=progress)
+    fields = ("force_n_per_m", "middle_force_n_per_m", "mid_strain", "middle_compression_ratio", "compression_ratio")
+    states = []
+    for a, b in zip(coarse.states, fine.states):
+        states.append(ShellStripState(
+            strain=b.strain, **{name: 2.0 * getattr(b, name) - getattr(a, name) for name in fields},
+            imbalance_n=max(a.imbalance_n, b.imbalance_n), iterations=a.iterations + b.iterations,
+            converged=a.converged and b.converged))
+    return ShellStripCurve(angle_deg=fine.angle_deg, gauge=fine.gauge, width=fine.width, nodes=fine.nodes,
+                           states=tuple(states), rows=(rows, 2 * rows))
+
+
+def _jaw_pull(membrane: _Membrane, gradient: np.ndarray) -> float:
+    """The moving jaw's pull (N): the x sum of ∂Π/∂u over its nodes."""
+    return float(gradient[membrane.mesh.moving, 0].sum())
+
+
+def _solve(membrane: _Membrane, u: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, float, int, bool]:
+    """Newton on the free dofs from displacements ``u`` with backtracking on the energy, shifting
+    the Hessian where its step does not descend; ``(u, imbalance (N), iterations, converged)``."""
+    flat = u.ravel().copy()
+    for iteration in range(MAX_NEWTON + 1):
+        gradient = membrane.gradient(flat.reshape(-1, 2))
+        g = gradient.ravel()[free]
+        imbalance = float(np.abs(g).max()) if len(g) else 0.0
+        K = membrane.stiffness(flat.reshape(-1, 2))[free][:, free].tocsc()
+        diagonal = float(np.abs(K.diagonal()).max())
+        floor = FORCE_ROUNDOFF * diagonal * float(np.abs(flat).max())
+        if imbalance <= max(FORCE_RTOL * abs(_jaw_pull(membrane, gradient)), floor):
+            return flat.reshape(-1, 2), imbalance, iteration, True
+        if iteration == MAX_NEWTON:
+            break
+        energy = membrane.energy(flat.reshape(-1, 2))
+        shift = 0.0
+        for _ in range(60):
+            try:
+                step = -scipy.sparse.linalg.spsolve(K + shift * scipy.sparse.identity(len(free), format="csc"), g)
+            except RuntimeError:  # singular: shift it
+                step = None
+            if step is not None and np.all(np.isfinite(step)) and float(g @ step) < 0.0:
+                accepted = _backtrack(membrane, flat, free, step, g, energy)
+                if accepted is not None:
+                    flat = accepted
+                    break
+            shift = max(1e-12 * diagonal, 10.0 * shift)
+        else:
+            break
+    gradient = membrane.gradient(flat.reshape(-1, 2))
+    g = gradient.ravel()[free]
+    return flat.reshape(-1, 2), float(np.abs(g).max()), MAX_NEWTON, False
+
+
+def _backtrack(membrane: _Membrane, flat: np.ndarray, free: np.ndarray, step: np.ndarray, g: np.ndarray,
+               energy: float) -> np.ndarray | None:
+    """The Newton step halved until the energy falls by Armijo's fraction of its linear decrease
+    (or, where that decrease is below the energy's round-off, until the imbalance falls); None
+    below :data:`LEAST_STEP`."""
+    slope = float(g @ step)
+    roundoff = 1e-14 * abs(energy)
+    imbalance = float(np.abs(g).max())
+    alpha = 1.0
+    while alpha >= LEAST_STEP:
+        trial = flat.copy()
+        trial[free] += alpha * step
+        change = membrane.energy(trial.reshape(-1, 2)) - energy
+        if change <= ARMIJO * alpha * slope and change < 0.0:
+            return trial
+        if abs(change) <= roundoff:
+            trial_g = membrane.gradient(trial.reshape(-1, 2)).ravel()[free]
+            if float(np.abs(trial_g).max()) < imbalance:
+                return trial
+        alpha *= 0.5
+    return None
+
+
+def _read(membrane: _Membrane, u: np.ndarray, strain: float, imbalance: float, iterations: int,
+          converged: bool) -> ShellStripState:
+    mesh = membrane.mesh
+    gradient = membrane.gradient(u)
+    x = mesh.rest + u
+    rest3 = np.column_stack([mesh.rest, np.zeros(len(mesh.rest))])
+    now3 = np.column_stack([x, np.zeros(len(x))])
+    inner_across = np.abs(mesh.rest[:, 1]) <= 0.25 * mesh.width
+    inner_along = np.abs(mesh.rest[:, 0]) <= 0.25 * mesh.gauge
+    mid_strain = between_marks(rest3, now3, 0, 0.0, 0.5 * EXTENSOMETER_SPAN * mesh.gauge, MARK_BAND * mesh.gauge,
+                               inner_across) - 1.0
+    middle_width = between_marks(rest3, now3, 1, 0.0, 0.25 * mesh.width, MARK_BAND * mesh.width, inner_along)
+    return ShellStripState(
+        strain=float(strain),
+        force_n_per_m=_jaw_pull(membrane, gradient) / mesh.width,
+        middle_force_n_per_m=membrane.middle_traction(u),
+        mid_strain=float(mid_strain),
+        middle_compression_ratio=float(middle_width),
+        compression_ratio=_mid_width(mesh, x) / mesh.width,
+        imbalance_n=float(imbalance),
+        iterations=int(iterations),
+        converged=bool(converged),
+    )
+
+
+def _mid_width(mesh: StripMesh, x: np.ndarray) -> float:
+    """The width (m) at mid-length: where the strip's long sides (its first and last rows) cross
+    the plane halfway between the jaws, interpolated along each side's edges."""
+    ys = []
+    for side in (mesh.rest[:, 1].min(), mesh.rest[:, 1].max()):
+        nodes = np.flatnonzero(np.isclose(mesh.rest[:, 1], side))
+        nodes = nodes[np.argsort(x[nodes, 0])]
+        ys.append(float(np.interp(0.0, x[nodes, 0], x[nodes, 1])))
+    return ys[1] - ys[0]
