@@ -21,6 +21,7 @@ def test_bias_softness_reads_every_level_of_each_strip_size():
     strips = {f"8x5_{d}": {"strain": [0.01, 0.02], "force_per_width_n_per_m": f}
               for d, f in (("weft", [10.0, 30.0]), ("warp", [20.0, 25.0]), ("bias", [5.0, 26.0]))}
     out = bias_softness({"strips": strips})
+    assert out["8x5"]["yarns_clamp_to_clamp"] is None  # no length and width given
     assert out["8x5"]["bias_over_weakest_axis"] == pytest.approx([0.5, 26.0 / 25.0])
     assert out["8x5"]["bias_softer"] is False
     strips["8x5_bias"]["force_per_width_n_per_m"] = [5.0, 24.0]
@@ -35,10 +36,18 @@ def test_bias_softness_reads_every_level_of_each_strip_size():
     assert bias_softness({"strips": strips}) == {}
 
 
+@pytest.mark.parametrize("length, width, clamped", [(0.02, 0.05, True), (0.08, 0.05, False), (0.05, 0.05, False)])
+def test_a_bias_strip_shorter_than_wide_has_yarns_from_clamp_to_clamp(length, width, clamped):
+    strips = {f"s_{d}": {"strain": [0.01], "force_per_width_n_per_m": [1.0], "length_m": length, "width_m": width}
+              for d in ("weft", "warp", "bias")}
+    assert bias_softness({"strips": strips})["s"]["yarns_clamp_to_clamp"] is clamped
+
+
 def test_woven_bias_strips_are_softer_in_the_stretch_summary():
     """Check (a) on the test woven through the suite's own stretch runner."""
     summary = run_stretch(ClothMaterial("woven", FABRIC, 0.2), quick=True, max_strain=0.05).summary()
     assert bias_softness(summary)["8x5"]["bias_softer"]
+    assert bias_softness(summary)["8x5"]["yarns_clamp_to_clamp"] is False
 
 
 def test_thicker_yarns_give_higher_stress():

@@ -68,6 +68,18 @@ def test_the_bias_criterion_applies_to_wovens_only():
     assert "up to 0.4;" in figure and "undefined at 1 level(s)" in figure
 
 
+def test_the_bias_criterion_skips_strips_whose_yarns_run_clamp_to_clamp():
+    """A bias strip shorter than wide is held by yarns running from clamp to clamp: not judged,
+    and said why; one long enough is judged."""
+    summary = copy.deepcopy(SUMMARY)
+    summary["bias_softness"]["2x5"] = {"bias_over_weakest_axis": [1.7, 1.4], "bias_softer": False,
+                                       "yarns_clamp_to_clamp": True}
+    summary["bias_softness"]["8x5"]["yarns_clamp_to_clamp"] = False
+    short = by_check(summary, "woven")["bias softer (2x5 strips)"]
+    assert short.passed is None and "clamp to clamp" in short.line()
+    assert by_check(summary, "woven")["bias softer (8x5 strips)"].passed is True
+
+
 def test_checks_of_scenes_not_run_are_not_listed():
     assert verdicts({"scenes": {"sphere": SUMMARY["scenes"]["sphere"]}}, "woven")[0].check == "sphere drape settled"
     assert len(verdicts({"scenes": {}}, "woven")) == 0

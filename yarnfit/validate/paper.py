@@ -45,7 +45,13 @@ def bias_softness(stretch: dict) -> dict:
     force over the smaller of the weft and warp forces at each strain level, and whether the bias
     is softer at every level (``bias_softer``). Where the weaker axis carries no tensile force (a
     strip MuJoCo reset) the ratio is undefined: ``None`` at that level, and ``bias_softer`` is
-    false, since softness was not shown there."""
+    false, since softness was not shown there. ``yarns_clamp_to_clamp``: the bias strip is shorter
+    between its clamps than it is wide, so yarns at ±45° run from one clamp to the other across
+    ``width − length`` of its width (the 2 × 5 cm strips) and carry its pull by stretching: a
+    woven's bias is then not soft, in the yarns or in their shell (the twill's shell strip, solved
+    quasi-statically, pulls 1.4–1.7 times its weaker axis at 0.2–2 % as 2 × 5 cm, 0.002–0.013
+    times as 8 × 5: ``docs/design.md`` §8), which is why a bias extension test's gauge is at least
+    twice its width. ``None`` where the summary does not give the strip's length and width."""
     strips = stretch.get("strips", {})
     out = {}
     for size in sorted({name.split("_")[0] for name in strips}):
@@ -56,8 +62,10 @@ def bias_softness(stretch: dict) -> dict:
         levels = min(len(f) for f in force.values())
         weakest = np.minimum(force["weft"][:levels], force["warp"][:levels])
         ratio = [float(b / w) if w > 0.0 else None for b, w in zip(force["bias"][:levels], weakest)]
-        out[size] = {"strain": list(strips[names["bias"]]["strain"][:levels]), "bias_over_weakest_axis": ratio,
-                     "bias_softer": all(r is not None and r < 1.0 for r in ratio)}
+        bias = strips[names["bias"]]
+        clamped = (bool(bias["length_m"] < bias["width_m"]) if "length_m" in bias and "width_m" in bias else None)
+        out[size] = {"strain": list(bias["strain"][:levels]), "bias_over_weakest_axis": ratio,
+                     "bias_softer": all(r is not None and r < 1.0 for r in ratio), "yarns_clamp_to_clamp": clamped}
     return out
 
 
