@@ -493,6 +493,12 @@ def test_the_suite_runs_the_yarn_scene_per_direction_and_merges_it(tmp_path):
     yarn = summary["scenes"]["yarn"]
     # Each direction's shell strip of the swatch's proportions follows its own yarn strip.
     assert set(summary["shell_vs_yarn"]["shell_strips"]) == {"swatch_weft", "swatch_warp"}
+    # ... the shell in the swatch's own test: its gauge, width and strains, solved to convergence.
+    for direction in ("weft", "warp"):
+        strip, curve = summary["shell_vs_yarn"]["shell_strips"][f"swatch_{direction}"], yarn["directions"][direction]
+        assert strip["quasi_static"] and all(strip["converged"])
+        assert (strip["length_m"], strip["width_m"]) == (curve["gauge_m"], curve["width_m"])
+        assert strip["strain"] == [e for e in curve["strain"] if e > 0]
     assert set(summary["shell_vs_yarn"]["same_proportions"]) == {"weft", "warp"}
     assert summary["wall_seconds"]["shell_strips_like_swatch"] > 0
     folder = tmp_path / "logs" / fabric.name

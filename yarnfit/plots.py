@@ -319,8 +319,8 @@ def validation_figures(summary: str | os.PathLike | Mapping, out_dir: str | os.P
             ``strain``, ``force_per_width_n_per_m``, ``settled``, ``stable``,
             ``uniaxial_law_n_per_m``), the ``yarn`` scene's curves per direction
             (:func:`yarnfit.validate.swatch.stretch_swatch`: ``strain``, ``force_n_per_m``, ``points``
-            with ``converged``) and ``shell_vs_yarn.shell_strips`` (shell strips of the swatch's
-            proportions), whichever ran.
+            with ``converged``) and ``shell_vs_yarn.shell_strips`` (the shell's quasi-static strips
+            of the swatch's size and jaws, ``converged`` per level), whichever ran.
         out_dir: the directory to write to (created if missing).
         reference: a measured curve (:class:`yarnfit.validate.reference.Reference`, or the path of
             its CSV, read by :func:`~yarnfit.validate.reference.read_reference`), or ``None``.
@@ -381,11 +381,14 @@ def _stretch_series(direction: str, strips: Mapping, yarn: Mapping, reference: R
     shown = [(name, strip) for name, strip in strips.items() if name.endswith(f"_{direction}")]
     for (strip_name, strip), color in zip(shown, STRIP_COLORS):
         strain = np.asarray(strip["strain"], dtype=float)
-        ok = np.asarray(strip.get("settled", [True] * len(strain)), bool) & np.asarray(
-            strip.get("stable", [True] * len(strain)), bool)
+        ok = (np.asarray(strip.get("settled", [True] * len(strain)), bool)
+              & np.asarray(strip.get("stable", [True] * len(strain)), bool)
+              & np.asarray(strip.get("converged", [True] * len(strain)), bool))
         label = (f"shell in MuJoCo, {CM_PER_M * strip['length_m']:.3g} x {CM_PER_M * strip['width_m']:.3g} cm strip"
                  if "length_m" in strip else f"shell in MuJoCo, strip {strip_name}")
-        if strip_name.startswith("swatch_"):  # suite.shell_strips_like_swatch
+        if strip.get("quasi_static"):  # suite.shell_strips_like_swatch: the swatch's own test
+            label = "shell, quasi-static, the swatch's size and jaws"
+        elif strip_name.startswith("swatch_"):  # written before session 49: MuJoCo strips
             label += " (the swatch's proportions)"
         out.append(Series(label, PERCENT * strain,
                           np.asarray(strip["force_per_width_n_per_m"], float) / N_PER_M_IN_N_PER_CM,

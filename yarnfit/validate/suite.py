@@ -5,9 +5,10 @@ figure to ``<logs>/<material>/summary.json``.
 ``summary.json``: ``yarnfit_version``, ``material`` (file, name), ``quick``, ``scenes`` (scene →
 its runner's summary, keys carrying their units), ``wall_seconds`` (scene → s, and
 ``shell_strips_like_swatch`` when it ran; each task's own, not the suite's) and, when both
-``stretch`` and ``yarn`` ran, ``shell_vs_yarn``: the yarn swatch against shell strips of its own
-proportions (``same_proportions``, :func:`shell_strips_like_swatch`) and against the 8 × 5 FAB
-strips (``fab_8x5``), both by :func:`compare_shell_yarn`; with ``stretch``,
+``stretch`` and ``yarn`` ran, ``shell_vs_yarn``: the yarn swatch against the shell in its own
+test, a quasi-static strip of the swatch's gauge and width between the same jaws
+(``same_proportions``, :func:`shell_strips_like_swatch`), and against the 8 × 5 FAB strips in
+MuJoCo (``fab_8x5``), both by :func:`compare_shell_yarn`; with ``stretch``,
 ``bias_softness`` (the paper's check (a), :func:`yarnfit.validate.paper.bias_softness`).
 
 The scenes are independent (each reads the material file and writes its own recording), so they
@@ -15,8 +16,8 @@ run as tasks of :mod:`yarnfit.tasks` on a :class:`~yarnfit.tasks.Backend`: one a
 process by default, or side by side on worker processes (``yarnfit validate`` uses every core).
 The yarn scene runs as one task per direction (recorded to ``yarn_<direction>.rrd``; its summary
 merged by :func:`~yarnfit.validate.swatch.merge_yarn_summaries`), each followed by its own shell
-strip of the swatch's proportions: its strips are the suite's longest computations, the twill's
-warp strip alone 477 s of its 638 (session 33).
+strip (seconds): its strips are the suite's longest computations, the twill's warp strip alone
+477 s of its 638 (session 33).
 On 2 cores the cotton twill's full suite took 613.5 s one scene after another and 407.7 s two at a
 time (session 28, ``yarnfit validate --workers 1`` against the default); every figure of the two
 summaries was the same, each scene being a deterministic computation of its own. Two scenes at once
@@ -46,13 +47,9 @@ from .verdicts import verdicts
 # (relative): the servo leaves the measured strain below the nominal level, ~1 % for wovens, up to
 # 5 % for the clamped strips of knits (a jersey's bias strip stops at 9.52 % of 10 %).
 SHELL_RANGE_SLACK = 0.06
-# The shell strips compared with the yarn swatch: 8 cm long (the FAB length), the swatch's
-# proportions; vertices along them (criss-cross cells as in the FAB strips: full within 1 % of the
-# mesh-converged clamped law for the presets, quick within 6 %) and of the fine criss-cross grid
-# of that mesh-converged reference.
-LIKE_SWATCH_LENGTH = 0.08
-LIKE_SWATCH_RESOLUTION = {False: 25, True: 9}
-FINE_MESH_RESOLUTION = 97
+# The shell strips compared with the yarn swatch (shell_strips_like_swatch): the coarser of the two
+# meshes shell_strip_limit extrapolates from (rows across; yarnfit.validate.shell_strip).
+LIKE_SWATCH_ROWS = {False: 24, True: 6}
 
 
 def _runner(scene: str) -> Callable:
@@ -73,7 +70,8 @@ def _runner(scene: str) -> Callable:
 # scene's directions (session 33, with friction in load steps of 0.5 %): the warp strip first.
 SCENE_COST = {"stretch": 187.0, "body": 60.0, "wall": 57.0, "sphere": 43.0, "cusick": 5.0}
 YARN_COST = {"warp": 477.0, "weft": 82.0, "bias": 77.0}
-LIKE_SWATCH_COST = 75.0
+# The quasi-static shell strips of the swatch (all directions): seconds each.
+LIKE_SWATCH_COST = 10.0
 
 
 def run_scene(file: MaterialFile, scene: str, quick: bool, recording: Path, reference=None,
@@ -271,30 +269,40 @@ def run_suite(material_path: str | Path, scenes=SCENES, *, quick: bool = False, 
 
 
 def shell_strips_like_swatch(material, yarn: dict, *, quick: bool = False) -> dict:
-    """Shell strips with the yarn swatch's proportions (length between the jaws over width), 8 cm
-    long, pulled like the FAB strips on a finer mesh (:data:`LIKE_SWATCH_RESOLUTION`); in the
-    stretch summary's form, strips named ``swatch_<direction>``.
+    """The fitted shell in the yarn swatch's own test: per yarn direction, a strip of its membrane
+    with the swatch's gauge and width between the same jaws, pulled quasi-statically to the
+    swatch's strains and read as it is (:func:`yarnfit.validate.shell_strip.shell_strip_limit`,
+    meshed along the yarns, extrapolated to a fine mesh from :data:`LIKE_SWATCH_ROWS`); in the
+    stretch summary's form, strips named ``swatch_<direction>`` (``quasi_static`` true), each
+    with the middle's readings beside the jaws'.
 
-    Clamped strips stiffen with their width over length, so the comparison uses the swatch's
-    proportions. Each strip carries ``fine_mesh_law_n_per_m``, the clamped law on a fine
-    criss-cross grid (:data:`FINE_MESH_RESOLUTION` vertices along), and ``mesh_stiffening``, the
-    scene mesh's clamped law over it (design notes §7: meshes with one diagonal per cell lock)."""
-    from ..mujoco.scenes import grid_mesh, strip_columns
-    from . import DIRECTIONS
-    from .stretch import clamped_strip_stiffness, pull_strip
+    Why not MuJoCo strips of the swatch's proportions (as until session 49): a clamped strip's
+    pull depends on its proportions and on its jaws, which these keep, and a MuJoCo strip adds its
+    mesh's locking (bias strips on a mesh that does not follow the yarns, ``docs/design.md`` §7)
+    and its settling to the shell's own error; the MuJoCo cloth is judged on its own in the
+    stretch scene."""
+    from .shell_strip import shell_strip_limit
 
     out = {"strips": {}}
     for direction, curve in yarn.get("directions", {}).items():
-        length = LIKE_SWATCH_LENGTH
-        width = length * curve["width_m"] / curve["gauge_m"]
-        result = pull_strip(material, "swatch", direction, quick=quick, max_strain=max(curve["strain"]),
-                            dimensions=(length, width), resolution=LIKE_SWATCH_RESOLUTION[quick])
-        fine_mesh = grid_mesh(FINE_MESH_RESOLUTION, strip_columns(FINE_MESH_RESOLUTION, length, width), length,
-                              width, crisscross=True)
-        fine = clamped_strip_stiffness(material.shell, *fine_mesh, math.radians(DIRECTIONS[direction]))
-        out["strips"][result.name] = {**result.summary(material.shell), "resolution": LIKE_SWATCH_RESOLUTION[quick],
-                                      "fine_mesh_law_n_per_m": fine,
-                                      "mesh_stiffening": result.clamped_law_n_per_m / fine}
+        strains = [float(e) for e in curve["strain"] if e > 0.0]
+        strip = shell_strip_limit(material.shell, curve["angle_deg"], curve["gauge_m"], curve["width_m"], strains,
+                                  rows=LIKE_SWATCH_ROWS[quick])
+        states = [strip.at_strain(e) for e in strains]
+        out["strips"][f"swatch_{direction}"] = {
+            "quasi_static": True,
+            "length_m": strip.gauge,
+            "width_m": strip.width,
+            "angle_rad": math.radians(strip.angle_deg),
+            "rows": list(strip.rows),
+            "strain": strains,
+            "force_per_width_n_per_m": [s.force_n_per_m for s in states],
+            "compression_ratio": [s.compression_ratio for s in states],
+            "middle_force_n_per_m": [s.middle_force_n_per_m for s in states],
+            "mid_strain": [s.mid_strain for s in states],
+            "middle_compression_ratio": [s.middle_compression_ratio for s in states],
+            "converged": [s.converged for s in states],
+        }
     return out
 
 
