@@ -124,6 +124,16 @@ def test_mesh_edges_follow_the_yarns(angle, directions):
     assert np.allclose(mesh.rest[mesh.moving, 0], 0.5 * GAUGE) and np.allclose(mesh.rest[mesh.fixed, 0], -0.5 * GAUGE)
 
 
+@pytest.mark.parametrize("angle", (0.0, 45.0))
+def test_a_short_strip_gets_its_rows_along_the_gauge(angle):
+    """A strip shorter than wide (2 x 5 cm) gets ``rows`` node spacings along its gauge, as a
+    longer one gets across its width."""
+    mesh = strip_mesh(angle, 0.02, 0.05, rows=12)
+    assert np.diff(np.unique(np.round(mesh.rest[:, 0], 12))) == pytest.approx(0.02 / 12)
+    long = strip_mesh(angle, 0.08, 0.05, rows=12)
+    assert np.diff(np.unique(np.round(long.rest[:, 1], 12))) == pytest.approx(0.05 / 12)
+
+
 def test_bias_strip_converges_with_the_mesh():
     """A woven-like bias strip held by its jaws: its middle strains more than their travel (the
     jaws hold its ends unsheared); its middle pull falls with each doubling of the rows (a

@@ -10,7 +10,8 @@ import rerun as rr
 
 from fabric_shell import FABRIC
 from yarnfit.mujoco.scenes import ClothMaterial, grid_mesh
-from yarnfit.shell import ShellMaterial
+from yarnfit.shell import RidgeMembrane, ShellMaterial
+from yarnfit.validate.shell_strip import shell_strip_limit
 from yarnfit.validate.reference import read_reference
 from yarnfit.validate import DIRECTIONS
 from yarnfit.validate.stretch import pull_strip, run_stretch
@@ -122,6 +123,31 @@ def test_bias_strips_of_a_woven_are_softer_than_weft_and_warp():
     force = {d: pull_strip(WOVEN, "8x5", d, quick=True, max_strain=0.02).force_per_width_n_per_m[-1]
              for d in DIRECTIONS}
     assert force["bias"] < min(force["weft"], force["warp"])
+
+
+# A woven whose shear stiffens one way only (a twill line): its two biases differ 11 times in a
+# clamped strip's pull.
+TWILL_LINE = ClothMaterial("twill-line", ShellMaterial(
+    thickness=H, s00=FABRIC.s00, s01=FABRIC.s01, s11=FABRIC.s11, s22=FABRIC.s22, b00=FABRIC.b00, b01=0.0,
+    b11=FABRIC.b11, b22=FABRIC.b22,
+    nonlinear=RidgeMembrane(base=(FABRIC.s00, FABRIC.s01, FABRIC.s11, FABRIC.s22),
+                            ridges=((0.0, 0.0, 1.0, 0.0, 10.0 * FABRIC.s22),))), DENSITY)
+# The quick 9-vertex strip against the quasi-static shell strip (meshed along the yarns, extrapolated
+# to a fine mesh): the clamped law's 6 % on the quick criss-cross mesh (§7) and the servo's lag.
+QUASI_STATIC_RTOL = 0.1
+
+
+def test_bias_strip_pulls_at_plus_45_degrees_from_the_weft():
+    """The scene's bias strip is pulled at +45° from the weft (validate.DIRECTIONS, as the yarn
+    scene's and the shell's own pulls): against the shell's quasi-static strip between the same
+    clamps (yarnfit.validate.shell_strip) along +45°, not −45°."""
+    result = pull_strip(TWILL_LINE, "8x5", "bias", quick=True, max_strain=0.005)
+    length, width = result.length_m, result.width_m
+    for angle, agrees in ((45.0, True), (-45.0, False)):
+        strip = shell_strip_limit(TWILL_LINE.shell, angle, length, width, [0.002, 0.005], rows=6)
+        for strain, force in zip(result.strain, result.force_per_width_n_per_m):
+            quasi_static = np.interp(strain, [s.strain for s in strip.states], [s.force_n_per_m for s in strip.states])
+            assert bool(abs(force / quasi_static - 1.0) <= QUASI_STATIC_RTOL) is agrees, (angle, force, quasi_static)
 
 
 def entity_paths(path):

@@ -34,6 +34,7 @@ little, the shell does not have: the middle half is read where they matter least
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -167,7 +168,8 @@ class ShellStripCurve:
 def strip_mesh(angle_deg: float, gauge: float, width: float, rows: int = ROWS_ACROSS) -> StripMesh:
     """The mesh of a strip pulled at ``angle_deg`` from weft (one of :data:`ALIGNED_ANGLES` or
     :data:`BIAS_ANGLES`), ``gauge × width`` (m) between its jaws, ``rows`` rows of triangles
-    across, cells as near square as the gauge allows. Its edges lie along the yarns (see the
+    across (across the gauge's length instead where the strip is shorter than wide), cells as near
+    square as the gauge allows. Its edges lie along the yarns (see the
     module docstring); the jaws hold the nodes at or beyond their inner edges ``x = ±gauge/2``
     (a bias mesh's shifted rows end in a half cell at each jaw)."""
     for value, what in ((gauge, "gauge"), (width, "width")):
@@ -181,7 +183,9 @@ def strip_mesh(angle_deg: float, gauge: float, width: float, rows: int = ROWS_AC
                          f" or {', '.join(f'{a:g}' for a in BIAS_ANGLES)}°, got {angle_deg!r}")
     # Row spacing dy; cell length a along x (a bias cell is two rows high, a = 2 dy, so its
     # diagonals run at 45°).
-    dy = width / rows
+    # ``rows`` counts the cells across the shorter side (a 2 × 5 cm strip, 2 cm between its jaws,
+    # gets as many along as a long one gets across).
+    dy = width / rows if width <= gauge else width / max(rows, round(rows * width / gauge))
     cell = 2.0 * dy if bias else dy
     columns = max(1, round(gauge / cell))
     cell = gauge / columns
@@ -414,8 +418,10 @@ def _solve(membrane: _Membrane, u: np.ndarray, free: np.ndarray) -> tuple[np.nda
         shift = 0.0
         for _ in range(60):
             try:
-                step = -scipy.sparse.linalg.spsolve(K + shift * scipy.sparse.identity(len(free), format="csc"), g)
-            except RuntimeError:  # singular: shift it
+                with warnings.catch_warnings():
+                    warnings.simplefilter("error", scipy.sparse.linalg.MatrixRankWarning)
+                    step = -scipy.sparse.linalg.spsolve(K + shift * scipy.sparse.identity(len(free), format="csc"), g)
+            except (RuntimeError, scipy.sparse.linalg.MatrixRankWarning):  # singular: shift it
                 step = None
             if step is not None and np.all(np.isfinite(step)) and float(g @ step) < 0.0:
                 accepted = _backtrack(membrane, flat, free, step, g, energy)

@@ -158,12 +158,17 @@ def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bo
     import mujoco
 
     length, width = STRIPS[strip] if dimensions is None else dimensions
-    angle = math.radians(DIRECTIONS[direction])
+    angle = math.radians(DIRECTIONS[direction])  # the pull's angle from the weft
+    # The plugin's (and the clamped law's) angle is the weft's from the strip's axis: a strip
+    # pulled at θ from the weft has its weft at −θ from its axis. (Until session 49 the scene
+    # passed +θ and pulled its "bias" strips along −45°: a twill's stiff diagonal, 8-12 times the
+    # +45° pull of the shell and of the yarn scene's bias strip.)
+    weft_angle = -angle
     levels = [e for e in STRAIN_LEVELS if e <= max_strain + 1e-12]
     if not levels:
         raise ValueError(f"max_strain must be at least {STRAIN_LEVELS[0]}, got {max_strain!r}")
     resolution = resolution or RESOLUTION.get(strip, RESOLUTION["8x5"])[quick]
-    built = build_scene(material, "stretch", resolution=resolution, size=length, width=width, angle=angle,
+    built = build_scene(material, "stretch", resolution=resolution, size=length, width=width, angle=weft_angle,
                         max_strain=levels[-1], mesh=MESH, membrane=MEMBRANE,
                         stiffening_bound=max(DEFAULT_STIFFENING_BOUND, levels[-1]))
     model = compile_quietly(built.spec)
@@ -229,7 +234,8 @@ def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bo
     wall = time.perf_counter() - start
     return StripResult(f"{strip}_{direction}", length, width, angle, np.array(strains), np.array(forces),
                        np.array(ratios), np.array(settled), wall,
-                       clamped_strip_stiffness(material.shell, rest, triangles, angle, MEMBRANE), np.array(stable))
+                       clamped_strip_stiffness(material.shell, rest, triangles, weft_angle, MEMBRANE),
+                       np.array(stable))
 
 
 def elastic_clamp_force(model, data, still, pull_dof: int) -> float:
