@@ -147,7 +147,8 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--damping", type=float, default=DEFAULT_DAMPING, metavar="S",
                         help=f"stiffness-proportional damping time in s (default {DEFAULT_DAMPING:g})")
     export.add_argument("--angle", type=float, default=0.0, metavar="DEG",
-                        help="weft direction in degrees from world x (stretch: 0 weft strip, 90 warp, 45 bias)")
+                        help="weft direction in degrees from world x (stretch, pulled along x: 0 weft strip, 90 warp, "
+                             "-45 bias (the pull at +45° from the weft), 45 the other bias)")
     export.add_argument("--gsm", type=float, metavar="G", help="areal density in g/m² (default: the material file's)")
     export.add_argument("--linear", action="store_true",
                         help="the linear StVK shell fitted from the same samples (quadratic membrane and symmetric bending) "
