@@ -8,7 +8,7 @@ import pytest
 
 import yarnfit.validate.suite as suite_module
 from yarnfit.cli import main
-from yarnfit.validate.verdicts import SHELL_YARN_TOLERANCE, verdicts
+from yarnfit.validate.verdicts import SHELL_YARN_TOLERANCE, STRIPS_FOLLOW_SHELL_RTOL, verdicts
 
 SUMMARY = {
     "scenes": {
@@ -66,6 +66,20 @@ def test_the_bias_criterion_applies_to_wovens_only():
     summary["bias_softness"]["8x5"]["bias_over_weakest_axis"] = [0.4, None]
     figure = by_check(summary, "woven")["bias softer (8x5 strips)"].figure
     assert "up to 0.4;" in figure and "undefined at 1 level(s)" in figure
+
+
+def test_strips_follow_the_shell_at_the_levels_at_rest():
+    """The MuJoCo strips against the shell's quasi-static strip: judged at levels at rest only,
+    the worst named."""
+    summary = copy.deepcopy(SUMMARY)
+    strips = summary["scenes"]["stretch"]["strips"]
+    strips["8x5_weft"].update(strain=[0.002, 0.005], over_quasi_static=[1.02, 0.95])
+    strips["8x5_bias"].update(strain=[0.002, 0.005], over_quasi_static=[1.05, 3.0])  # 3.0 not at rest
+    verdict = by_check(summary)["stretch strips follow the shell"]
+    assert verdict.passed is True and "5.0 % (8x5_weft at 0.5 %)" in verdict.figure
+    strips["8x5_weft"]["over_quasi_static"] = [1.02, 1.0 + 1.001 * STRIPS_FOLLOW_SHELL_RTOL]
+    assert by_check(summary)["stretch strips follow the shell"].passed is False
+    assert "stretch strips follow the shell" not in by_check(SUMMARY)  # not solved: not judged
 
 
 def test_the_bias_criterion_skips_strips_whose_yarns_run_clamp_to_clamp():
