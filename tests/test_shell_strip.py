@@ -130,6 +130,9 @@ def test_a_short_strip_gets_its_rows_along_the_gauge(angle):
     longer one gets across its width."""
     mesh = strip_mesh(angle, 0.02, 0.05, rows=12)
     assert np.diff(np.unique(np.round(mesh.rest[:, 0], 12))) == pytest.approx(0.02 / 12)
+    assert np.ptp(mesh.rest, axis=0) == pytest.approx([0.02, 0.05])  # the whole strip
+    d1, d2 = (mesh.rest[mesh.triangles[:, k]] - mesh.rest[mesh.triangles[:, 0]] for k in (1, 2))
+    assert 0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]).sum() == pytest.approx(0.02 * 0.05, rel=1e-12)
     long = strip_mesh(angle, 0.08, 0.05, rows=12)
     assert np.diff(np.unique(np.round(long.rest[:, 1], 12))) == pytest.approx(0.05 / 12)
 

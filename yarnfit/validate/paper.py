@@ -49,7 +49,7 @@ def bias_softness(stretch: dict) -> dict:
     between its clamps than it is wide, so yarns at ±45° run from one clamp to the other across
     ``width − length`` of its width (the 2 × 5 cm strips) and carry its pull by stretching: a
     woven's bias is then not soft, in the yarns or in their shell (the twill's shell strip, solved
-    quasi-statically, pulls 1.4–1.7 times its weaker axis at 0.2–2 % as 2 × 5 cm, 0.002–0.013
+    quasi-statically, pulls 1.5–1.9 times its weaker axis at 0.2–2 % as 2 × 5 cm, 0.002–0.013
     times as 8 × 5: ``docs/design.md`` §8), which is why a bias extension test's gauge is at least
     twice its width. ``None`` where the summary does not give the strip's length and width."""
     strips = stretch.get("strips", {})

@@ -185,7 +185,9 @@ def strip_mesh(angle_deg: float, gauge: float, width: float, rows: int = ROWS_AC
     # diagonals run at 45°).
     # ``rows`` counts the cells across the shorter side (a 2 × 5 cm strip, 2 cm between its jaws,
     # gets as many along as a long one gets across).
-    dy = width / rows if width <= gauge else width / max(rows, round(rows * width / gauge))
+    if width > gauge:
+        rows = max(rows, round(rows * width / gauge))
+    dy = width / rows
     cell = 2.0 * dy if bias else dy
     columns = max(1, round(gauge / cell))
     cell = gauge / columns

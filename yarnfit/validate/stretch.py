@@ -111,8 +111,9 @@ REST_CHECK_STEPS = 10
 # within 1 s; the hold is a budget, only the slow levels spend it. 5 s leaves a third to spare.
 MAX_HOLD_SECONDS = 5.0
 # The quasi-static reference of each strip (quasi_static_forces): rows of the coarser of the two
-# meshes it is extrapolated from, full and quick. From 12 and 24 rows the twill's and satin's six
-# strips take ~20 s and read within 1-5 % of the same from 24 and 48 (session 49).
+# meshes it is extrapolated from, full and quick. From 12 and 24 rows the twill's six strips take
+# 40 s and the satin's 83 s on one core, and read within 0-4 % of the same from 24 and 48 (the
+# twill's 2 x 5 bias at 0.2 % the 4 %; session 49); 24 rows would cost 108 and 158 s.
 QUASI_STATIC_ROWS = {False: 12, True: 6}
 
 
