@@ -46,8 +46,8 @@ from ..shell import ShellMaterial
 from .strip import EXTENSOMETER_SPAN, MARK_BAND, between_marks
 from .swatch import UniformReading, read_curve
 
-# Rows of triangles across the strip's width (a bias mesh's rows are half a cell apart): the
-# coarser of shell_strip_limit's two meshes (24 and 48 rows: see its docstring for the convergence
+# Rows of triangles across the strip's width, or node spacings along its gauge where it is shorter
+# than wide (a bias mesh's rows are half a cell apart): the coarser of shell_strip_limit's two meshes (24 and 48 rows: see its docstring for the convergence
 # they give; tests/test_shell_strip.py checks it on a woven-like membrane).
 ROWS_ACROSS = 24
 # Largest jaw travel per load step (strain): as the yarn strip's frictional steps
@@ -65,7 +65,8 @@ FORCE_RTOL = 1e-8
 # stall at 1e-16 … 1e-14 of that product.
 FORCE_ROUNDOFF = 1e-13
 # Newton iterations per load step before a step is reported unconverged: a membrane with a
-# piecewise-quadratic energy converges in a handful once its kinks are crossed.
+# piecewise-quadratic energy converges in a few once its kinks are crossed (the wovens' 8 x 6
+# bias strips: 8-16 a step on average, the backtracking carrying them across the kinks).
 MAX_NEWTON = 100
 # Backtracking: the step is halved until the energy falls (Armijo, this fraction of the linear
 # decrease) or it is this small, then the Hessian is shifted (it can be indefinite where the strip
