@@ -375,16 +375,18 @@ def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Cal
                 cells.append("not reached | —")
             else:
                 cells.append(f"{_against(same[0], force)} | {same[1]:.3f}" + ("" if same[2] else " (not converged)"))
+            # The strip is judged where both it and the yarn strip converged.
+            strip_meets = None if not point.converged or same is None or not same[2] else _meets(
+                same[0], same[1], force, narrowing)
             if point.converged:
                 judged += 1
                 within += verdicts["nonlinear"]
-                if same is not None and same[2]:
-                    strip_judged += 1
-                    strip_within += _meets(same[0], same[1], force, narrowing)
+            if strip_meets is not None:
+                strip_judged += 1
+                strip_within += strip_meets
             verdict = ("not converged" if not point.converged else
                        "within" if verdicts["nonlinear"] else "MISSED")
-            strip_verdict = ("—" if not point.converged or same is None or not same[2] else
-                             "within" if _meets(same[0], same[1], force, narrowing) else "MISSED")
+            strip_verdict = "—" if strip_meets is None else "within" if strip_meets else "MISSED"
             rows.append(f"| {direction} | {gauge:g} × {width:g} | {100 * point.level:g} % | {force:.4g} | "
                         f"{100 * strain:.3g} %{point.note} | {narrowing:.3f} | " + " | ".join(cells)
                         + f" | {verdict} | {strip_verdict} |")
@@ -443,6 +445,8 @@ def main(argv: list[str] | None = None) -> int:
                     curves[label] = curve
         name = file.fabric().name
         relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
+        if args.json:  # the curves read, together in one file
+            write_curves(args.json, name, curves)
     else:
         relaxed, curves = solve_curves(file, parse_sizes(args.sizes), args.directions.split(","), args.selvedge,
                                        not args.frictionless, args.json)

@@ -410,10 +410,12 @@ def _solve(membrane: _Membrane, u: np.ndarray, free: np.ndarray) -> tuple[np.nda
         gradient = membrane.gradient(flat.reshape(-1, 2))
         g = gradient.ravel()[free]
         imbalance = float(np.abs(g).max()) if len(g) else 0.0
+        if imbalance <= FORCE_RTOL * abs(_jaw_pull(membrane, gradient)):
+            return flat.reshape(-1, 2), imbalance, iteration, True
+        # The stiffness is assembled only for a step (or the round-off floor it sets).
         K = membrane.stiffness(flat.reshape(-1, 2))[free][:, free].tocsc()
         diagonal = float(np.abs(K.diagonal()).max())
-        floor = FORCE_ROUNDOFF * diagonal * float(np.abs(flat).max())
-        if imbalance <= max(FORCE_RTOL * abs(_jaw_pull(membrane, gradient)), floor):
+        if imbalance <= FORCE_ROUNDOFF * diagonal * float(np.abs(flat).max()):
             return flat.reshape(-1, 2), imbalance, iteration, True
         if iteration == MAX_NEWTON:
             break

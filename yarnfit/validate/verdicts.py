@@ -72,17 +72,19 @@ def verdicts(summary: dict, family: str | None) -> list[Verdict]:
         defined = [r for r in bias["bias_over_weakest_axis"] if r is not None]
         undefined = len(bias["bias_over_weakest_axis"]) - len(defined)
         worst = max(defined) if defined else float("nan")
-        clamped = bool(bias.get("yarns_clamp_to_clamp"))
-        applies = family == "woven" and not clamped
+        if family != "woven":
+            applies, criterion = False, f"a criterion for wovens; this fabric is {family or 'of unknown family'}"
+        elif bias.get("yarns_clamp_to_clamp"):
+            applies, criterion = False, ("not judged: the strip is shorter than wide, so yarns at ±45° run from "
+                                         "clamp to clamp and hold its bias (a bias extension test's gauge is at "
+                                         "least twice its width)")
+        else:
+            applies, criterion = True, "a woven's bias is softer than weft and warp"
         out.append(Verdict(f"bias softer ({size} strips)", bool(bias["bias_softer"]) if applies else None,
                            f"bias / weaker axis up to {worst:.3g}"
                            + (f"; undefined at {undefined} level(s) where weft or warp carried no force"
                               if undefined else ""),
-                           "a woven's bias is softer than weft and warp" if applies
-                           else f"a criterion for wovens; this fabric is {family or 'of unknown family'}"
-                           if family != "woven" else
-                           "not judged: the strip is shorter than wide, so yarns at ±45° run from clamp to clamp "
-                           "and hold its bias (a bias extension test's gauge is at least twice its width)"))
+                           criterion))
     comparison = summary.get("shell_vs_yarn", {}).get("same_proportions")
     if comparison is not None:
         differences = [(abs(d), direction, strain) for direction, c in comparison.items()
