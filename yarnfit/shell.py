@@ -43,6 +43,7 @@ from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 from scipy.optimize import brentq
 
 from .checks import check_keys, finite_number, non_negative_number
@@ -268,27 +269,33 @@ class RidgeMembrane:
         """``(k,)`` ridge stiffnesses (Pa, read-only)."""
         return _read_only(np.array([r[4] for r in self.ridges], dtype=np.float64))
 
-    def _excess(self, eps: np.ndarray) -> np.ndarray:
-        """``max(n_j·ε − t_j, 0)`` ``(…, k)``."""
-        return np.maximum(eps @ self.directions.T - self.knots, 0.0)
+    def law(self, eps: np.ndarray, order: int = 2) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """``(ψ (…), ∂ψ/∂ε (…, 3), ∂²ψ/∂ε² (…, 3, 3))`` (Pa) at Voigt strains ``eps (…, 3)`` in one
+        pass over the ridges (:func:`_ridge_law`); the derivatives past ``order`` (0, 1 or 2) are
+        None. At a kink the side ``n·ε > t`` excludes."""
+        eps = np.asarray(eps, dtype=np.float64)
+        shape = eps.shape[:-1]
+        flat = np.ascontiguousarray(eps.reshape(-1, 3))
+        count = flat.shape[0]
+        energy = np.empty(count)
+        stress = np.empty((count if order >= 1 else 0, 3))
+        tangent = np.empty((count if order >= 2 else 0, 3, 3))
+        _ridge_law(flat, self.Q, self.directions, self.knots, self.stiffness, order, energy, stress, tangent)
+        return (energy.reshape(shape), stress.reshape(shape + (3,)) if order >= 1 else None,
+                tangent.reshape(shape + (3, 3)) if order >= 2 else None)
 
     def energy(self, eps: np.ndarray) -> np.ndarray:
-        """``ψ`` (Pa = J/m³) at Voigt strains ``eps (…, 3)``; shape ``(…)``."""
-        eps = np.asarray(eps, dtype=np.float64)
-        excess = self._excess(eps)
-        return 0.5 * np.einsum("...i,ij,...j->...", eps, self.Q, eps) + 0.5 * (excess**2) @ self.stiffness
+        """``ψ = ½ εᵀ Q ε + ½ Σ_j c_j max(n_j·ε − t_j, 0)²`` (Pa = J/m³) at Voigt strains
+        ``eps (…, 3)``; shape ``(…)``."""
+        return self.law(eps, 0)[0]
 
     def stress(self, eps: np.ndarray) -> np.ndarray:
         """``∂ψ/∂ε = Q ε + Σ_j c_j max(n_j·ε − t_j, 0) n_j`` (Pa), shaped like ``eps (…, 3)``."""
-        eps = np.asarray(eps, dtype=np.float64)
-        return eps @ self.Q + (self._excess(eps) * self.stiffness) @ self.directions
+        return self.law(eps, 1)[1]
 
     def hessian(self, eps: np.ndarray) -> np.ndarray:
         """``Q + Σ_j c_j [n_j·ε > t_j] n_j n_jᵀ`` ``(…, 3, 3)`` (Pa)."""
-        eps = np.asarray(eps, dtype=np.float64)
-        engaged = (eps @ self.directions.T > self.knots) * self.stiffness
-        n = self.directions
-        return self.Q + np.einsum("...k,ki,kj->...ij", engaged, n, n)
+        return self.law(eps, 2)[2]
 
     def largest_tangent(self, bound: float) -> np.ndarray:
         """``Q + Σ_n T_n n nᵀ`` ``(3, 3)`` (Pa), ``T_n`` the largest tangent along direction ``n``
@@ -453,6 +460,39 @@ class SignedBending:
         """Inverse of :meth:`to_dict`; ValueError ``<where>: …`` naming the key at fault."""
         _check_keys(data, SIGNED_BENDING_PARAMETERS, where, "signed_bending_pa.")
         return cls(**{k: _json_number(data[k], where, f"signed_bending_pa.{k}") for k in SIGNED_BENDING_PARAMETERS})
+
+
+@njit(cache=True)
+def _ridge_law(eps, Q, directions, knots, stiffness, order, energy, stress, tangent):
+    """The :class:`RidgeMembrane`'s law at each of ``eps (N, 3)`` (Voigt Green strains): ``ψ`` into
+    ``energy (N,)``, and for ``order`` >= 1 ``∂ψ/∂ε`` into ``stress (N, 3)``, for ``order`` >= 2
+    ``∂²ψ/∂ε²`` into ``tangent (N, 3, 3)`` (Pa). A ridge acts where ``n·ε − t > 0``."""
+    for p in range(eps.shape[0]):
+        e0, e1, e2 = eps[p, 0], eps[p, 1], eps[p, 2]
+        psi = 0.0
+        for i in range(3):
+            s = Q[i, 0] * e0 + Q[i, 1] * e1 + Q[i, 2] * e2
+            psi += 0.5 * s * eps[p, i]
+            if order >= 1:
+                stress[p, i] = s
+            if order >= 2:
+                for j in range(3):
+                    tangent[p, i, j] = Q[i, j]
+        for k in range(knots.shape[0]):
+            n0, n1, n2 = directions[k, 0], directions[k, 1], directions[k, 2]
+            excess = n0 * e0 + n1 * e1 + n2 * e2 - knots[k]
+            if excess > 0.0:
+                c = stiffness[k]
+                psi += 0.5 * c * excess * excess
+                if order >= 1:
+                    stress[p, 0] += c * excess * n0
+                    stress[p, 1] += c * excess * n1
+                    stress[p, 2] += c * excess * n2
+                if order >= 2:
+                    for i in range(3):
+                        for j in range(3):
+                            tangent[p, i, j] += c * directions[k, i] * directions[k, j]
+        energy[p] = psi
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -746,6 +786,17 @@ class ShellMaterial:
         if self.signed_bending is not None:
             return self.signed_bending.moment(kap)
         return kap @ self.B  # B symmetric
+
+    def membrane_law(self, eps: np.ndarray, order: int = 2) -> tuple[np.ndarray, np.ndarray | None,
+                                                                       np.ndarray | None]:
+        """:meth:`membrane_energy`, :meth:`membrane_stress` and :meth:`membrane_tangent` at once
+        (those past ``order``, 0 to 2, None): one pass over a :class:`RidgeMembrane`'s ridges."""
+        eps = np.asarray(eps, dtype=np.float64)
+        if self.nonlinear is not None:
+            return self.nonlinear.law(eps, order)
+        stress = eps @ self.S
+        return (0.5 * np.einsum("...i,...i->...", eps, stress), stress if order >= 1 else None,
+                np.broadcast_to(self.S, eps.shape[:-1] + (3, 3)) if order >= 2 else None)
 
     def membrane_energy(self, eps: np.ndarray) -> np.ndarray:
         """The membrane's energy per reference area and thickness (Pa = J/m³) at Voigt strains

@@ -34,14 +34,15 @@ little, the shell does not have: the middle half is read where they matter least
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
+from numba import njit
 
+from ..engine.linear import FactorCache, SingularSystemError, SymmetricSolve
 from ..shell import ShellMaterial
 from .strip import EXTENSOMETER_SPAN, MARK_BAND, between_marks
 from .swatch import UniformReading, read_curve
@@ -238,8 +239,10 @@ def _zip_rows(low: np.ndarray, high: np.ndarray, rest: np.ndarray) -> list[tuple
 
 class _Membrane:
     """The strip's membrane energy over its mesh: energy, nodal gradient and stiffness (material
-    and geometric parts) at current positions ``x (n, 2)``, the material's Green strain taken in
-    its weft/warp frame."""
+    and geometric parts) at nodal displacements ``u (n, 2)`` (m), the material's Green strain taken
+    in its weft/warp frame. The kinematics and the assembly are the kernels below; the law is the
+    material's (:meth:`~yarnfit.shell.ShellMaterial.membrane_law`). ``free`` are the DOFs the jaws
+    do not hold, and the stiffness is assembled into a pattern fixed at construction."""
 
     def __init__(self, material: ShellMaterial, mesh: StripMesh, angle_deg: float):
         self.material, self.mesh = material, mesh
@@ -248,33 +251,47 @@ class _Membrane:
         # (c, s) in weft/warp coordinates, across it v = (−s, c) (as cut_swatch turns a strip).
         self.to_material = np.array([[c, -s], [s, c]])
         rest = mesh.rest @ self.to_material.T
-        t = mesh.triangles
+        t = np.ascontiguousarray(mesh.triangles, dtype=np.int64)
+        self.triangles = t
         edges = np.stack([rest[t[:, 1]] - rest[t[:, 0]], rest[t[:, 2]] - rest[t[:, 0]]], axis=2)  # (m, 2, 2)
         self.area = 0.5 * np.linalg.det(edges)
         if np.any(self.area <= 0.0):
             raise ValueError("the strip's mesh has a degenerate or inverted triangle")
         inverse = np.linalg.inv(edges)  # rows: ∂(barycentric 1, 2)/∂X
         # Shape-function gradients in material coordinates, (m, 3, 2).
-        self.gradient_of_shape = np.concatenate([-inverse.sum(axis=1, keepdims=True), inverse], axis=1)
+        self.gradient_of_shape = np.ascontiguousarray(
+            np.concatenate([-inverse.sum(axis=1, keepdims=True), inverse], axis=1))
         self.h = material.thickness
-        dofs = 2 * t[:, :, None] + np.arange(2)[None, None, :]  # (m, 3, 2)
-        dofs = dofs.reshape(len(t), 6)
-        self.rows = np.repeat(dofs, 6, axis=1).ravel()
-        self.cols = np.tile(dofs, (1, 6)).ravel()
+        held = np.zeros(2 * len(mesh.rest), dtype=bool)
+        for nodes in (mesh.moving, mesh.fixed):
+            held[2 * nodes] = held[2 * nodes + 1] = True
+        self.free = np.flatnonzero(~held)
+        # The stiffness's pattern (CSC, symmetric): each local entry's slot, and the slots of the
+        # free block.
+        n = held.shape[0]
+        dofs = (2 * t[:, :, None] + np.arange(2)[None, None, :]).reshape(len(t), 6)
+        rows, cols = np.tile(dofs, (1, 6)).ravel(), np.repeat(dofs, 6, axis=1).ravel()
+        keys, self._slot = np.unique(cols * n + rows, return_inverse=True)
+        row, col = keys % n, keys // n
+        self._pattern = (row, np.searchsorted(col, np.arange(n + 1)), n)
+        in_free = ~held[row] & ~held[col]
+        renumber = np.cumsum(~held) - 1
+        self._free_entries = np.flatnonzero(in_free)
+        free_col = renumber[col[in_free]]
+        self._free_pattern = (renumber[row[in_free]], np.searchsorted(free_col, np.arange(len(self.free) + 1)),
+                              len(self.free))
 
     def kinematics(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(F, ε)`` per triangle at nodal displacements ``u (n, 2)`` (m): ``F = ∂x/∂X`` (current
-        strip frame from material frame) ``(m, 2, 2)`` and the Voigt Green strain ``(m, 3)``,
-        formed from the displacement gradient ``D`` as ``½ (R D + (R D)ᵀ + Dᵀ D)`` (``F = Rᵀ + D``):
-        from positions, ``½ (FᵀF − Id)`` loses the digits of a gauge-long coordinate over a cell,
-        which a satin's stiff yarns turn into a force imbalance above the bias pull's tolerance."""
-        D = np.einsum("mai,maj->mij", u[self.mesh.triangles], self.gradient_of_shape)
-        RD = np.einsum("ik,mkj->mij", self.to_material, D)
-        E = 0.5 * (RD + np.swapaxes(RD, 1, 2) + np.einsum("mki,mkj->mij", D, D))
-        return self.to_material.T[None] + D, np.stack([E[:, 0, 0], E[:, 1, 1], 2.0 * E[:, 0, 1]], axis=1)
+        strip frame from material frame) ``(m, 2, 2)`` and the Voigt Green strain ``(m, 3)``
+        (:func:`_strip_strains`)."""
+        F, eps = np.empty((len(self.area), 2, 2)), np.empty((len(self.area), 3))
+        _strip_strains(np.ascontiguousarray(u, dtype=np.float64), self.triangles, self.gradient_of_shape,
+                       self.to_material, F, eps)
+        return F, eps
 
     def energy(self, u: np.ndarray) -> float:
-        return float(self.h * np.dot(self.area, self.material.membrane_energy(self.kinematics(u)[1])))
+        return float(self.h * np.dot(self.area, self.material.membrane_law(self.kinematics(u)[1], 0)[0]))
 
     def first_piola(self, F: np.ndarray, eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(h F S (N/m), S (Pa))`` per triangle, ``(m, 2, 2)`` each: the first Piola–Kirchhoff
@@ -286,30 +303,29 @@ class _Membrane:
 
     def gradient(self, u: np.ndarray) -> np.ndarray:
         """``∂Π/∂u (n, 2)`` (N)."""
-        P, _ = self.first_piola(*self.kinematics(u))
-        per_node = self.area[:, None, None] * np.einsum("mij,maj->mai", P, self.gradient_of_shape)
-        out = np.zeros_like(u)
-        np.add.at(out, self.mesh.triangles, per_node)
+        F, eps = self.kinematics(u)
+        out = np.zeros((len(u), 2))
+        _strip_gradient(self.triangles, self.gradient_of_shape, self.h * self.area, F,
+                        self.material.membrane_law(eps, 1)[1], out)
         return out
 
-    def stiffness(self, u: np.ndarray) -> scipy.sparse.csr_matrix:
+    def stiffness(self, u: np.ndarray) -> scipy.sparse.csc_matrix:
         """``∂²Π/∂u²`` ``(2n, 2n)``, the material part ``h A Bᵀ D B`` and the geometric part
-        ``h A (gₐᵀ S g_b) Id``."""
+        ``h A (gₐᵀ S g_b) Id`` (:func:`_strip_stiffness`)."""
+        row, indptr, n = self._pattern
+        return scipy.sparse.csc_matrix((self._stiffness_values(u), row, indptr), shape=(n, n))
+
+    def free_stiffness(self, u: np.ndarray) -> scipy.sparse.csc_matrix:
+        """:meth:`stiffness`'s block on :attr:`free`."""
+        row, indptr, n = self._free_pattern
+        return scipy.sparse.csc_matrix((self._stiffness_values(u)[self._free_entries], row, indptr), shape=(n, n))
+
+    def _stiffness_values(self, u: np.ndarray) -> np.ndarray:
         F, eps = self.kinematics(u)
-        D = self.material.membrane_tangent(eps)
-        _, S = self.first_piola(F, eps)
-        g = self.gradient_of_shape
-        # B (m, 3, 3 nodes, 2): δε = Σ_a B_a δx_a with rows δE00, δE11, 2 δE01.
-        B = np.stack([g[:, :, 0, None] * F[:, None, :, 0],
-                      g[:, :, 1, None] * F[:, None, :, 1],
-                      g[:, :, 1, None] * F[:, None, :, 0] + g[:, :, 0, None] * F[:, None, :, 1]], axis=1)
-        B = B.reshape(len(F), 3, 6)
-        material = np.einsum("mpi,mpq,mqj->mij", B, D, B)
-        geometric = np.einsum("mai,mij,mbj->mab", g, S, g)  # (m, 3, 3)
-        geometric = np.einsum("mab,kl->makbl", geometric, np.eye(2)).reshape(len(F), 6, 6)
-        local = (self.h * self.area)[:, None, None] * (material + geometric)
-        n = 2 * len(u)
-        return scipy.sparse.coo_matrix((local.ravel(), (self.rows, self.cols)), shape=(n, n)).tocsr()
+        _, stress, tangent = self.material.membrane_law(eps, 2)
+        local = np.empty((len(F), 6, 6))
+        _strip_stiffness(self.gradient_of_shape, self.h * self.area, F, stress, np.ascontiguousarray(tangent), local)
+        return np.bincount(self._slot, weights=local.ravel(), minlength=len(self._pattern[0]))
 
     def middle_traction(self, u: np.ndarray) -> float:
         """The mean over the middle region (half the gauge by half the width, triangles by their
@@ -322,6 +338,81 @@ class _Membrane:
         normal = self.to_material[:, 0]
         traction = np.einsum("mj,j->m", P[:, 0, :], normal)
         return float(np.dot(self.area[inner], traction[inner]) / self.area[inner].sum())
+
+
+@njit(cache=True)
+def _strip_strains(u, triangles, gradient_of_shape, to_material, F, eps):
+    """Per triangle of ``triangles (m, 3)``, from nodal displacements ``u (n, 2)`` (m): the
+    deformation gradient ``F = Rᵀ + D`` into ``F (m, 2, 2)`` and the Voigt Green strain into
+    ``eps (m, 3)``, formed from the displacement gradient ``D = Σₐ uₐ gₐᵀ`` as
+    ``½ (R D + (R D)ᵀ + Dᵀ D)`` (``R`` = ``to_material``, ``gₐ`` = ``gradient_of_shape (m, 3, 2)``):
+    from positions, ``½ (FᵀF − Id)`` loses the digits of a gauge-long coordinate over a cell, which
+    a satin's stiff yarns turn into a force imbalance above the bias pull's tolerance."""
+    R = to_material
+    for m in range(triangles.shape[0]):
+        d00 = d01 = d10 = d11 = 0.0
+        for a in range(3):
+            node = triangles[m, a]
+            g0, g1 = gradient_of_shape[m, a, 0], gradient_of_shape[m, a, 1]
+            d00 += u[node, 0] * g0
+            d01 += u[node, 0] * g1
+            d10 += u[node, 1] * g0
+            d11 += u[node, 1] * g1
+        rd00 = R[0, 0] * d00 + R[0, 1] * d10
+        rd01 = R[0, 0] * d01 + R[0, 1] * d11
+        rd10 = R[1, 0] * d00 + R[1, 1] * d10
+        rd11 = R[1, 0] * d01 + R[1, 1] * d11
+        eps[m, 0] = rd00 + 0.5 * (d00 * d00 + d10 * d10)
+        eps[m, 1] = rd11 + 0.5 * (d01 * d01 + d11 * d11)
+        eps[m, 2] = rd01 + rd10 + d00 * d01 + d10 * d11
+        F[m, 0, 0] = R[0, 0] + d00
+        F[m, 0, 1] = R[1, 0] + d01
+        F[m, 1, 0] = R[0, 1] + d10
+        F[m, 1, 1] = R[1, 1] + d11
+
+
+@njit(cache=True)
+def _strip_gradient(triangles, gradient_of_shape, weight, F, stress, out):
+    """``∂Π/∂u`` added into ``out (n, 2)`` (N): per triangle ``weight (m,)`` (``h A``, m³) times
+    ``F S gₐ`` at each of its nodes, ``S`` the second Piola–Kirchhoff stress from its Voigt
+    ``stress (m, 3)`` (Pa)."""
+    for m in range(triangles.shape[0]):
+        s00, s11, s01 = stress[m, 0], stress[m, 1], stress[m, 2]
+        p00 = weight[m] * (F[m, 0, 0] * s00 + F[m, 0, 1] * s01)
+        p01 = weight[m] * (F[m, 0, 0] * s01 + F[m, 0, 1] * s11)
+        p10 = weight[m] * (F[m, 1, 0] * s00 + F[m, 1, 1] * s01)
+        p11 = weight[m] * (F[m, 1, 0] * s01 + F[m, 1, 1] * s11)
+        for a in range(3):
+            g0, g1 = gradient_of_shape[m, a, 0], gradient_of_shape[m, a, 1]
+            out[triangles[m, a], 0] += p00 * g0 + p01 * g1
+            out[triangles[m, a], 1] += p10 * g0 + p11 * g1
+
+
+@njit(cache=True)
+def _strip_stiffness(gradient_of_shape, weight, F, stress, tangent, local):
+    """Each triangle's ``6 × 6`` stiffness into ``local (m, 6, 6)`` (DOF ``2 a + k``: node ``a``'s
+    coordinate ``k``): ``weight (Bᵀ D B + (gₐᵀ S g_b) Id)``, ``B (3, 6)`` the Voigt strain's
+    derivative (rows δE00, δE11, 2 δE01), ``D`` = ``tangent (m, 3, 3)``, ``S`` from ``stress``."""
+    B = np.empty((3, 6))
+    for m in range(F.shape[0]):
+        for a in range(3):
+            g0, g1 = gradient_of_shape[m, a, 0], gradient_of_shape[m, a, 1]
+            for k in range(2):
+                B[0, 2 * a + k] = g0 * F[m, k, 0]
+                B[1, 2 * a + k] = g1 * F[m, k, 1]
+                B[2, 2 * a + k] = g1 * F[m, k, 0] + g0 * F[m, k, 1]
+        s00, s11, s01 = stress[m, 0], stress[m, 1], stress[m, 2]
+        for i in range(6):
+            for j in range(6):
+                value = 0.0
+                for p in range(3):
+                    row = tangent[m, p, 0] * B[0, j] + tangent[m, p, 1] * B[1, j] + tangent[m, p, 2] * B[2, j]
+                    value += B[p, i] * row
+                if i % 2 == j % 2:
+                    ga0, ga1 = gradient_of_shape[m, i // 2, 0], gradient_of_shape[m, i // 2, 1]
+                    gb0, gb1 = gradient_of_shape[m, j // 2, 0], gradient_of_shape[m, j // 2, 1]
+                    value += ga0 * (s00 * gb0 + s01 * gb1) + ga1 * (s01 * gb0 + s11 * gb1)
+                local[m, i, j] = weight[m] * value
 
 
 def pull_shell_strip(material: ShellMaterial, angle_deg: float, gauge: float, width: float,
@@ -339,10 +430,6 @@ def pull_shell_strip(material: ShellMaterial, angle_deg: float, gauge: float, wi
     material.check_positive_definite()
     mesh = strip_mesh(angle_deg, gauge, width, rows)
     membrane = _Membrane(material, mesh, angle_deg)
-    held = np.zeros(2 * len(mesh.rest), dtype=bool)
-    for nodes in (mesh.moving, mesh.fixed):
-        held[2 * nodes] = held[2 * nodes + 1] = True
-    free = np.flatnonzero(~held)
     u = np.zeros_like(mesh.rest)  # displacements (m): the unknowns, see _Membrane.kinematics
     states = [_read(membrane, u, 0.0, 0.0, 0, True)]
     reached, before = 0.0, None
@@ -362,7 +449,7 @@ def pull_shell_strip(material: ShellMaterial, angle_deg: float, gauge: float, wi
             before, u = (previous, u), guess
             u[mesh.moving] = (0.5 * strain * gauge, 0.0)
             u[mesh.fixed] = (-0.5 * strain * gauge, 0.0)
-            u, imbalance, iterations, converged = _solve(membrane, u, free)
+            u, imbalance, iterations, converged = _solve(membrane, u)
             state = _read(membrane, u, strain, imbalance, iterations, converged)
             if not converged and progress is not None:
                 progress(f"shell strip at {100 * strain:.3g} %: not converged (imbalance {imbalance:.3g} N after "
@@ -402,10 +489,15 @@ def _jaw_pull(membrane: _Membrane, gradient: np.ndarray) -> float:
     return float(gradient[membrane.mesh.moving, 0].sum())
 
 
-def _solve(membrane: _Membrane, u: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, float, int, bool]:
+def _solve(membrane: _Membrane, u: np.ndarray) -> tuple[np.ndarray, float, int, bool]:
     """Newton on the free dofs from displacements ``u`` with backtracking on the energy, shifting
-    the Hessian where its step does not descend; ``(u, imbalance (N), iterations, converged)``."""
+    the Hessian where its step does not descend; ``(u, imbalance (N), iterations, converged)``.
+    The Newton systems are solved by :class:`yarnfit.engine.linear.SymmetricSolve` (equilibrated
+    LDLᵀ on a fill-reducing ordering, its analysis kept across the solve's systems, which share one
+    pattern)."""
+    free = membrane.free
     flat = u.ravel().copy()
+    cache = FactorCache()
     for iteration in range(MAX_NEWTON + 1):
         gradient = membrane.gradient(flat.reshape(-1, 2))
         g = gradient.ravel()[free]
@@ -413,7 +505,7 @@ def _solve(membrane: _Membrane, u: np.ndarray, free: np.ndarray) -> tuple[np.nda
         if imbalance <= FORCE_RTOL * abs(_jaw_pull(membrane, gradient)):
             return flat.reshape(-1, 2), imbalance, iteration, True
         # The stiffness is assembled only for a step (or the round-off floor it sets).
-        K = membrane.stiffness(flat.reshape(-1, 2))[free][:, free].tocsc()
+        K = membrane.free_stiffness(flat.reshape(-1, 2))
         diagonal = float(np.abs(K.diagonal()).max())
         if imbalance <= FORCE_ROUNDOFF * diagonal * float(np.abs(flat).max()):
             return flat.reshape(-1, 2), imbalance, iteration, True
@@ -423,10 +515,9 @@ def _solve(membrane: _Membrane, u: np.ndarray, free: np.ndarray) -> tuple[np.nda
         shift = 0.0
         for _ in range(60):
             try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("error", scipy.sparse.linalg.MatrixRankWarning)
-                    step = -scipy.sparse.linalg.spsolve(K + shift * scipy.sparse.identity(len(free), format="csc"), g)
-            except (RuntimeError, scipy.sparse.linalg.MatrixRankWarning):  # singular: shift it
+                shifted = K if shift == 0.0 else K + shift * scipy.sparse.identity(len(free), format="csc")
+                step = -SymmetricSolve(shifted, cache=cache)(g)
+            except SingularSystemError:  # singular: shift it
                 step = None
             if step is not None and np.all(np.isfinite(step)) and float(g @ step) < 0.0:
                 accepted = _backtrack(membrane, flat, free, step, g, energy)
