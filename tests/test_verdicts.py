@@ -77,6 +77,9 @@ def test_strips_follow_the_shell_at_the_levels_at_rest():
     strips["8x5_bias"].update(strain=[0.002, 0.005], over_quasi_static=[1.05, 3.0])  # 3.0 not at rest
     verdict = by_check(summary)["stretch strips follow the shell"]
     assert verdict.passed is True and "5.0 % (8x5_weft at 0.5 %)" in verdict.figure
+    assert "not converged" not in verdict.figure
+    strips["8x5_weft"]["quasi_static_converged"] = [True, False]
+    assert "reference not converged: 8x5_weft at 0.5 %" in by_check(summary)["stretch strips follow the shell"].figure
     strips["8x5_weft"]["over_quasi_static"] = [1.02, 1.0 + 1.001 * STRIPS_FOLLOW_SHELL_RTOL]
     assert by_check(summary)["stretch strips follow the shell"].passed is False
     assert "stretch strips follow the shell" not in by_check(SUMMARY)  # not solved: not judged
