@@ -1,7 +1,7 @@
 """Benchmarks of yarnfit, one section per stage.
 
     python validation/bench.py [engine] [relax] [fit] [mujoco] [plugin_nonlinear_stable_step] [swatch]
-                               [swatch_frictionless] [drape_stable_step] [body] [suite]
+                               [swatch_frictionless] [drape_stable_step] [body] [shell_strip] [suite]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -688,6 +688,40 @@ def bench_body() -> None:
         report(f"body_{scale}_plugin_over_native", cost["plugin"] / cost["native"], "x")
 
 
+def bench_shell_strip() -> None:
+    """The stretch scene's quasi-static reference (``stretch.quasi_static_forces``): the shell
+    strips of its six strips (8 × 5 and 2 × 5 cm along weft, warp and bias) extrapolated from
+    :data:`~yarnfit.validate.stretch.QUASI_STATIC_ROWS` rows, through every strain level, for the
+    cotton twill and the polyester satin (fitted here with the default design): wall time per strip
+    on one core, Newton iterations, and whether every load step converged."""
+    import warnings
+
+    from yarnfit.fabric import Fabric
+    from yarnfit.fabric_fit import fit_fabric
+    from yarnfit.validate import DIRECTIONS
+    from yarnfit.validate.shell_strip import shell_strip_limit
+    from yarnfit.validate.stretch import QUASI_STATIC_ROWS, STRAIN_LEVELS, STRIPS
+
+    for preset in ("cotton-twill", "polyester-satin"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            shell = fit_fabric(Fabric.preset(preset)).material
+        key = "shell_strip_" + preset.replace("-", "_")
+        shell_strip_limit(shell, 0.0, 0.02, 0.01, [0.002], rows=2)  # compile or load the kernels
+        total = 0.0
+        for strip, (length, width) in STRIPS.items():
+            for direction, angle in DIRECTIONS.items():
+                start = time.perf_counter()
+                curve = shell_strip_limit(shell, angle, length, width, STRAIN_LEVELS, rows=QUASI_STATIC_ROWS[False])
+                seconds = time.perf_counter() - start
+                total += seconds
+                report(f"{key}_{strip}_{direction}_seconds", seconds,
+                       f"s ({sum(s.iterations for s in curve.states)} Newton iterations, "
+                       f"{'converged' if curve.converged else 'NOT converged'})")
+        report(f"{key}_seconds", total, f"s (six strips, {QUASI_STATIC_ROWS[False]}/{2 * QUASI_STATIC_ROWS[False]} rows, "
+               "one core)")
+
+
 def bench_suite() -> None:
     """``yarnfit validate``'s full suite on the cotton twill (fitted here with the default design):
     wall time of each scene and of the whole suite with the scenes side by side on every core (the
@@ -723,7 +757,8 @@ def bench_suite() -> None:
 SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco,
             "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step, "swatch": bench_swatch,
             "swatch_frictionless": lambda: bench_swatch(friction=False),
-            "drape_stable_step": bench_drape_stable_step, "body": bench_body, "suite": bench_suite}
+            "drape_stable_step": bench_drape_stable_step, "body": bench_body, "shell_strip": bench_shell_strip,
+            "suite": bench_suite}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -114,8 +114,8 @@ MAX_HOLD_SECONDS = 5.0
 # meshes it is extrapolated from, full and quick. From 12 and 24 rows it read up to ~4 % low on the
 # 2 x 5 bias strips against the same from 24 and 48 (the twill's at 0.2 %: 1.107 against 1.062,
 # the satin's 1.139 / 1.115 / 1.109 against 1.091 / 1.077 / 1.045; session 49), more than the
-# reference's share of STRIPS_FOLLOW_SHELL_RTOL. From 24 and 48 rows the six strips take 39 s (twill) and
-# 49 s (satin) on one core (session 50; 12 and 24 rows: 8 and 10 s).
+# reference's share of STRIPS_FOLLOW_SHELL_RTOL. From 24 and 48 rows the six strips take 35 s
+# (twill) and 105 s (satin) on one core (`validation/bench.py shell_strip`, session 50; 12 and 24 rows: 8 and 10 s).
 QUASI_STATIC_ROWS = {False: 24, True: 6}
 
 
