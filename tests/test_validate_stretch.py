@@ -154,6 +154,19 @@ def test_quasi_static_forces_reach_the_largest_measured_strain():
     assert converged.all()
 
 
+def test_quasi_static_forces_say_where_the_reference_did_not_converge(monkeypatch):
+    """A level read between load steps that stopped unconverged is flagged (here every one: no
+    Newton iteration allowed, from a guess that is not the equilibrium of a strip that narrows)."""
+    import yarnfit.validate.shell_strip as shell_strip
+
+    strain = np.array([0.002, 0.005])
+    result = StripResult("8x5_bias", 0.08, 0.05, math.radians(45.0), strain, np.zeros(2), np.ones(2),
+                         np.ones(2, bool), 0.0, 1.0, np.ones(2, bool))
+    assert quasi_static_forces(TWILL_LINE.shell, result, quick=True)[1].all()
+    monkeypatch.setattr(shell_strip, "MAX_NEWTON", 0)
+    assert not quasi_static_forces(TWILL_LINE.shell, result, quick=True)[1].any()
+
+
 def test_bias_strip_pulls_at_plus_45_degrees_from_the_weft():
     """The scene's bias strip is pulled at +45° from the weft (validate.DIRECTIONS, as the yarn
     scene's and the shell's own pulls): against the shell's quasi-static strip between the same
