@@ -12,6 +12,7 @@ from yarnfit.validate.shell_strip import (
     STRAIN_STEP,
     _Membrane,
     pull_shell_strip,
+    richardson_limit,
     shell_strip_limit,
     strip_mesh,
 )
@@ -141,11 +142,11 @@ def test_bias_strip_converges_with_the_mesh():
     """A woven-like bias strip held by its jaws: its middle strains more than their travel (the
     jaws hold its ends unsheared); its middle pull falls with each doubling of the rows (a
     coarse mesh is stiffer: it spreads the shear bands from the jaws' corners over its cells), and
-    the limit extrapolated from 24 and 48 rows is within EXTRAPOLATION_RTOL of that from 12 and
-    24."""
+    the limit extrapolated from 12, 24 and 48 rows is within EXTRAPOLATION_RTOL of that from 6, 12
+    and 24."""
     material = woven_like()
     one_mesh = {}
-    for rows in (12, 24, 48):
+    for rows in (6, 12, 24, 48):
         curve = pull_shell_strip(material, 45.0, GAUGE, WIDTH, [0.02, 0.05], rows=rows)
         one_mesh[rows] = np.array([curve.at_strain(e).middle_force_n_per_m for e in (0.02, 0.05)])
         assert curve.at_strain(0.05).mid_strain > 0.05
@@ -153,10 +154,27 @@ def test_bias_strip_converges_with_the_mesh():
     limits = {}
     for rows in (12, 24):
         curve = shell_strip_limit(material, 45.0, GAUGE, WIDTH, [0.02, 0.05], rows=rows)
-        assert curve.rows == (rows, 2 * rows) and curve.converged
+        assert curve.rows == (rows // 2, rows, 2 * rows) and curve.converged
         limits[rows] = np.array([curve.at_strain(e).middle_force_n_per_m for e in (0.02, 0.05)])
-        assert np.allclose(limits[rows], 2 * one_mesh[2 * rows] - one_mesh[rows], rtol=1e-12)
+        expected = [richardson_limit(*(one_mesh[n][k] for n in curve.rows)) for k in range(2)]
+        assert np.allclose(limits[rows], expected, rtol=1e-12)
     assert np.all(np.abs(limits[24] / limits[12] - 1) <= EXTRAPOLATION_RTOL)
+
+
+@pytest.mark.parametrize("order", [1.0, 1.5, 2.0, 3.0])
+def test_richardson_limit_is_exact_for_a_power_of_the_cell(order):
+    """Readings ``L + C h^p`` on cells h, h/2, h/4 give L exactly for any order p >= 1."""
+    limit, scale = 3.0, -0.7
+    coarse, middle, fine = (limit + scale * h**order for h in (1.0, 0.5, 0.25))
+    assert richardson_limit(coarse, middle, fine) == pytest.approx(limit, rel=1e-13)
+
+
+def test_richardson_limit_is_first_order_where_the_meshes_show_less():
+    """An order below 1 or readings that do not converge monotonically: ``2 fine − middle``."""
+    coarse, middle, fine = (1.0 + h**0.5 for h in (1.0, 0.5, 0.25))
+    assert richardson_limit(coarse, middle, fine) == 2 * fine - middle
+    assert richardson_limit(1.0, 1.2, 1.1) == 2 * 1.1 - 1.2
+    assert richardson_limit(1.0, 1.0, 1.0) == 1.0
 
 
 def test_strip_is_read_off_its_load_steps():

@@ -48,8 +48,9 @@ from .strip import EXTENSOMETER_SPAN, MARK_BAND, between_marks
 from .swatch import UniformReading, read_curve
 
 # Rows of triangles across the strip's width, or node spacings along its gauge where it is shorter
-# than wide (a bias mesh's rows are half a cell apart): the coarser of shell_strip_limit's two meshes (24 and 48 rows: see its docstring for the convergence
-# they give; tests/test_shell_strip.py checks it on a woven-like membrane).
+# than wide (a bias mesh's rows are half a cell apart): the middle of shell_strip_limit's three
+# meshes (12, 24 and 48 rows: see its docstring for the convergence they give;
+# tests/test_shell_strip.py checks it on a woven-like membrane).
 ROWS_ACROSS = 24
 # Largest jaw travel per load step (strain): as the yarn strip's frictional steps
 # (yarnfit.engine.lagged.FRICTION_STRAIN_STEP), so the two curves are read between steps as fine.
@@ -79,7 +80,7 @@ MAX_NEWTON = 1000
 # is compressed across).
 ARMIJO = 1e-4
 LEAST_STEP = 1e-6
-# Angles (degrees from weft) whose yarns the two meshes follow: 0 / 90 (yarns along the strip and
+# Angles (degrees from weft) whose yarns the two kinds of mesh follow: 0 / 90 (yarns along the strip and
 # across it: square cells split on a diagonal) and ±45 (yarns at ±45°: rows half a cell apart,
 # shifted half a cell, so the edges run along x and both diagonals).
 ALIGNED_ANGLES = (0.0, 90.0, -90.0)
@@ -137,8 +138,8 @@ class ShellStripState:
 @dataclass(frozen=True)
 class ShellStripCurve:
     """A shell strip pulled through its load steps (:func:`pull_shell_strip`), rest first:
-    ``rows`` the mesh's rows across, or the two meshes it was extrapolated from
-    (:func:`shell_strip_limit`; ``nodes`` then the finer's)."""
+    ``rows`` the mesh's rows across, or the three meshes it was extrapolated from
+    (:func:`shell_strip_limit`; ``nodes`` then the finest's)."""
 
     angle_deg: float
     gauge: float
@@ -468,25 +469,47 @@ def pull_shell_strip(material: ShellMaterial, angle_deg: float, gauge: float, wi
 def shell_strip_limit(material: ShellMaterial, angle_deg: float, gauge: float, width: float,
                       strains: Sequence[float], *, rows: int = ROWS_ACROSS,
                       progress: Callable[[str], None] | None = None) -> ShellStripCurve:
-    """The shell strip in the limit of a fine mesh: pulled on ``rows`` and ``2 rows`` rows
-    (:func:`pull_shell_strip`), each reading of each load step extrapolated as ``2 fine − coarse``
-    (Richardson, first order). Why: a strip held by its jaws shears in regions bounded by the
-    yarns through the jaws' corners, and the strain jumps across those lines, which a triangle
-    mesh resolves to first order in its cell: a woven's bias strip's middle pull falls 5–9 % from
-    24 to 48 rows and half that again to 96; extrapolated from 24 and 48 it is within 2.5 % of
-    the same from 48 and 96 (the satin's and twill's 8 × 6 bias strips, ``docs/design.md`` §8).
-    ``imbalance_n`` is the larger of the two, ``iterations`` their sum, ``converged`` both."""
-    coarse = pull_shell_strip(material, angle_deg, gauge, width, strains, rows=rows, progress=progress)
-    fine = pull_shell_strip(material, angle_deg, gauge, width, strains, rows=2 * rows, progress=progress)
+    """The shell strip in the limit of a fine mesh: pulled on ``rows / 2``, ``rows`` and ``2 rows``
+    rows (:func:`pull_shell_strip`), each reading of each load step extrapolated by Richardson at
+    the order the three meshes show (:func:`richardson_limit`). Why: a strip held by its jaws
+    shears in regions bounded by the yarns through the jaws' corners, and the strain jumps across
+    those lines, which a triangle mesh resolves to first order in its cell: a woven's bias strip's
+    middle pull falls 5–9 % from 24 to 48 rows and half that again to 96 (the satin's and twill's
+    8 × 6 bias strips, ``docs/design.md`` §8); where the strip stiffens, faster: the cotton
+    jersey's 2 × 5 cm weft strip at 10 % pulls 525 / 286 / 213 / 192 N/m on 12 / 24 / 48 / 96 rows,
+    order 1.7, and ``2 fine − coarse`` from 24 and 48 rows (140 N/m) overshot the limit those
+    meshes show (181 N/m from 12 / 24 / 48 rows, 182 from 24 / 48 / 96) by 23 %.
+    ``imbalance_n`` is the largest of the three, ``iterations`` their sum, ``converged`` all."""
+    if not (isinstance(rows, (int, np.integer)) and rows >= 4 and rows % 2 == 0):
+        raise ValueError(f"rows must be an even integer of at least 4 (the coarsest mesh has rows / 2), got {rows!r}")
+    curves = [pull_shell_strip(material, angle_deg, gauge, width, strains, rows=n, progress=progress)
+              for n in (rows // 2, rows, 2 * rows)]
     fields = ("force_n_per_m", "middle_force_n_per_m", "mid_strain", "middle_compression_ratio", "compression_ratio")
     states = []
-    for a, b in zip(coarse.states, fine.states):
+    for triple in zip(*(curve.states for curve in curves)):
         states.append(ShellStripState(
-            strain=b.strain, **{name: 2.0 * getattr(b, name) - getattr(a, name) for name in fields},
-            imbalance_n=max(a.imbalance_n, b.imbalance_n), iterations=a.iterations + b.iterations,
-            converged=a.converged and b.converged))
+            strain=triple[-1].strain,
+            **{name: richardson_limit(*(getattr(state, name) for state in triple)) for name in fields},
+            imbalance_n=max(state.imbalance_n for state in triple),
+            iterations=sum(state.iterations for state in triple),
+            converged=all(state.converged for state in triple)))
+    fine = curves[-1]
     return ShellStripCurve(angle_deg=fine.angle_deg, gauge=fine.gauge, width=fine.width, nodes=fine.nodes,
-                           states=tuple(states), rows=(rows, 2 * rows))
+                           states=tuple(states), rows=(rows // 2, rows, 2 * rows))
+
+
+def richardson_limit(coarse: float, middle: float, fine: float) -> float:
+    """The limit of a reading on three meshes each of half the last's cell, at the order they show:
+    with ``d₁ = coarse − middle`` and ``d₂ = middle − fine`` of one sign and ``r = d₁ / d₂``, the
+    error falls as ``h^p`` with ``2^p = r`` and the limit is ``fine − d₂ / (r − 1)``. Where they
+    show an order below 1 (``r < 2``) or do not converge monotonically, ``2 fine − middle``: first
+    order, the least a mesh's error can have here (the strain's jumps across lines through the
+    jaws' corners, resolved to first order), so a slow or noisy triple is not extrapolated further
+    than first order would."""
+    d1, d2 = coarse - middle, middle - fine
+    if d1 * d2 > 0.0 and abs(d1) >= 2.0 * abs(d2):
+        return fine - d2 / (d1 / d2 - 1.0)
+    return 2.0 * fine - middle
 
 
 def _jaw_pull(membrane: _Membrane, gradient: np.ndarray) -> float:

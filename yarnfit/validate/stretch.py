@@ -110,12 +110,12 @@ REST_CHECK_STEPS = 10
 # after 3.48 and 3.68 s (8 s hold), and 3 s left them unsettled there. Every other strip rests
 # within 1 s; the hold is a budget, only the slow levels spend it. 5 s leaves a third to spare.
 MAX_HOLD_SECONDS = 5.0
-# The quasi-static reference of each strip (quasi_static_forces): rows of the coarser of the two
-# meshes it is extrapolated from, full and quick. From 12 and 24 rows it read up to ~4 % low on the
-# 2 x 5 bias strips against the same from 24 and 48 (the twill's at 0.2 %: 1.107 against 1.062,
-# the satin's 1.139 / 1.115 / 1.109 against 1.091 / 1.077 / 1.045; session 49), more than the
-# reference's share of STRIPS_FOLLOW_SHELL_RTOL. From 24 and 48 rows the six strips take 35 s
-# (twill) and 105 s (satin) on one core (`validation/bench.py shell_strip`, session 50; 12 and 24 rows: 8 and 10 s).
+# The quasi-static reference of each strip (quasi_static_forces): rows of the middle of the three
+# meshes it is extrapolated from, full and quick. First order from 12 and 24 rows it read up to ~4 %
+# low on the 2 x 5 bias strips against the same from 24 and 48 (the twill's at 0.2 %: 1.107 against
+# 1.062, the satin's 1.139 / 1.115 / 1.109 against 1.091 / 1.077 / 1.045; session 49), more than
+# the reference's share of STRIPS_FOLLOW_SHELL_RTOL. From 12, 24 and 48 rows the six strips take
+# (timing: see validation/bench.py shell_strip).
 QUASI_STATIC_ROWS = {False: 24, True: 6}
 
 

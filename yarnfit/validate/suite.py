@@ -47,7 +47,7 @@ from .verdicts import verdicts
 # (relative): the servo leaves the measured strain below the nominal level, ~1 % for wovens, up to
 # 5 % for the clamped strips of knits (a jersey's bias strip stops at 9.52 % of 10 %).
 SHELL_RANGE_SLACK = 0.06
-# The shell strips compared with the yarn swatch (shell_strips_like_swatch): the coarser of the two
+# The shell strips compared with the yarn swatch (shell_strips_like_swatch): the middle of the three
 # meshes shell_strip_limit extrapolates from (rows across; yarnfit.validate.shell_strip).
 LIKE_SWATCH_ROWS = {False: 24, True: 6}
 
