@@ -202,3 +202,10 @@ def test_bad_input_is_refused(kwargs, message):
     arguments.update(kwargs)
     with pytest.raises(ValueError, match=message):
         pull_shell_strip(**arguments)
+
+
+@pytest.mark.parametrize("rows", [2, 5, 4.0])
+def test_limit_needs_an_even_count_of_rows(rows):
+    """The limit's coarsest mesh has rows / 2 rows: an odd count, or fewer than 4, is refused."""
+    with pytest.raises(ValueError, match="even integer"):
+        shell_strip_limit(isotropic_without_poisson(), 0.0, GAUGE, WIDTH, [0.02], rows=rows)

@@ -707,7 +707,7 @@ def bench_shell_strip() -> None:
             warnings.simplefilter("ignore")
             shell = fit_fabric(Fabric.preset(preset)).material
         key = "shell_strip_" + preset.replace("-", "_")
-        shell_strip_limit(shell, 0.0, 0.02, 0.01, [0.002], rows=2)  # compile or load the kernels
+        shell_strip_limit(shell, 0.0, 0.02, 0.01, [0.002], rows=4)  # compile or load the kernels
         total = 0.0
         for strip, (length, width) in STRIPS.items():
             for direction, angle in DIRECTIONS.items():

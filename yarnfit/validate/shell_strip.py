@@ -39,7 +39,6 @@ from typing import Callable, Sequence
 
 import numpy as np
 import scipy.sparse
-import scipy.sparse.linalg
 from numba import njit
 
 from ..engine.linear import FactorCache, SingularSystemError, SymmetricSolve
