@@ -718,8 +718,7 @@ def bench_shell_strip() -> None:
                 report(f"{key}_{strip}_{direction}_seconds", seconds,
                        f"s ({sum(s.iterations for s in curve.states)} Newton iterations, "
                        f"{'converged' if curve.converged else 'NOT converged'})")
-        report(f"{key}_seconds", total, f"s (six strips, {QUASI_STATIC_ROWS[False]}/{2 * QUASI_STATIC_ROWS[False]} rows, "
-               "one core)")
+        report(f"{key}_seconds", total, f"s (six strips, {'/'.join(map(str, curve.rows))} rows, one core)")
 
 
 def bench_suite() -> None:

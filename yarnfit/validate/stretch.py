@@ -114,8 +114,10 @@ MAX_HOLD_SECONDS = 5.0
 # meshes it is extrapolated from, full and quick. First order from 12 and 24 rows it read up to ~4 %
 # low on the 2 x 5 bias strips against the same from 24 and 48 (the twill's at 0.2 %: 1.107 against
 # 1.062, the satin's 1.139 / 1.115 / 1.109 against 1.091 / 1.077 / 1.045; session 49), more than
-# the reference's share of STRIPS_FOLLOW_SHELL_RTOL. From 12, 24 and 48 rows the six strips take
-# (timing: see validation/bench.py shell_strip).
+# the reference's share of STRIPS_FOLLOW_SHELL_RTOL; first order from 24 and 48 rows read the cotton
+# jersey's 2 x 5 weft strip at 10 % 23 % low (shell_strip_limit). From 12, 24 and 48 rows the six
+# strips take 34 s (twill) and 111 s (satin, its 2 x 5 bias 89 s of it) on one core
+# (`validation/bench.py shell_strip`, session 50).
 QUASI_STATIC_ROWS = {False: 24, True: 6}
 
 
