@@ -789,37 +789,29 @@ class ShellMaterial:
 
     def membrane_law(self, eps: np.ndarray, order: int = 2) -> tuple[np.ndarray, np.ndarray | None,
                                                                        np.ndarray | None]:
-        """:meth:`membrane_energy`, :meth:`membrane_stress` and :meth:`membrane_tangent` at once
-        (those past ``order``, 0 to 2, None): one pass over a :class:`RidgeMembrane`'s ridges."""
+        """The membrane's energy per reference area and thickness ``ψ(ε)`` (Pa = J/m³), its
+        gradient and its tangent at Voigt strains ``eps (…, 3)``, shaped ``(…)``, ``(…, 3)`` and
+        ``(…, 3, 3)`` (those past ``order``, 0 to 2, None): the :class:`RidgeMembrane`'s, in one
+        pass over its ridges (piecewise constant tangent: at a kink, the side ``n·ε > t``
+        excludes), or ``½ εᵀ S ε``, ``S ε`` and ``S``."""
         eps = np.asarray(eps, dtype=np.float64)
         if self.nonlinear is not None:
             return self.nonlinear.law(eps, order)
-        stress = eps @ self.S
+        stress = eps @ self.S  # S symmetric: row-vector product = S ε
         return (0.5 * np.einsum("...i,...i->...", eps, stress), stress if order >= 1 else None,
                 np.broadcast_to(self.S, eps.shape[:-1] + (3, 3)) if order >= 2 else None)
 
     def membrane_energy(self, eps: np.ndarray) -> np.ndarray:
-        """The membrane's energy per reference area and thickness (Pa = J/m³) at Voigt strains
-        ``eps (…, 3)``: ``ψ(ε)`` of the :class:`RidgeMembrane`, or ``½ εᵀ S ε``; shape ``(…)``."""
-        eps = np.asarray(eps, dtype=np.float64)
-        if self.nonlinear is not None:
-            return self.nonlinear.energy(eps)
-        return 0.5 * np.einsum("...i,ij,...j->...", eps, self.S, eps)
+        """``ψ(ε)`` (Pa = J/m³) of :meth:`membrane_law`, shaped ``(…)``."""
+        return self.membrane_law(eps, 0)[0]
 
     def membrane_stress(self, eps: np.ndarray) -> np.ndarray:
-        """``∂/∂ε`` of :meth:`membrane_energy` (Pa), shaped like ``eps (…, 3)``."""
-        eps = np.asarray(eps, dtype=np.float64)
-        if self.nonlinear is not None:
-            return self.nonlinear.stress(eps)
-        return eps @ self.S  # S symmetric: row-vector product = S ε
+        """``∂ψ/∂ε`` (Pa) of :meth:`membrane_law`, shaped like ``eps (…, 3)``."""
+        return self.membrane_law(eps, 1)[1]
 
     def membrane_tangent(self, eps: np.ndarray) -> np.ndarray:
-        """``∂²/∂ε²`` of :meth:`membrane_energy` ``(…, 3, 3)`` (Pa): ``S``, or the ridge membrane's
-        (piecewise constant: at a kink, the side ``n·ε > t`` excludes)."""
-        eps = np.asarray(eps, dtype=np.float64)
-        if self.nonlinear is not None:
-            return self.nonlinear.hessian(eps)
-        return np.broadcast_to(self.S, eps.shape[:-1] + (3, 3))
+        """``∂²ψ/∂ε²`` ``(…, 3, 3)`` (Pa) of :meth:`membrane_law`."""
+        return self.membrane_law(eps, 2)[2]
 
     def uniaxial_stiffness(self, angle: float) -> tuple[float, float]:
         """Small-strain uniaxial stiffness (N/m) and Poisson ratio for a pull at ``angle`` (rad)
