@@ -267,6 +267,9 @@ class _Membrane:
         self.gradient_of_shape = np.ascontiguousarray(
             np.concatenate([-inverse.sum(axis=1, keepdims=True), inverse], axis=1))
         self.h = material.thickness
+        # The middle region middle_traction averages over: triangles by their centroid.
+        centroid = mesh.rest[t].mean(axis=1)
+        self._middle = (np.abs(centroid[:, 0]) <= 0.25 * mesh.gauge) & (np.abs(centroid[:, 1]) <= 0.25 * mesh.width)
         held = np.zeros(2 * len(mesh.rest), dtype=bool)
         for nodes in (mesh.moving, mesh.fixed):
             held[2 * nodes] = held[2 * nodes + 1] = True
@@ -298,13 +301,14 @@ class _Membrane:
     def energy(self, u: np.ndarray) -> float:
         return float(self.h * np.dot(self.area, self.material.membrane_law(self.kinematics(u)[1], 0)[0]))
 
-    def first_piola(self, F: np.ndarray, eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(h F S (N/m), S (Pa))`` per triangle, ``(m, 2, 2)`` each: the first Piola–Kirchhoff
-        stress resultant and the second Piola–Kirchhoff stress in material coordinates."""
+    def first_piola(self, F: np.ndarray, eps: np.ndarray) -> np.ndarray:
+        """``h F S`` (N/m) per triangle ``(m, 2, 2)``: the first Piola–Kirchhoff stress resultant,
+        ``S`` the second Piola–Kirchhoff stress in material coordinates (the gradient's kernel,
+        :func:`_strip_gradient`, forms the same per triangle)."""
         sigma = self.material.membrane_stress(eps)
         S = np.stack([np.stack([sigma[:, 0], sigma[:, 2]], axis=1), np.stack([sigma[:, 2], sigma[:, 1]], axis=1)],
                      axis=1)
-        return self.h * np.einsum("mij,mjk->mik", F, S), S
+        return self.h * np.einsum("mij,mjk->mik", F, S)
 
     def gradient(self, u: np.ndarray) -> np.ndarray:
         """``∂Π/∂u (n, 2)`` (N)."""
@@ -336,12 +340,8 @@ class _Membrane:
         """The mean over the middle region (half the gauge by half the width, triangles by their
         centroid, area-weighted) of the pull across reference planes normal to x, ``(P N)_x`` with
         ``N`` the strip's x in material coordinates (N/m)."""
-        mesh = self.mesh
-        centroid = mesh.rest[mesh.triangles].mean(axis=1)
-        inner = (np.abs(centroid[:, 0]) <= 0.25 * mesh.gauge) & (np.abs(centroid[:, 1]) <= 0.25 * mesh.width)
-        P, _ = self.first_piola(*self.kinematics(u))
-        normal = self.to_material[:, 0]
-        traction = np.einsum("mj,j->m", P[:, 0, :], normal)
+        inner = self._middle
+        traction = self.first_piola(*self.kinematics(u))[:, 0, :] @ self.to_material[:, 0]
         return float(np.dot(self.area[inner], traction[inner]) / self.area[inner].sum())
 
 
