@@ -17,7 +17,8 @@ from yarnfit.engine.tiling import cut_rectangle
 from yarnfit.validate.strip import centre_line as middle_line
 from yarnfit.validate.strip import cut_forces, edge_draw_in, free_side_ends, mid_strain, middle_compression
 from yarnfit.validate.swatch import (FRICTION_STRAIN_STEP, STRAIN_TIMELINE, SWATCH_OPTIONS,
-                                     UNIFORM_EXTRAPOLATION_RTOL, cut_swatch, read_uniform, stretch_repeat, stretch_swatch)
+                                     UNIFORM_EXTRAPOLATION_RTOL, cut_swatch, read_uniform, stretch_repeat, stretch_swatch,
+                                     swatch_curve)
 
 E = 1e9  # Pa
 RADIUS = 1e-4  # m
@@ -114,6 +115,28 @@ def test_straight_wefts_match_closed_form(hardening):
         assert read.compression_ratio == pytest.approx(1.0, abs=1e-9)
         if hardening == 0.0 or strain in (0.02, 0.10):
             assert read.force_n_per_m == pytest.approx(axial_force(strain, hardening) / spacing, rel=FORCE_RTOL)
+
+
+def test_the_curve_so_far_is_the_start_of_the_finished_curve():
+    # A convergence study writes swatch_curve of the points reached after every strain, so a run
+    # stopped part way keeps its levels: that curve must be the finished one's start, read the same.
+    model, material = straight_weft_repeat(0.0)
+    swatch = cut_swatch(model, model.node_rest_position, material, direction="weft", gauge=4 * PX, width=2 * PY,
+                        clamp=PX)
+    points, so_far = [], []
+
+    def keep(k, strain, position, point):
+        points.append(point)
+        so_far.append(swatch_curve(swatch, points))
+
+    out = stretch_swatch(swatch, (0.02, 0.05), on_step=keep)
+    assert swatch_curve(swatch, points) == out
+    first = so_far[1]  # after the 2 % level
+    assert first["strain"] == out["strain"][:2] and first["points"] == out["points"][:2]
+    assert first["nodes"] == out["nodes"] and first["converged"]
+    (at_two, at_five) = read_uniform(first, (0.02, 0.05))
+    assert at_two == read_uniform(out, (0.02,))[0]
+    assert at_five is None  # not reached yet
 
 
 def test_the_extensometer_reads_the_middle_not_the_jaws():

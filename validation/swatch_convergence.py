@@ -62,7 +62,7 @@ from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
 from yarnfit.homogenize import periodic_pulls_along
 from yarnfit.validate.shell_strip import ShellStripCurve, shell_strip_limit
-from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, read_uniform, stretch_swatch
+from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, read_uniform, stretch_swatch, swatch_curve
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
 CLAMP_REPEATS = 0.5
@@ -102,8 +102,9 @@ def solve_curves(file: MaterialFile, sizes, directions, selvedge: bool = False,
     ``selvedge``, the yarns running across a strip joined at its long sides:
     :func:`yarnfit.validate.swatch.join_selvedges`; with ``friction``, the fibre's friction at the
     contacts), pulled to STRAINS on one core; prints each strip's row as it finishes and, with
-    ``json_path``, writes the curves finished so far there (a strip takes up to hours: a run
-    stopped part way keeps what it finished, for ``--from-json``)."""
+    ``json_path``, writes the curves there after every strain a strip reaches (a strip takes up to
+    hours: a run stopped part way keeps the strains it reached, the strip being pulled marked
+    ``"unfinished"``, for ``--from-json``)."""
     relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
     repeat = float(max(relaxed.repeat_size))
     section = relaxed.yarn.section()
@@ -114,11 +115,21 @@ def solve_curves(file: MaterialFile, sizes, directions, selvedge: bool = False,
             swatch = cut_swatch(relaxed.model, relaxed.state.node_position, section, direction=direction,
                                 gauge=gauge * repeat, width=width * repeat, clamp=CLAMP_REPEATS * repeat,
                                 selvedge=selvedge)
+            label, points = f"{direction} {gauge:g}x{width:g}", []
+
+            def keep(k, strain, position, point, swatch=swatch, label=label, points=points, size=(gauge, width)):
+                """Write the strip's curve so far after each strain it reaches."""
+                points.append(point)
+                if json_path and k > 0:
+                    write_curves(json_path, relaxed.name,
+                                 {**curves, label: {**swatch_curve(swatch, points), "repeats": list(size),
+                                                    "unfinished": True}})
+
             start = time.perf_counter()
-            curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, friction=coefficient,
+            curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, friction=coefficient, on_step=keep,
                                    progress=lambda text: print("   ", text, flush=True))
             curve["repeats"] = [gauge, width]
-            curves[f"{direction} {gauge:g}x{width:g}"] = curve
+            curves[label] = curve
             print(convergence_row(curve), f"({time.perf_counter() - start:.0f} s)", flush=True)
             if json_path:
                 write_curves(json_path, relaxed.name, curves)
@@ -132,17 +143,33 @@ def write_curves(path: str, name: str, curves: dict) -> None:
 
 
 def convergence_row(curve: dict) -> str:
-    points = curve["points"][1:]
+    """The strip's row of the convergence table; '—' at the strains a stopped run did not reach."""
+    points = level_points(curve)
+    reached = [p for p in points if p is not None]
     gauge, width = curve["repeats"]
+
+    def cells(text: Callable[[dict], str]) -> str:
+        return " | ".join("—" if p is None else text(p) for p in points)
+
+    last = points[-1]
+    converged = "unfinished" if curve.get("unfinished") else "yes" if curve["converged"] else "NO"
     return (f"| {curve['direction']} | {gauge:g} × {width:g} | {curve['nodes']} | "
-            + " | ".join(f"{p['force_n_per_m']:.4g}" for p in points) + " | "
-            + " | ".join(_force(p.get("middle_force_n_per_m")) for p in points) + " | "
-            + " | ".join(f"{p['compression_ratio']:.3f}" for p in points) + " | "
-            + " | ".join(_ratio(p.get("middle_compression_ratio")) for p in points) + " | "
-            + " | ".join(_percent(p.get("mid_strain")) for p in points) + " | "
-            + " | ".join(_micrometres(p.get("edge_draw_in_m")) for p in points) + " | "
-            + _quarters(points[-1].get("quarter_forces_n_per_m")) + " | "
-            + f"{max(p['seconds'] for p in points):.1f} | {'yes' if curve['converged'] else 'NO'} |")
+            + cells(lambda p: f"{p['force_n_per_m']:.4g}") + " | "
+            + cells(lambda p: _force(p.get("middle_force_n_per_m"))) + " | "
+            + cells(lambda p: f"{p['compression_ratio']:.3f}") + " | "
+            + cells(lambda p: _ratio(p.get("middle_compression_ratio"))) + " | "
+            + cells(lambda p: _percent(p.get("mid_strain"))) + " | "
+            + cells(lambda p: _micrometres(p.get("edge_draw_in_m"))) + " | "
+            + ("—" if last is None else _quarters(last.get("quarter_forces_n_per_m"))) + " | "
+            + f"{max((p['seconds'] for p in reached), default=0.0):.1f} | {converged} |")
+
+
+def level_points(curve: dict) -> list[dict | None]:
+    """The strip's point at each of STRAINS, ``None`` where a stopped run did not reach it."""
+    points = curve["points"][1:]
+    if len(points) > len(STRAINS) or any(p["strain"] != e for p, e in zip(points, STRAINS)):
+        raise ValueError(f"the curve's strains {[p['strain'] for p in points]} are not a start of {list(STRAINS)}")
+    return points + [None] * (len(STRAINS) - len(points))
 
 
 def _quarters(values) -> str:
@@ -248,14 +275,14 @@ class Reading:
     read: Callable[[dict], list]
 
 
-def _jaws(curve: dict) -> list[ReadPoint]:
-    return [ReadPoint(p["strain"], p["force_n_per_m"], p["strain"], p["compression_ratio"], p["converged"])
-            for p in curve["points"][1:]]
+def _jaws(curve: dict) -> list[ReadPoint | None]:
+    return [None if p is None else ReadPoint(p["strain"], p["force_n_per_m"], p["strain"], p["compression_ratio"],
+                                             p["converged"]) for p in level_points(curve)]
 
 
-def _middle(curve: dict) -> list[ReadPoint]:
-    return [ReadPoint(p["strain"], middle_force(p), middle_strain(p), middle_compression(p), p["converged"])
-            for p in curve["points"][1:]]
+def _middle(curve: dict) -> list[ReadPoint | None]:
+    return [None if p is None else ReadPoint(p["strain"], middle_force(p), middle_strain(p), middle_compression(p),
+                                             p["converged"]) for p in level_points(curve)]
 
 
 def _uniform(curve: dict) -> list[ReadPoint | None]:

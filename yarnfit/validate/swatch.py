@@ -435,6 +435,15 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                      f"({point['seconds']:.1f} s; {r})")
         if on_step is not None:
             on_step(k, strain, state.node_position, point)
+    return swatch_curve(swatch, points)
+
+
+def swatch_curve(swatch: Swatch, points: Sequence[dict]) -> dict:
+    """The JSON-able curve :func:`stretch_swatch` returns, from ``swatch`` and its ``points`` (the
+    rest point first, then one per strain reached): also the curve so far of a pull still running
+    (a convergence study writes it after every strain, so a run stopped part way keeps its levels)."""
+    points = list(points)
+    model = swatch.model
     return {
         "direction": swatch.direction,
         "angle_deg": swatch.angle_deg,
