@@ -522,6 +522,11 @@ def test_the_suite_runs_the_yarn_scene_per_direction_and_merges_it(tmp_path):
         assert strip["quasi_static"] and all(strip["converged"])
         assert (strip["length_m"], strip["width_m"]) == (curve["gauge_m"], curve["width_m"])
         assert strip["strain"] == [e for e in curve["strain"] if e > 0]
+        # ... beside the same shell pulled free, which says how far the jaws hold the strip.
+        angle = math.radians(curve["angle_deg"])
+        assert strip["free_pull_n_per_m"] == [FABRIC.uniaxial_pull(angle, 1 + e).force_n_per_m for e in strip["strain"]]
+        compared = summary["shell_vs_yarn"]["same_proportions"][direction]
+        assert len(compared["jaws_hold"]) == len(compared["strain"]) and all(h > 0 for h in compared["jaws_hold"])
     assert set(summary["shell_vs_yarn"]["same_proportions"]) == {"weft", "warp"}
     assert summary["wall_seconds"]["shell_strips_like_swatch"] > 0
     folder = tmp_path / "logs" / fabric.name

@@ -8,7 +8,7 @@ import pytest
 
 import yarnfit.validate.suite as suite_module
 from yarnfit.cli import main
-from yarnfit.validate.verdicts import SHELL_YARN_TOLERANCE, STRIPS_FOLLOW_SHELL_RTOL, verdicts
+from yarnfit.validate.verdicts import JAWS_HOLD_RTOL, SHELL_YARN_TOLERANCE, STRIPS_FOLLOW_SHELL_RTOL, verdicts
 
 SUMMARY = {
     "scenes": {
@@ -54,6 +54,20 @@ def test_the_shell_yarn_criterion_is_its_tolerance():
     summary = copy.deepcopy(SUMMARY)
     summary["shell_vs_yarn"]["same_proportions"]["weft"]["force_relative_difference"][1] = -1.001 * SHELL_YARN_TOLERANCE
     assert by_check(summary)["shell vs yarn swatch"].passed is False
+
+
+def test_a_swatch_whose_jaws_hold_the_shell_says_so():
+    # The worst point's swatch holds the shell's own strip 3 times its free pull: the figure says
+    # so; the verdict is still the criterion's. Within JAWS_HOLD_RTOL nothing is added.
+    summary = copy.deepcopy(SUMMARY)
+    summary["shell_vs_yarn"]["same_proportions"]["weft"]["force_relative_difference"] = [0.05, -0.5]
+    summary["shell_vs_yarn"]["same_proportions"]["weft"]["jaws_hold"] = [1.0, 3.0]
+    held = by_check(summary)["shell vs yarn swatch"]
+    assert held.passed is False and "weft at 5 %" in held.figure and "3 times its free pull" in held.figure
+    summary["shell_vs_yarn"]["same_proportions"]["weft"]["jaws_hold"] = [1.0, 1.0 + 0.99 * JAWS_HOLD_RTOL]
+    assert "free pull" not in by_check(summary)["shell vs yarn swatch"].figure
+    summary["shell_vs_yarn"]["same_proportions"]["weft"]["jaws_hold"] = [1.0, None]  # no free pull there
+    assert "free pull" not in by_check(summary)["shell vs yarn swatch"].figure
 
 
 def test_the_bias_criterion_applies_to_wovens_only():

@@ -302,6 +302,9 @@ def shell_strips_like_swatch(material, yarn: dict, *, quick: bool = False) -> di
             "mid_strain": [s.mid_strain for s in states],
             "middle_compression_ratio": [s.middle_compression_ratio for s in states],
             "converged": [s.converged for s in states],
+            # The same shell pulled free at the jaws' strains: how far the jaws hold its strip.
+            "free_pull_n_per_m": [material.shell.uniaxial_pull(math.radians(strip.angle_deg), 1.0 + e).force_n_per_m
+                                  for e in strains],
         }
     return out
 
@@ -310,8 +313,12 @@ def compare_shell_yarn(stretch: dict, yarn: dict, strip: str = "8x5") -> dict:
     """The shell's ``<strip>_<direction>`` strips against the explicit yarn swatch, per direction, at the yarn
     test's strains: ``strain``, ``shell_force_n_per_m`` and ``shell_compression_ratio`` (the shell
     curve interpolated there), ``yarn_force_n_per_m``, ``yarn_compression_ratio`` and
-    ``force_relative_difference`` (shell / yarn − 1; the issue's target is within 20 % up to 10 %).
-    Strains outside the shell's pulled range are left out."""
+    ``force_relative_difference`` (shell / yarn − 1; the issue's target is within 20 % up to 10 %),
+    and where the strip carries the shell pulled free (``free_pull_n_per_m``,
+    :func:`shell_strips_like_swatch`) ``jaws_hold``, the strip's force over the free pull's: how
+    far the jaws, not the material, set the reading (a bias strip shorter than about twice its
+    width holds a woven's shell several times its free pull). Strains outside the shell's pulled
+    range are left out."""
     import numpy as np
 
     out = {}
@@ -335,6 +342,9 @@ def compare_shell_yarn(stretch: dict, yarn: dict, strip: str = "8x5") -> dict:
             "yarn_compression_ratio": np.asarray(curve["compression_ratio"], float)[inside].tolist(),
             "force_relative_difference": (shell_force / yarn_force - 1.0).tolist(),
         }
+        if "free_pull_n_per_m" in strip_curve:
+            free = _interp_extend(strain[inside], shell_strain, strip_curve["free_pull_n_per_m"])
+            out[direction]["jaws_hold"] = [float(a / b) if b > 0.0 else None for a, b in zip(shell_force, free)]
     return out
 
 
