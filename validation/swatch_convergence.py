@@ -67,7 +67,9 @@ from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
 from yarnfit.homogenize import periodic_pulls_along
 from yarnfit.validate.shell_strip import ShellStripCurve, shell_strip_limit
+from yarnfit.validate import PULL_DIRECTIONS
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, read_uniform, stretch_swatch, swatch_curve
+from yarnfit.validate.verdicts import JAWS_HOLD_RTOL
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
 CLAMP_REPEATS = 0.5
@@ -86,25 +88,24 @@ SHELL_COMPRESSION_ATOL = 0.05
 # strain a yarn strip's middle reached: 12.6-13.3 % for the knits at 10 %, 15.1 % for the twill's
 # bias strip, whose shell strips' middles strain less or more than their jaws.
 SHELL_STRIP_REACH = 0.2
-# A strip whose own jaws move the shell's reading of its middle by more than the shell criterion
-# (its same-jaws strip against its free pull) cannot tell the shell's error from the jaws': a
-# woven's 8 × 6 bias strip (gauge 1.33 widths) reads the twill's shell 3.2 / 5.7 / 1.9 times its
-# free pull at 2 / 5 / 10 %, the satin's 4.5 / 4.8 / 24 times, where a 12 × 4 strip (a bias
-# extension test's 3 widths) reads both within 12 %. Such cells are counted apart.
-REPRESENTATIVE_RTOL = SHELL_FORCE_RTOL
+# A strip whose own jaws move the shell's reading by more than JAWS_HOLD_RTOL (its same-jaws strip
+# against its free pull) cannot tell the shell's error from the jaws', and its cells are counted
+# apart: a woven's 8 × 6 bias strip (gauge 1.33 widths) reads the twill's shell 3.2 / 5.7 / 1.9
+# times its free pull at the middle's 2 / 5 / 10 %, the satin's 4.5 / 4.8 / 24 times, where a
+# 12 × 4 strip (a bias extension test's 3 widths) reads both within 12 %.
 
-
-# Default strips, gauge x width in repeats: along the yarns up to 8 x 6; on the bias a bias
-# extension test's proportions (gauge three widths) at the same areas, whose middle shears out of
-# the jaws' reach (REPRESENTATIVE_RTOL's comment: an 8 x 6 bias strip holds the shell 1.9-24 times
-# its free pull, a 12 x 4 strip within 12 %).
+# Default strips, gauge x width in repeats: along the yarns up to 8 x 6; off them a bias extension
+# test's proportions (gauge three widths) at the same areas, whose middle shears out of the jaws'
+# reach (above).
 DEFAULT_SIZES = "2x1.5,4x3,8x6"
 DEFAULT_BIAS_SIZES = "3x1,6x2,12x4"
 
 
 def default_sizes(direction: str) -> list[tuple[float, float]]:
-    """The strips a direction is pulled at when ``--sizes`` is not given."""
-    return parse_sizes(DEFAULT_BIAS_SIZES if "bias" in direction else DEFAULT_SIZES)
+    """The strips a direction is pulled at when ``--sizes`` is not given (a direction that is not
+    a key of PULL_DIRECTIONS is refused by the cut, with the names)."""
+    along_yarns = PULL_DIRECTIONS.get(direction, 0.0) % 90.0 == 0.0
+    return parse_sizes(DEFAULT_SIZES if along_yarns else DEFAULT_BIAS_SIZES)
 
 
 def parse_sizes(text: str) -> list[tuple[float, float]]:
@@ -142,9 +143,10 @@ def solve_curves(file: MaterialFile, sizes: Callable[[str], list], directions, s
             label, points = f"{direction} {gauge:g}x{width:g}", []
 
             def keep(k, strain, position, point, swatch=swatch, label=label, points=points, size=(gauge, width)):
-                """Write the strip's curve so far after each strain it reaches."""
+                """Write the strip's curve so far after each strain it reaches before its last (the
+                finished curve is written below)."""
                 points.append(point)
-                if json_path and k > 0:
+                if json_path and 0 < k < len(STRAINS):
                     write_curves(json_path, relaxed.name,
                                  {**curves, label: {**swatch_curve(swatch, points), "repeats": list(size),
                                                     "unfinished": True}})
@@ -369,7 +371,7 @@ class Tally:
     meets pulled free (``within``), how many its shell strip between the same jaws was judged at
     and meets, how many frictional periodic pulls were judged and meet, and how many of the
     strip's judged points were representative (the jaws move the shell strip's reading by at most
-    REPRESENTATIVE_RTOL of its free pull) and met there."""
+    JAWS_HOLD_RTOL of its free pull) and met there."""
 
     judged: int = 0
     within: int = 0
@@ -444,7 +446,7 @@ def shell_rows(file: MaterialFile, curves: dict, reading: Reading, periodic: Cal
             if strip_meets is not None:
                 strip_judged += 1
                 strip_within += strip_meets
-                if held is not None and abs(held - 1.0) <= REPRESENTATIVE_RTOL:
+                if held is not None and abs(held - 1.0) <= JAWS_HOLD_RTOL:
                     representative += 1
                     representative_within += strip_meets
             verdict = ("not converged" if not point.converged else
@@ -571,7 +573,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"shell (nonlinear) strip between the same jaws vs largest swatch, {reading.name}: within at "
               f"{tally.strip_within} of {tally.strip_judged} converged points: "
               f"{'within' if tally.strip_within == tally.strip_judged else 'MISSED'}; where the jaws hold the shell "
-              f"strip within {REPRESENTATIVE_RTOL:.0%} of its free pull (a representative test) at "
+              f"strip within {JAWS_HOLD_RTOL:.0%} of its free pull (a representative test) at "
               f"{tally.representative_within} of {tally.representative}")
         if tally.rubbed:
             print(f"periodic pull with friction vs largest swatch, {reading.name}: within at {tally.rubbed_within} of "

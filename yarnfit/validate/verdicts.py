@@ -109,7 +109,8 @@ def verdicts(summary: dict, family: str | None) -> list[Verdict]:
         note = f"; yarn solve not converged: {', '.join(unconverged)}" if unconverged else ""
         if differences:
             worst, direction, strain, k = max(differences)
-            hold = (comparison[direction].get("jaws_hold") or [None] * (k + 1))[k]
+            holds = comparison[direction].get("jaws_hold")
+            hold = holds[k] if holds else None
             held = (f"; there the swatch's jaws hold the shell's own strip {hold:.3g} times its free pull: the "
                     f"strip tests its jaws more than the material" if hold is not None
                     and abs(hold - 1.0) > JAWS_HOLD_RTOL else "")
