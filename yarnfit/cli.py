@@ -90,8 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("preset", nargs="?", help="a built-in fabric (see `yarnfit materials`)")
     add_fabric_arguments(fit)
     fit.add_argument("--samples", type=int, default=None, metavar="N",
-                     help="about how many deformation samples (at least 36; default 75; a woven, pulled "
-                          "along both biases, 7 more)")
+                     help="about how many deformation samples (at least 42; default 81; a woven, pulled "
+                          "along both biases, 9 more)")
     fit.add_argument("--model", choices=("full", "paper"), default="full",
                      help="full: fit b01 too (default); paper: b01 = 0, the paper's 7 parameters")
     fit.add_argument("--strict", action="store_true",
@@ -176,8 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
     catalogue.add_argument("labels", metavar="LABELS.csv", help="the labels table")
     catalogue.add_argument("-o", "--output", required=True, metavar="DIR", help="where the results go")
     catalogue.add_argument("--samples", type=int, default=None, metavar="N",
-                           help="about how many deformation samples per fabric (at least 36; default 75; a "
-                                "woven, pulled along both biases, 7 more)")
+                           help="about how many deformation samples per fabric (at least 42; default 81; a "
+                                "woven, pulled along both biases, 9 more)")
     catalogue.add_argument("--model", choices=("full", "paper"), default="full", help="as for `yarnfit fit`")
     add_sample_friction_arguments(catalogue)
     catalogue.add_argument("--validate", action="store_true",

@@ -27,9 +27,9 @@ from .shell import ShellMaterial
 from .tasks import Backend
 
 # Four magnitudes per family and sign, from 0.1 % (1 /m) to the range, free-width pulls along weft,
-# warp and the bias at seven strains from 0.1 to 10 % (samples.uniaxial_strains), and the
-# undeformed sample (75 in all; a woven, pulled along both biases, 82): each stretch and shear curve
-# from four points and each free-width pull from seven, at about a second per small-strain sample.
+# warp and the bias at nine strains from 0.1 to 10 % (samples.uniaxial_strains), and the
+# undeformed sample (81 in all; a woven, pulled along both biases, 90): each stretch and shear curve
+# from four points and each free-width pull from nine, at about a second per small-strain sample.
 DEFAULT_LEVELS = 4
 DEFAULT_SAMPLES = design_size(DEFAULT_LEVELS)
 

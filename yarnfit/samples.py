@@ -448,7 +448,8 @@ def _free_membrane_strain(value: object, number: Callable[[object, str], float])
 REFERENCE_SAMPLES = 2
 # Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
 # four bend families of both signs; plus weft, warp and bias uniaxial tension at UNIAXIAL_LEVELS strains
-# each (uniaxial_strains), and with both biases the other bias's (−45°) too.
+# each and between the largest (uniaxial_strains), and with both biases the other bias's
+# (−45°) too.
 SAMPLES_PER_LEVEL = 13
 # Uniaxial tension (the transverse direction free) per direction: log-spaced from SMALLEST_STRAIN
 # to the range or UNIAXIAL_LARGEST_STRAIN, whichever is less. The strain-stiffening membrane follows
@@ -476,9 +477,22 @@ SAMPLES_PER_LEVEL = 13
 # 10 % within 20 % at 89 of 100 points against 83 with six (validation/periodic_pulls.py), and
 # their largest yarn strips at 28 of 35 cells against 25; the stockinette's one-worker mean per
 # sample unchanged (0.49–0.50 s either way, paired): its new samples cost what its others do.
+# Plus one in each of the largest UNIAXIAL_REFINED_INTERVALS intervals (session 52; their
+# geometric means, 3.2 and 6.8 % at a 10 % reach), where a fabric's pull stiffens most: a woven's
+# bias locks (the cotton twill's twentyfold, 2.90 → 61.5 N/m from 4.6 to 10 %) and a knit jams
+# (cotton jersey's loading warp pull tenfold, 64 → 698 N/m from 3 to 4.6 %). With no sample
+# inside such an interval nothing pins where on it the stiffening sets in: the default twill's
+# shell, within 6 % of its periodic pull at 4.6 and 10 %, pulled +81 / +159 / +120 % off it at
+# 5.5 / 6 / 7.5 % (validation/periodic_pulls.py; 11 of 44 points beyond 20 % at 11 strains along
+# weft, warp and both biases; over the five presets 42 of 220). With the 6.8 % sample alone (and
+# ten knots per ray) the twill 3 of 44, but cotton jersey's warp at 3 % +73 % (−25 % before), 27
+# of 220; with both and twelve knots (fit.RIDGE_KNOTS) 19, ten of them the knits' −45° pulls,
+# which their designs do not sample. The satin's fit, the slowest, takes four more samples.
 UNIAXIAL_LEVELS = 7
 UNIAXIAL_LARGEST_STRAIN = 0.10
-UNIAXIAL_SAMPLES = (len(UNIAXIAL_FAMILIES) - len(OTHER_BIAS_FAMILIES)) * UNIAXIAL_LEVELS  # weft, warp, bias
+UNIAXIAL_REFINED_INTERVALS = 2
+UNIAXIAL_STRAINS_PER_DIRECTION = UNIAXIAL_LEVELS + UNIAXIAL_REFINED_INTERVALS
+UNIAXIAL_SAMPLES = (len(UNIAXIAL_FAMILIES) - len(OTHER_BIAS_FAMILIES)) * UNIAXIAL_STRAINS_PER_DIRECTION  # weft, warp, bias
 # Smallest sampled strain (λ − 1, and I12 for shear): the design's levels are spaced
 # logarithmically from here up to the range, so the small-strain stiffness that a drape, a low-load
 # tensile test or a robot's grasp sees is measured, not extrapolated from a few per cent. 0.1 %
@@ -572,23 +586,27 @@ def magnitudes(largest: float, smallest: float, levels: int) -> np.ndarray:
 
 
 def uniaxial_strains(largest: float) -> np.ndarray:
-    """The uniaxial families' ``λ − 1`` for a stretch range ``largest``: :data:`UNIAXIAL_LEVELS`
-    magnitudes (:func:`magnitudes`) from :data:`SMALLEST_STRAIN` to ``largest`` or
-    :data:`UNIAXIAL_LARGEST_STRAIN`, whichever is less."""
-    return magnitudes(min(float(largest), UNIAXIAL_LARGEST_STRAIN), SMALLEST_STRAIN, UNIAXIAL_LEVELS)
+    """The uniaxial families' ``λ − 1`` for a stretch range ``largest``, ascending,
+    :data:`UNIAXIAL_STRAINS_PER_DIRECTION` of them: :data:`UNIAXIAL_LEVELS` magnitudes
+    (:func:`magnitudes`) from :data:`SMALLEST_STRAIN` to ``largest`` or
+    :data:`UNIAXIAL_LARGEST_STRAIN`, whichever is less, and the geometric mean of each pair of
+    neighbours among the largest ``UNIAXIAL_REFINED_INTERVALS + 1``."""
+    levels = magnitudes(min(float(largest), UNIAXIAL_LARGEST_STRAIN), SMALLEST_STRAIN, UNIAXIAL_LEVELS)
+    top = levels[-UNIAXIAL_REFINED_INTERVALS - 1:]
+    return np.sort(np.concatenate([levels, np.sqrt(top[:-1] * top[1:])]))
 
 
 def design_size(levels: int, both_biases: bool = False) -> int:
     """Samples in a design of ``levels`` magnitudes per family and sign (``both_biases``: with
     the uniaxial pulls along −45°, :func:`sample_design`)."""
-    other = len(OTHER_BIAS_FAMILIES) * UNIAXIAL_LEVELS if both_biases else 0
+    other = len(OTHER_BIAS_FAMILIES) * UNIAXIAL_STRAINS_PER_DIRECTION if both_biases else 0
     return REFERENCE_SAMPLES + SAMPLES_PER_LEVEL * levels + UNIAXIAL_SAMPLES + other
 
 
 def levels_for(samples: int) -> int:
     """Magnitudes per family and sign for about ``samples`` samples in all (at least
     ``design_size(1)``), counted without the other bias's pulls (a design with ``both_biases``
-    has :data:`UNIAXIAL_LEVELS` more)."""
+    has :data:`UNIAXIAL_STRAINS_PER_DIRECTION` more)."""
     smallest = design_size(1)
     if not (isinstance(samples, int) and samples >= smallest):
         raise ValueError(f"the sample design needs at least {smallest} samples (one per family and sign), "
