@@ -65,6 +65,27 @@ def test_dependencies_and_failures_on_a_local_pool(workers):
     assert all(total == 8 for _, _, total in seen)
 
 
+def blas_threads(_):
+    """The most threads any BLAS loaded in this process would use."""
+    from threadpoolctl import threadpool_info
+
+    return max((pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"), default=1)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_task_runs_its_blas_on_one_thread_and_leaves_the_caller_s_alone(workers):
+    from threadpoolctl import threadpool_limits
+
+    # The caller's BLAS may use two threads (as numpy's does on a two-core machine): a task must not.
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads(None)
+        assert before == 2  # numpy's BLAS is loaded here
+        with LocalPool(workers) as pool:
+            out = run_tasks([Task(k, blas_threads, (k,)) for k in range(2 * workers)], pool)
+        assert set(out.values()) == {1}
+        assert blas_threads(None) == before
+
+
 def test_longest_ready_tasks_start_first():
     order = []
     tasks = [Task(i, operator.mul, (i, 1), cost=c) for i, c in enumerate([1.0, 5.0, 3.0, 5.0])]

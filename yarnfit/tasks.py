@@ -26,7 +26,11 @@ the same on either backend:
   is closed) and propagates, within a second or so.
 
 Worker processes ignore SIGINT: Ctrl-C in a terminal reaches the whole process group, and the
-parent alone decides what stops (the workers would otherwise each print a traceback).
+parent alone decides what stops (the workers would otherwise each print a traceback). A task runs
+on one core: its BLAS (numpy's, scipy's) on one thread, as on a Dask worker
+(``distributed.nanny.pre-spawn-environ``), because a yarn-level solve's dense algebra is small (a
+periodic repeat's constraint rows, 30 × 2400) and BLAS threads beside the other workers only
+contend for the cores.
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ from pathlib import Path
 from typing import Any, Callable, Hashable, Iterable, Sequence
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from . import __version__
 from .checks import error_line
@@ -160,6 +165,14 @@ def ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def start_worker() -> None:
+    """A :class:`LocalPool` worker's initializer: SIGINT ignored (:func:`ignore_sigint`) and BLAS on
+    one thread for the worker's life (``fork`` copies the parent's thread pools, so the
+    environment variables a spawned process reads come too late)."""
+    ignore_sigint()
+    threadpool_limits(limits=1, user_api="blas")
+
+
 class Backend:
     """Where tasks run: ``submit`` a call, ``wait_any`` of the running ones, ``stop`` everything."""
 
@@ -199,7 +212,8 @@ class _Done:
 
     def __init__(self, function, args):
         try:
-            self._value, self._error = function(*args), None
+            with threadpool_limits(limits=1, user_api="blas"):  # one core, as in a worker
+                self._value, self._error = function(*args), None
         except Exception as error:  # noqa: BLE001 - kept as the task's outcome, as a worker's would be
             self._value, self._error = None, error
 
@@ -227,7 +241,7 @@ class LocalPool(Backend):
             # start at once with the parent's compiled kernels.
             method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
             self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context(method),
-                                             initializer=ignore_sigint)
+                                             initializer=start_worker)
         return self._pool
 
     @property
