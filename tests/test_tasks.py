@@ -65,7 +65,7 @@ def test_dependencies_and_failures_on_a_local_pool(workers):
     assert all(total == 8 for _, _, total in seen)
 
 
-def blas_threads(_):
+def blas_threads():
     """The most threads any BLAS loaded in this process would use."""
     from threadpoolctl import threadpool_info
 
@@ -78,12 +78,12 @@ def test_a_task_runs_its_blas_on_one_thread_and_leaves_the_caller_s_alone(worker
 
     # The caller's BLAS may use two threads (as numpy's does on a two-core machine): a task must not.
     with threadpool_limits(limits=2, user_api="blas"):
-        before = blas_threads(None)
+        before = blas_threads()
         assert before == 2  # numpy's BLAS is loaded here
         with LocalPool(workers) as pool:
-            out = run_tasks([Task(k, blas_threads, (k,)) for k in range(2 * workers)], pool)
+            out = run_tasks([Task(k, blas_threads, ()) for k in range(2 * workers)], pool)
         assert set(out.values()) == {1}
-        assert blas_threads(None) == before
+        assert blas_threads() == before
 
 
 def test_longest_ready_tasks_start_first():

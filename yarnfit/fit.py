@@ -152,9 +152,9 @@ RIDGE_MIXED_ELEVATIONS_DEG = (45.0,)
 # 6.8, 10 %), a ratio of 1.47 between samples where six knots along a ray reaching 10.5 % (a 10 %
 # pull's Green strain) are 1.9 apart (the last at 1.4, 2.8, 5.4 %, then one straight stress segment
 # to 10.5 %, across the 6.8 % sample where the twill's bias locks) and twelve 1.4 (the last at 2.8,
-# 3.9, 5.4, 7.5 %). The five
-# presets refitted from their own samples and pulled between them (validation/periodic_pulls.py at
-# 0.1, 1, 2, 3, 4.6, 5.5, 6, 6.66, 7.5, 8.5, 10 % along weft, warp and both biases; 220 points),
+# 3.9, 5.4, 7.5 %). The five presets refitted from their own samples and pulled between them
+# (validation/periodic_pulls.py at 0.1, 1, 2, 3, 4.6, 5.5, 6, 6.66, 7.5, 8.5, 10 % along weft, warp
+# and both biases; 220 points),
 # points beyond 20 % of the periodic pulls, with 6 / 8 / 10 / 12 / 14 / 16 knots: 28 / 27 / 24 /
 # 19 / 18 / 16 (42 before the new samples, six knots); the twill 8 / 6 / 3 / 3 / 0 / 1, but the
 # satin's bias at 2 %, whose force is 1e-4 of its weft's, −8 / … / +39 / +51 / +75 / +82 %: the
