@@ -15,7 +15,7 @@ import pytest
 import yarnfit
 
 from yarnfit.outputs import check_writable, write_atomically
-from yarnfit.tasks import DaskBackend, LocalPool, Result, SkippedTask, Task, TaskCache, run_tasks
+from yarnfit.tasks import DaskBackend, LocalPool, Result, SkippedTask, Task, TaskCache, one_core, run_tasks
 
 # A stopped pool's workers must be gone this soon (the issue's interrupt budget is 2 s in all).
 STOP_SECONDS = 2.0
@@ -65,25 +65,36 @@ def test_dependencies_and_failures_on_a_local_pool(workers):
     assert all(total == 8 for _, _, total in seen)
 
 
-def blas_threads():
-    """The most threads any BLAS loaded in this process would use."""
+def threads_in_use() -> tuple[int, int]:
+    """``(numba, blas)``: the threads Numba's parallel kernels and the most threads any BLAS loaded
+    in this process would use."""
+    import numba
     from threadpoolctl import threadpool_info
 
-    return max((pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"), default=1)
+    blas = max((pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"), default=1)
+    return numba.get_num_threads(), blas
 
 
 @pytest.mark.parametrize("workers", [1, 2])
-def test_a_task_runs_its_blas_on_one_thread_and_leaves_the_caller_s_alone(workers):
+def test_a_task_runs_on_one_core_and_leaves_the_caller_s_threads_alone(workers):
+    import numba
     from threadpoolctl import threadpool_limits
 
-    # The caller's BLAS may use two threads (as numpy's does on a two-core machine): a task must not.
+    # The caller may thread over two cores (as numpy's BLAS and Numba do on a two-core machine):
+    # a task must not.
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("Numba has one thread here")
+    numba.set_num_threads(2)
     with threadpool_limits(limits=2, user_api="blas"):
-        before = blas_threads()
-        assert before == 2  # numpy's BLAS is loaded here
+        before = threads_in_use()
+        assert before == (2, 2)  # numpy's BLAS is loaded here
         with LocalPool(workers) as pool:
-            out = run_tasks([Task(k, blas_threads, ()) for k in range(2 * workers)], pool)
-        assert set(out.values()) == {1}
-        assert blas_threads() == before
+            out = run_tasks([Task(k, threads_in_use, ()) for k in range(2 * workers)], pool)
+        assert set(out.values()) == {(1, 1)}
+        assert threads_in_use() == before
+        with one_core():
+            assert threads_in_use() == (1, 1)
+        assert threads_in_use() == before
 
 
 def test_longest_ready_tasks_start_first():

@@ -30,6 +30,7 @@ from yarnfit.engine import (
 from yarnfit.engine import _kernels
 from yarnfit.engine.contact import find_pairs
 from yarnfit.engine.xpbd import _color_constraints
+from yarnfit.tasks import one_core
 
 # A polyester-like yarn: r = 0.1 mm, E = 3 GPa (docs/design.md §4 fibre table, mid-range).
 YARN = RodMaterial(young_modulus=3e9, poisson_ratio=0.3, density=1380.0)
@@ -629,8 +630,7 @@ def bench_swatch(friction: bool = True) -> None:
     from yarnfit.relax import relax
     from yarnfit.validate.swatch import stretch_repeat
 
-    numba.set_num_threads(1)
-    with warnings.catch_warnings():
+    with one_core(), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for name, directions in (("cotton-jersey", ("weft",)), ("cotton-twill", ("weft", "warp"))):
             fabric = Fabric.preset(name)
@@ -654,7 +654,6 @@ def bench_swatch(friction: bool = True) -> None:
                         report(f"{key}_{percent}_load_steps", point["load_steps"], "steps")
                         report(f"{key}_{percent}_slowest_step_seconds", point["slowest_step_seconds"], "s (one core)")
                         report(f"{key}_{percent}_friction_passes", point["friction_passes"], "passes")
-    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
 def bench_body() -> None:
@@ -712,7 +711,9 @@ def bench_shell_strip() -> None:
         for strip, (length, width) in STRIPS.items():
             for direction, angle in DIRECTIONS.items():
                 start = time.perf_counter()
-                curve = shell_strip_limit(shell, angle, length, width, STRAIN_LEVELS, rows=QUASI_STATIC_ROWS[False])
+                with one_core():
+                    curve = shell_strip_limit(shell, angle, length, width, STRAIN_LEVELS,
+                                              rows=QUASI_STATIC_ROWS[False])
                 seconds = time.perf_counter() - start
                 total += seconds
                 report(f"{key}_{strip}_{direction}_seconds", seconds,

@@ -21,12 +21,11 @@ import math
 import sys
 import warnings
 
-import numba
-
 from yarnfit.engine import ConvergenceWarning
 from yarnfit.homogenize import periodic_pulls_along
 from yarnfit.material_file import MaterialFile
 from yarnfit.validate import PULL_DIRECTIONS
+from yarnfit.tasks import one_core
 
 # The strains pulled to by default: from the design's smallest (0.1 %) to the uniaxial samples'
 # largest (10 %), the stretch tests' 2 and 5 %, and 3, 6.5 and 8 %, between the uniaxial samples
@@ -56,39 +55,40 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--strains must be comma-separated numbers, got {args.strains!r}")
     if not strains or strains != sorted(set(strains)) or strains[0] <= 0.0:
         parser.error(f"--strains must be positive and ascending, got {args.strains!r}")
-    numba.set_num_threads(1)  # one core, as the bench figures
-    file = MaterialFile.read(args.material)
-    relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
-    friction = file.sample_friction
-    shells = {"nonlinear": file.shell, "linear": file.shell.linear}
-    kind = f"with friction μ {friction:g}, as its samples" if friction > 0.0 else "frictionless, as its samples"
-    print(f"\n{file.fabric().name}: the shell against the periodic repeat pulled with every other stress free "
-          f"({kind}); force per width, % against the periodic pull\n")
-    print("| direction | strain | periodic N/m | periodic width | nonlinear N/m | nonlinear width | linear N/m | "
-          "linear width | verdict (nonlinear) |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    within, judged, linear_within = 0, 0, 0
-    for direction, degrees in PULL_DIRECTIONS.items():
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", ConvergenceWarning)  # a pull that did not converge says so below
-            pulls = periodic_pulls_along(relaxed, direction, strains, friction)
-        for strain, reference in zip(strains, pulls):
-            cells = []
-            verdicts = {}
-            for name, shell in shells.items():
-                pull = shell.uniaxial_pull(math.radians(degrees), 1.0 + strain)
-                cells += [_against(pull.force_n_per_m, reference.force_n_per_m), f"{pull.width_ratio:.3f}"]
-                verdicts[name] = abs(pull.force_n_per_m / reference.force_n_per_m - 1.0) <= FORCE_RTOL
-            if reference.converged:
-                judged += 1
-                within += verdicts["nonlinear"]
-                linear_within += verdicts["linear"]
-            verdict = "not converged" if not reference.converged else "within" if verdicts["nonlinear"] else "MISSED"
-            print(f"| {direction} ({degrees:g}°) | {100 * strain:g} % | {reference.force_n_per_m:.4g} | "
-                  f"{reference.width_ratio:.3f} | " + " | ".join(cells) + f" | {verdict} |")
-    print(f"\nnonlinear shell within {FORCE_RTOL:.0%} of the periodic pull at {within} of {judged} converged points "
-          f"(linear model: {linear_within})")
-    return 0
+    with one_core():  # as the bench figures
+        file = MaterialFile.read(args.material)
+        relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
+        friction = file.sample_friction
+        shells = {"nonlinear": file.shell, "linear": file.shell.linear}
+        kind = f"with friction μ {friction:g}, as its samples" if friction > 0.0 else "frictionless, as its samples"
+        print(f"\n{file.fabric().name}: the shell against the periodic repeat pulled with every other stress free "
+              f"({kind}); force per width, % against the periodic pull\n")
+        print("| direction | strain | periodic N/m | periodic width | nonlinear N/m | nonlinear width | linear N/m | "
+              "linear width | verdict (nonlinear) |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        within, judged, linear_within = 0, 0, 0
+        for direction, degrees in PULL_DIRECTIONS.items():
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ConvergenceWarning)  # a pull that did not converge says so below
+                pulls = periodic_pulls_along(relaxed, direction, strains, friction)
+            for strain, reference in zip(strains, pulls):
+                cells = []
+                verdicts = {}
+                for name, shell in shells.items():
+                    pull = shell.uniaxial_pull(math.radians(degrees), 1.0 + strain)
+                    cells += [_against(pull.force_n_per_m, reference.force_n_per_m), f"{pull.width_ratio:.3f}"]
+                    verdicts[name] = abs(pull.force_n_per_m / reference.force_n_per_m - 1.0) <= FORCE_RTOL
+                if reference.converged:
+                    judged += 1
+                    within += verdicts["nonlinear"]
+                    linear_within += verdicts["linear"]
+                verdict = ("not converged" if not reference.converged
+                           else "within" if verdicts["nonlinear"] else "MISSED")
+                print(f"| {direction} ({degrees:g}°) | {100 * strain:g} % | {reference.force_n_per_m:.4g} | "
+                      f"{reference.width_ratio:.3f} | " + " | ".join(cells) + f" | {verdict} |")
+        print(f"\nnonlinear shell within {FORCE_RTOL:.0%} of the periodic pull at {within} of {judged} "
+              f"converged points (linear model: {linear_within})")
+        return 0
 
 
 if __name__ == "__main__":

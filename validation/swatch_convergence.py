@@ -61,8 +61,6 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-import numba
-
 from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
 from yarnfit.homogenize import periodic_pulls_along
@@ -70,6 +68,7 @@ from yarnfit.validate.shell_strip import ShellStripCurve, shell_strip_limit
 from yarnfit.validate import PULL_DIRECTIONS
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, read_uniform, stretch_swatch, swatch_curve
 from yarnfit.validate.verdicts import JAWS_HOLD_RTOL
+from yarnfit.tasks import one_core
 
 # Jaw band in repeats of the larger repeat side (as the suite's strips).
 CLAMP_REPEATS = 0.5
@@ -500,85 +499,87 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", help="also write the curves to this file")
     parser.add_argument("--from-json", help="comma-separated curve files of earlier runs: compare, do not solve")
     args = parser.parse_args(argv)
-    numba.set_num_threads(1)  # one core, as the bench figures
-    file = MaterialFile.read(args.material)
-    if args.from_json:
-        curves = {}
-        for path in args.from_json.split(","):
-            with open(path) as source:
-                for label, curve in json.load(source)["curves"].items():
-                    # Labels are "DIRECTION GAUGExWIDTH" (curves written before "repeats" was kept).
-                    curve.setdefault("repeats", parse_sizes(label.split()[1])[0])
-                    curves[label] = curve
-        name = file.fabric().name
-        relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
-        if args.json:  # the curves read, together in one file
-            write_curves(args.json, name, curves)
-    else:
-        sizes = default_sizes if args.sizes is None else (lambda direction, given=parse_sizes(args.sizes): given)
-        relaxed, curves = solve_curves(file, sizes, args.directions.split(","), args.selvedge,
-                                       not args.frictionless, args.json)
-        name = relaxed.name
-        print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
-    strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
-    order = sorted(curves.values(), key=lambda c: (c["direction"], c["nodes"]))
-    print_table("", ["direction", "repeats (gauge × width)", "nodes", f"N/m (jaws) at {strains}",
-                     f"N/m (middle half) at {strains}", f"compression at {strains}",
-                     f"middle half's compression at {strains}",
-                     f"middle's strain (%) at {strains}", f"edge draw-in (µm) at {strains}",
-                     f"N/m per quarter of the width at {100 * STRAINS[-1]:g} %", "slowest strain (s)",
-                     "converged"],
-                [convergence_row(curve) for curve in order], columns=6 + 6 * len(STRAINS))
-    pulls = periodic_pulls(relaxed, sorted({curve["direction"] for curve in curves.values()}))
+    with one_core():  # as the bench figures
+        file = MaterialFile.read(args.material)
+        if args.from_json:
+            curves = {}
+            for path in args.from_json.split(","):
+                with open(path) as source:
+                    for label, curve in json.load(source)["curves"].items():
+                        # Labels are "DIRECTION GAUGExWIDTH" (curves written before "repeats" was kept).
+                        curve.setdefault("repeats", parse_sizes(label.split()[1])[0])
+                        curves[label] = curve
+            name = file.fabric().name
+            relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
+            if args.json:  # the curves read, together in one file
+                write_curves(args.json, name, curves)
+        else:
+            sizes = default_sizes if args.sizes is None else (lambda direction, given=parse_sizes(args.sizes): given)
+            relaxed, curves = solve_curves(file, sizes, args.directions.split(","), args.selvedge,
+                                           not args.frictionless, args.json)
+            name = relaxed.name
+            print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
+        strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
+        order = sorted(curves.values(), key=lambda c: (c["direction"], c["nodes"]))
+        print_table("", ["direction", "repeats (gauge × width)", "nodes", f"N/m (jaws) at {strains}",
+                         f"N/m (middle half) at {strains}", f"compression at {strains}",
+                         f"middle half's compression at {strains}",
+                         f"middle's strain (%) at {strains}", f"edge draw-in (µm) at {strains}",
+                         f"N/m per quarter of the width at {100 * STRAINS[-1]:g} %", "slowest strain (s)",
+                         "converged"],
+                    [convergence_row(curve) for curve in order], columns=6 + 6 * len(STRAINS))
+        pulls = periodic_pulls(relaxed, sorted({curve["direction"] for curve in curves.values()}))
 
-    def periodic(direction: str, strain: float):
-        """The periodic pull at ``strain``: solved at STRAINS already, else now."""
-        return pulls[direction, strain] if (direction, strain) in pulls else periodic_pulls_along(relaxed, direction,
-                                                                                                    [strain])[0]
+        def periodic(direction: str, strain: float):
+            """The periodic pull at ``strain``: solved at STRAINS already, else now."""
+            if (direction, strain) in pulls:
+                return pulls[direction, strain]
+            return periodic_pulls_along(relaxed, direction, [strain])[0]
 
-    coefficient = 0.0 if args.frictionless else relaxed.fiber.friction
-    strips = shell_strips(file, curves)
-    counts, rubbings = {}, {}
-    for reading in READINGS:
-        rubbing = rubbings[reading.name] = frictional_pulls(relaxed, curves, reading, coefficient)
-        rows, counts[reading.name] = shell_rows(file, curves, reading, periodic, rubbing, strips)
-        print_table(f"{name}: shell and periodic repeat against the largest strip per direction, read as "
-                    f"{reading.title} (force within {SHELL_FORCE_RTOL:.0%}, compression within "
-                    f"{SHELL_COMPRESSION_ATOL}; % against the strip)",
-                    ["direction", "repeats", "level", "swatch N/m", "strain pulled to", "swatch compression",
-                     "periodic N/m", "periodic compression", f"periodic with friction μ {coefficient:g} N/m",
-                     "its compression", "nonlinear N/m", "nonlinear compression", "linear N/m",
-                     "linear compression", "nonlinear strip, same jaws, N/m", "its compression",
-                     "its jaws' hold (same jaws / free)", "verdict (nonlinear)", "verdict (its strip)"], rows)
-    fitted_to = pulls
-    if file.sample_friction > 0.0:
-        # A shell fitted to loading paths: its own error is against the frictional pull at the
-        # nominal strains (the jaws' reading's, solved above when the friction is the same).
-        jaws = READINGS[0]
-        fitted_to = (rubbings[jaws.name] if file.sample_friction == coefficient
-                     else frictional_pulls(relaxed, curves, jaws, file.sample_friction))
-    rows = fit_rows(file, curves, fitted_to)
-    if rows:
-        kind = (f"with friction μ {file.sample_friction:g}, as its samples" if file.sample_friction > 0.0
-                else "frictionless")
-        print_table(f"{name}: nonlinear shell against the periodic repeat's pull ({kind}: the fit's own error; "
-                    f"% against the periodic pull)",
-                    ["direction", "strain", "periodic N/m", "periodic compression", "periodic converged",
-                     "nonlinear N/m", "nonlinear compression"], rows)
-    print()
-    for reading in READINGS:
-        tally = counts[reading.name]
-        print(f"shell (nonlinear) pulled free vs largest swatch, {reading.name}: within at {tally.within} of "
-              f"{tally.judged} converged points: {'within' if tally.within == tally.judged else 'MISSED'}")
-        print(f"shell (nonlinear) strip between the same jaws vs largest swatch, {reading.name}: within at "
-              f"{tally.strip_within} of {tally.strip_judged} converged points: "
-              f"{'within' if tally.strip_within == tally.strip_judged else 'MISSED'}; where the jaws hold the shell "
-              f"strip within {JAWS_HOLD_RTOL:.0%} of its free pull (a representative test) at "
-              f"{tally.representative_within} of {tally.representative}")
-        if tally.rubbed:
-            print(f"periodic pull with friction vs largest swatch, {reading.name}: within at {tally.rubbed_within} of "
-                  f"{tally.rubbed} converged points")
-    return 0
+        coefficient = 0.0 if args.frictionless else relaxed.fiber.friction
+        strips = shell_strips(file, curves)
+        counts, rubbings = {}, {}
+        for reading in READINGS:
+            rubbing = rubbings[reading.name] = frictional_pulls(relaxed, curves, reading, coefficient)
+            rows, counts[reading.name] = shell_rows(file, curves, reading, periodic, rubbing, strips)
+            print_table(f"{name}: shell and periodic repeat against the largest strip per direction, read as "
+                        f"{reading.title} (force within {SHELL_FORCE_RTOL:.0%}, compression within "
+                        f"{SHELL_COMPRESSION_ATOL}; % against the strip)",
+                        ["direction", "repeats", "level", "swatch N/m", "strain pulled to", "swatch compression",
+                         "periodic N/m", "periodic compression", f"periodic with friction μ {coefficient:g} N/m",
+                         "its compression", "nonlinear N/m", "nonlinear compression", "linear N/m",
+                         "linear compression", "nonlinear strip, same jaws, N/m", "its compression",
+                         "its jaws' hold (same jaws / free)", "verdict (nonlinear)", "verdict (its strip)"], rows)
+        fitted_to = pulls
+        if file.sample_friction > 0.0:
+            # A shell fitted to loading paths: its own error is against the frictional pull at the
+            # nominal strains (the jaws' reading's, solved above when the friction is the same).
+            jaws = READINGS[0]
+            fitted_to = (rubbings[jaws.name] if file.sample_friction == coefficient
+                         else frictional_pulls(relaxed, curves, jaws, file.sample_friction))
+        rows = fit_rows(file, curves, fitted_to)
+        if rows:
+            kind = (f"with friction μ {file.sample_friction:g}, as its samples" if file.sample_friction > 0.0
+                    else "frictionless")
+            print_table(f"{name}: nonlinear shell against the periodic repeat's pull ({kind}: the fit's own error; "
+                        f"% against the periodic pull)",
+                        ["direction", "strain", "periodic N/m", "periodic compression", "periodic converged",
+                         "nonlinear N/m", "nonlinear compression"], rows)
+        print()
+        for reading in READINGS:
+            tally = counts[reading.name]
+            print(f"shell (nonlinear) pulled free vs largest swatch, {reading.name}: within at {tally.within} of "
+                  f"{tally.judged} converged points: {'within' if tally.within == tally.judged else 'MISSED'}")
+            print(f"shell (nonlinear) strip between the same jaws vs largest swatch, {reading.name}: within at "
+                  f"{tally.strip_within} of {tally.strip_judged} converged points: "
+                  f"{'within' if tally.strip_within == tally.strip_judged else 'MISSED'}; "
+                  f"where the jaws hold the shell "
+                  f"strip within {JAWS_HOLD_RTOL:.0%} of its free pull (a representative test) at "
+                  f"{tally.representative_within} of {tally.representative}")
+            if tally.rubbed:
+                print(f"periodic pull with friction vs largest swatch, {reading.name}: "
+                      f"within at {tally.rubbed_within} of {tally.rubbed} converged points")
+        return 0
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ the same on either backend:
 
 Worker processes ignore SIGINT: Ctrl-C in a terminal reaches the whole process group, and the
 parent alone decides what stops (the workers would otherwise each print a traceback). A task runs
-on one core: its BLAS (numpy's, scipy's) on one thread, as on a Dask worker
+on one core (:func:`one_core`): its Numba kernels and BLAS (numpy's, scipy's) on one thread, as on a Dask worker
 (``distributed.nanny.pre-spawn-environ``), because a yarn-level solve's dense algebra is small (a
 periodic repeat's constraint rows, 30 × 2400) and BLAS threads beside the other workers only
 contend for the cores.
@@ -42,10 +42,12 @@ import os
 import pickle
 import signal
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from contextlib import contextmanager
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any, Callable, Hashable, Iterable, Sequence
 
+import numba
 import numpy as np
 from threadpoolctl import threadpool_limits
 
@@ -54,7 +56,7 @@ from .checks import error_line
 from .outputs import write_atomically
 
 __all__ = ["Backend", "DaskBackend", "LocalPool", "Result", "SkippedTask", "Task", "TaskCache", "ignore_sigint",
-           "make_backend", "run_tasks"]
+           "make_backend", "one_core", "run_tasks"]
 
 
 @dataclass(frozen=True)
@@ -159,6 +161,21 @@ def _canonical(value):
 # -- backends -------------------------------------------------------------------------------------
 
 
+@contextmanager
+def one_core():
+    """Compute on one core inside the block: Numba's parallel kernels and BLAS (numpy's, scipy's)
+    on one thread each, both restored after. What a task runs under, and what the validation
+    scripts time their one-core figures under (with either left threading, two solves side by
+    side contend for the cores)."""
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        with threadpool_limits(limits=1, user_api="blas"):
+            yield
+    finally:
+        numba.set_num_threads(threads)
+
+
 def ignore_sigint() -> None:
     """A helper process's initializer: SIGINT ignored (Ctrl-C reaches the whole process group; the
     parent alone decides what stops, and stops its helpers itself)."""
@@ -166,11 +183,12 @@ def ignore_sigint() -> None:
 
 
 def start_worker() -> None:
-    """A :class:`LocalPool` worker's initializer: SIGINT ignored (:func:`ignore_sigint`) and BLAS on
-    one thread for the worker's life (``fork`` copies the parent's thread pools, so the
+    """A :class:`LocalPool` worker's initializer: SIGINT ignored (:func:`ignore_sigint`) and one
+    core (:func:`one_core`) for the worker's life (``fork`` copies the parent's thread pools, so the
     environment variables a spawned process reads come too late)."""
     ignore_sigint()
-    threadpool_limits(limits=1, user_api="blas")
+    numba.set_num_threads(1)
+    threadpool_limits(limits=1, user_api="blas")  # kept: only its ``with`` block's exit restores
 
 
 class Backend:
@@ -212,7 +230,7 @@ class _Done:
 
     def __init__(self, function, args):
         try:
-            with threadpool_limits(limits=1, user_api="blas"):  # one core, as in a worker
+            with one_core():  # as in a worker
                 self._value, self._error = function(*args), None
         except Exception as error:  # noqa: BLE001 - kept as the task's outcome, as a worker's would be
             self._value, self._error = None, error
