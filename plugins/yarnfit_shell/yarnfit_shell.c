@@ -65,9 +65,20 @@
 // the built-in part's rest. MuJoCo's implicit treatment of its own part still stabilises the step
 // (its linearisation enters the step's matrix, not the force): yarnfit.mujoco.garment.
 // use_pattern_rest rewrites that part's rest from the pattern, so that it too pulls towards it.
+//
+// Returned drag (optional key implicit_drag: "full", the default, or "critical"). Under
+// integrator="discrete" MuJoCo steps (M + h^2 K) a = f - h K v with K the built-in elasticity's
+// stiffness: the isotropic share, stiff enough for the material's stiffest direction, is as stiff
+// in the material's soft modes (a woven's shear, 1e-3 of it), where its drag h K v holds the cloth
+// back for ~k_b / k_t steps. With "critical" the plugin adds back h K_r v, K_r <= K the part of the
+// built-in membrane's drag that damping each mode critically on the step's inertia does not need
+// (build_drag_return): the soft modes settle in ~sqrt(k_b / k_t) steps, the equilibrium unchanged.
+// Never more than MuJoCo's drag, so the step stays stable; other integrators have no such drag and
+// get nothing back.
 
 #include <ctype.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -109,10 +120,16 @@
 #define YF_RIDGE_CONVEXITY_RTOL 1e-12
 // Numbers per ridge in the `ridges` key: n0 n1 n2 t c.
 #define YF_RIDGE_NUMBERS 5
+// implicit_drag="critical": in a mode whose material stiffness is r times the built-in share's
+// (r = k_t / k_b), MuJoCo's step keeps YF_CRITICAL_DRAG sqrt(r) of its drag h k_b (at most all of
+// it). The step's inertia there is m + h^2 k_b, about h^2 k_b where the share is stiff, and the
+// drag that damps k_t on that inertia critically is 2 sqrt(k_t h^2 k_b) = h k_b 2 sqrt(r).
+#define YF_CRITICAL_DRAG 2.0
 
 static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
   "builtin_young", "builtin_poisson", "builtin_thickness", "ridges", "rest", "membrane", "b00_neg", "b11_neg",
+  "implicit_drag",
 };
 enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 
@@ -142,6 +159,14 @@ typedef struct {
   const mjtNum* builtin_length0; // (nedge) MuJoCo's rest edge lengths, flexedge_length0
   double* builtin_delta;         // (nedge) scratch: MuJoCo's elongation per edge
   int nedge;
+  // implicit_drag="critical": the share of MuJoCo's step drag -h K v (integrator="discrete") that
+  // compute gives back, per triangle in MuJoCo's edge space (see drag_returned):
+  int critical_drag;             // 1 with implicit_drag="critical", 0 with "full" (default)
+  const int* drag_elemedge;      // (ntri x 3) flex-local edges of each triangle, flex_elemedge order
+  double* drag_basis;            // (ntri x 27) K_b^(1/2), K_b^(-1/2) (row-major) and g_0 g_1 g_2
+  double* drag_returned;         // (ntri x 6) upper triangle of the returned metric K_r, or NULL
+  uint64_t* drag_active;         // (ntri) signature of the ridges K_r was built with engaged
+  double* drag_rate;             // (nedge) scratch: d(l^2)/dt per edge
   double membrane[4];   // the plugin's membrane stiffness h S - t_b S_iso: c00 c01 c11 c22 (N/m)
   double bending[4];    // h^3 B: d00 d01 d11 d22 (N m)
   double bending_neg[2];  // h^3 b00_neg, h^3 b11_neg (N m): d00 and d11 where the curvature is negative
@@ -336,7 +361,8 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
   if (isnan(s->b00_neg)) s->b00_neg = s->b00;  // absent: the quadratic bending
   if (isnan(s->b11_neg)) s->b11_neg = s->b11;
   if (read_choice(m, instance, "membrane", "triangle", "node", &s->node_membrane) ||
-      read_choice(m, instance, "rest", "qpos0", "texcoord", &s->rest_texcoord)) return -1;
+      read_choice(m, instance, "rest", "qpos0", "texcoord", &s->rest_texcoord) ||
+      read_choice(m, instance, "implicit_drag", "full", "critical", &s->critical_drag)) return -1;
   if (read_ridges(m, instance, NULL, &s->nridge)) return -1;
   if (s->nridge > 0) {
     double* ridge = malloc(sizeof(double) * YF_RIDGE_NUMBERS * s->nridge);
@@ -459,6 +485,10 @@ static void shell_free(Shell* s) {
   free(s->builtin_hinge);
   free(s->builtin_edge);
   free(s->builtin_delta);
+  free(s->drag_basis);
+  free(s->drag_returned);
+  free(s->drag_active);
+  free(s->drag_rate);
   free(s->corner_domain);
   free(s->domain_area);
   free(s->tri_F);
@@ -840,6 +870,129 @@ static void classify_vertices(const mjModel* m, Shell* s) {
 
 static int build_domains(const mjModel* m, Shell* s);
 
+// Symmetric 3x3 (row-major) matrix function: V diag(fn(eigenvalues)) V^T.
+static void sym3_function(const double a[9], double (*fn)(double), double out[9]) {
+  double value[3], vector[9], quat[4];
+  mju_eig3(value, vector, quat, a);
+  for (int i = 0; i < 3; i++) {
+    for (int j = 0; j < 3; j++) {
+      out[3 * i + j] = 0;
+      for (int k = 0; k < 3; k++) out[3 * i + j] += vector[3 * i + k] * fn(value[k]) * vector[3 * j + k];
+    }
+  }
+}
+
+static double root_of(double value) { return sqrt(value); }
+static double inverse_root_of(double value) { return 1 / sqrt(value); }
+// The share of the drag given back in a mode of stiffness ratio r (YF_CRITICAL_DRAG).
+static double drag_returned_share(double r) { return 1 - fmin(1, YF_CRITICAL_DRAG * sqrt(fmax(r, 0))); }
+
+// The signature of the ridges engaged at strain eps (3, Voigt): FNV-1a over their indices (0 for
+// none). A collision only keeps a K_r built for other ridges, still between 0 and K_b.
+static uint64_t engaged_ridges(const Shell* s, const double eps[3]) {
+  uint64_t hash = 0;
+  for (int j = 0; j < s->nridge; j++) {
+    const double* r = s->ridge + YF_RIDGE_NUMBERS * j;
+    if (!(mju_dot3(r, eps) - r[3] > 0)) continue;
+    if (!hash) hash = 1469598103934665603ULL;
+    hash = (hash ^ (uint64_t)j) * 1099511628211ULL;
+  }
+  return hash;
+}
+
+// Triangle t's returned metric K_r (build_drag_return) for the material's tangent at strain eps
+// (3, Voigt): h S and the ridges engaged there.
+static void update_returned_drag(Shell* s, int t, const double eps[3]) {
+  double h = s->thickness;
+  double C[9] = {h * s->s00, h * s->s01, 0, h * s->s01, h * s->s11, 0, 0, 0, h * s->s22};
+  for (int j = 0; j < s->nridge; j++) {
+    const double* r = s->ridge + YF_RIDGE_NUMBERS * j;
+    if (!(mju_dot3(r, eps) - r[3] > 0)) continue;
+    for (int a = 0; a < 3; a++) {
+      for (int b = 0; b < 3; b++) C[3 * a + b] += h * r[4] * r[a] * r[b];
+    }
+  }
+  const double* root = s->drag_basis + 27 * t;
+  const double* inverse_root = root + 9;
+  const double* g = root + 18;
+  double Kt[9], tmp[9], ratio[9], share[9];
+  for (int a = 0; a < 3; a++) {
+    for (int b = a; b < 3; b++) {
+      double cg[3];
+      mju_mulMatVec3(cg, C, g + 3 * b);
+      Kt[3 * a + b] = Kt[3 * b + a] = 2 * s->area[t] * mju_dot3(g + 3 * a, cg);
+    }
+  }
+  mju_mulMatMat(tmp, inverse_root, Kt, 3, 3, 3);
+  mju_mulMatMat(ratio, tmp, inverse_root, 3, 3, 3);
+  for (int a = 0; a < 3; a++) {  // symmetrise the round-off before the eigendecomposition
+    for (int b = a + 1; b < 3; b++) ratio[3 * a + b] = ratio[3 * b + a] = 0.5 * (ratio[3 * a + b] + ratio[3 * b + a]);
+  }
+  sym3_function(ratio, drag_returned_share, share);
+  mju_mulMatMat(tmp, root, share, 3, 3, 3);
+  mju_mulMatMat(share, tmp, root, 3, 3, 3);
+  for (int a = 0, n = 0; a < 3; a++) {
+    for (int b = a; b < 3; b++, n++) s->drag_returned[6 * t + n] = 0.5 * (share[3 * a + b] + share[3 * b + a]);
+  }
+  s->drag_active[t] = engaged_ridges(s, eps);
+}
+
+// implicit_drag="critical": per triangle, the metric K_r of MuJoCo's drag that compute gives back.
+// Under integrator="discrete" MuJoCo steps (M + h^2 K) a = f - h K v, K the built-in elasticity's
+// stiffness: per triangle (1/2) J^T K_b J with J = d(l^2)/dx over its edges and K_b its
+// flex_stiffness block (edge space, the energy (1/4) Delta^T K_b Delta). In the material's soft
+// modes (a woven's shear, 1e-3 of the isotropic share that covers its weft) the drag h K v holds
+// the cloth back for k_b / k_t steps. The material's own tangent at the triangle's strain in the
+// same edge space, K_t = 2 A g^T C g (g_a the Voigt Green strain per unit l_a^2, C = h S plus the
+// ridges engaged), and the generalised eigenproblem of K_t against K_b give each mode's ratio r;
+// K_r = K_b^(1/2) Q diag(1 - min(1, 2 sqrt(r))) Q^T K_b^(1/2) returns what critical damping of the
+// mode on the step's inertia does not need. 0 <= K_r <= K_b in every direction: what is returned
+// never exceeds MuJoCo's drag, so the step stays as stable as without it (plugins/README.md).
+// Here the per-triangle basis (K_b's roots, g) and K_r at rest; compute rebuilds a triangle's K_r
+// when the ridges engaged at its strain change (return_drag).
+static int build_drag_return(const mjModel* m, Shell* s, const int* tri_edge_local) {
+  if (!s->critical_drag) return 0;
+  int f = s->flex;
+  if (m->flex_stiffnessadr[f] < 0 || m->flex_stiffness[m->flex_stiffnessadr[f]] == 0) {
+    mju_error(YF_NAME ": config key implicit_drag=\"critical\" needs flex %d to carry built-in stretch "
+              "elasticity (<elasticity elastic2d=\"stretch\"> or \"both\"): without it there is no drag to "
+              "return", f);
+    return -1;
+  }
+  s->drag_elemedge = m->flex_elemedge + m->flex_elemedgeadr[f];
+  s->nedge = m->flex_edgenum[f];
+  s->drag_basis = malloc(sizeof(double) * 27 * s->ntri);
+  s->drag_returned = malloc(sizeof(double) * 6 * s->ntri);
+  s->drag_active = malloc(sizeof(uint64_t) * s->ntri);
+  s->drag_rate = malloc(sizeof(double) * (s->nedge > 0 ? s->nedge : 1));
+  if (!s->drag_basis || !s->drag_returned || !s->drag_active || !s->drag_rate) return -1;
+  const mjtNum* stiffness = m->flex_stiffness + m->flex_stiffnessadr[f];
+  const double rest[3] = {0, 0, 0};
+  for (int t = 0; t < s->ntri; t++) {
+    double G[3][4], Kb[9];
+    double* root = s->drag_basis + 27 * t;
+    double* g = root + 18;
+    strain_basis(s->rest_inv + 4 * t, G);
+    for (int a = 0; a < 3; a++) {
+      const double* Ga = G[tri_edge_local[3 * t + a]];
+      g[3 * a] = Ga[0]; g[3 * a + 1] = Ga[3]; g[3 * a + 2] = Ga[1] + Ga[2];  // (E00, E11, 2 E01) per unit l_a^2
+    }
+    for (int a = 0, n = 0; a < 3; a++) {
+      for (int b = a; b < 3; b++, n++) Kb[3 * a + b] = Kb[3 * b + a] = stiffness[YF_STIFFNESS_STRIDE * t + n];
+    }
+    double value[3], vector[9], quat[4];
+    mju_eig3(value, vector, quat, Kb);
+    if (!(value[0] > 0 && value[1] > 0 && value[2] > 0)) {
+      mju_error(YF_NAME ": flex %d triangle %d: its built-in stretch stiffness is not positive definite", f, t);
+      return -1;
+    }
+    sym3_function(Kb, root_of, root);
+    sym3_function(Kb, inverse_root_of, root + 9);
+    update_returned_drag(s, t, rest);
+  }
+  return 0;
+}
+
 static int shell_init(const mjModel* m, mjData* d, int instance) {
   // Validate before allocating anything: mju_error does not return.
   Shell config = {0};
@@ -1004,6 +1157,7 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
   if (status == 0 && exact) status = collect_builtin_membrane(m, s);
   if (status == 0 && s->node_membrane) status = build_domains(m, s);
   if (status == 0) status = collect_builtin_bending(m, s);
+  if (status == 0) status = build_drag_return(m, s, tri_edge_local);
   free(rest2d);
   free(tri_edge_local);
   if (status) {
@@ -1330,6 +1484,50 @@ static void bending_forces(Shell* s, const double* x, const double* xdot) {
   }
 }
 
+// implicit_drag="critical": give back the part K_r of MuJoCo's step drag -h K v that the material's
+// soft modes do not need (build_drag_return; a triangle's K_r rebuilt first when the ridges engaged
+// at its strain changed): per triangle the force h (1/2) J^T K_r dDelta/dt, dDelta_b/dt = 2 (x_q -
+// x_p) . (v_q - v_p), i.e. h (K_r dDelta/dt)_b (x_q - x_p) on edge b's vertex q.
+// (mjData.flexedge_velocity is not computed without flex damping.) Only under
+// integrator="discrete": the other integrators put no stiffness in the step, so there is no drag.
+static void return_drag(const mjModel* m, Shell* s, const double* x, const double* xdot) {
+  if (m->opt.integrator != mjINT_DISCRETE) return;
+  double h = m->opt.timestep;
+  const int* edge = m->flex_edge + 2 * m->flex_edgeadr[s->flex];
+  for (int e = 0; e < s->nedge; e++) {
+    int p = edge[2 * e], q = edge[2 * e + 1];
+    double along[3], speed[3];
+    mju_sub3(along, x + 3 * q, x + 3 * p);
+    mju_sub3(speed, xdot + 3 * q, xdot + 3 * p);
+    s->drag_rate[e] = 2 * mju_dot3(along, speed);
+  }
+  for (int t = 0; t < s->ntri; t++) {
+    if (s->nridge > 0) {
+      const int* v = s->tri + 3 * t;
+      double xt[9], F[12], eps[6];
+      for (int k = 0; k < 3; k++) mju_copy3(xt + 3 * k, x + 3 * v[k]);
+      triangle_deformation(s->rest_inv + 4 * t, xt, NULL, F);
+      green_strain(F, 0, eps);
+      if (engaged_ridges(s, eps) != s->drag_active[t]) update_returned_drag(s, t, eps);
+    }
+    const double* k = s->drag_returned + 6 * t;
+    const int* slot = s->drag_elemedge + 3 * t;
+    double K[3][3], rate[3];
+    for (int a = 0, n = 0; a < 3; a++) {
+      rate[a] = s->drag_rate[slot[a]];
+      for (int b = a; b < 3; b++, n++) K[a][b] = K[b][a] = k[n];
+    }
+    for (int b = 0; b < 3; b++) {
+      double c = h * (K[b][0] * rate[0] + K[b][1] * rate[1] + K[b][2] * rate[2]);
+      int p = edge[2 * slot[b]], q = edge[2 * slot[b] + 1];
+      double along[3];
+      mju_sub3(along, x + 3 * q, x + 3 * p);
+      mju_addToScl3(s->grad + 3 * q, along, -c);
+      mju_addToScl3(s->grad + 3 * p, along, c);
+    }
+  }
+}
+
 static void shell_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   (void)capability_bit;
   Shell* s = (Shell*)d->plugin_data[instance];
@@ -1342,9 +1540,11 @@ static void shell_compute(const mjModel* m, mjData* d, int instance, int capabil
   mjtNum* jac = NULL;
   mjtNum* qfrc = NULL;
 
-  // Vertex velocities, only for damping: sum of slide axes times joint speeds, or the Jacobian.
+  // Vertex velocities, only for damping and the returned drag: sum of slide axes times joint
+  // speeds, or the Jacobian.
+  int damped = s->damping > 0 || (s->nbuiltin_hinge > 0 && s->builtin_damping > 0);
   mjtNum* xdot = NULL;
-  if (s->damping > 0 || (s->nbuiltin_hinge > 0 && s->builtin_damping > 0)) {
+  if (damped || s->drag_returned) {
     xdot = s->xdot;
     for (int v = 0; v < nvert; v++) {
       mjtNum* out = xdot + 3 * v;
@@ -1361,10 +1561,11 @@ static void shell_compute(const mjModel* m, mjData* d, int instance, int capabil
     }
   }
 
-  membrane_forces(s, x, xdot);
-  if (s->nhinge > 0) bending_forces(s, x, xdot);
+  membrane_forces(s, x, damped ? xdot : NULL);
+  if (s->nhinge > 0) bending_forces(s, x, damped ? xdot : NULL);
   if (s->nbuiltin_hinge > 0) remove_builtin_bending(s, x, s->builtin_damping > 0 ? xdot : NULL);
   if (s->builtin_metric) remove_builtin_membrane(m, d, s, x);
+  if (s->drag_returned) return_drag(m, s, x, xdot);
 
   // Forces (minus the gradient) into joint space: slide-only chains directly, others through the
   // vertex Jacobian.
