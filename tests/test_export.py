@@ -242,6 +242,7 @@ def test_scene_exports_reloads_and_runs_stably(scene, material_file, tmp_path):
         assert float(config[name]) == value
     assert float(config["thickness"]) == FABRIC.thickness
     assert config["membrane"] == "node"
+    assert "implicit_drag" not in config  # the full drag, the plugin's default (plugins/README.md)
     assert not any(key.startswith("builtin_") for key in config)
     flex = mujoco.MjSpec.from_file(str(path)).flexes[0]
     assert (flex.young, flex.poisson, flex.thickness, flex.elastic2d) == \
@@ -327,6 +328,11 @@ def test_bad_scene_options_fail_clearly(material_file):
         build_scene(material, "cloth", resolution=0)
     with pytest.raises(ValueError, match="unknown integrator 'implicitfast'"):
         build_scene(material, "cloth", integrator="implicitfast")
+    with pytest.raises(ValueError, match="unknown implicit_drag 'half'"):
+        build_scene(material, "cloth", implicit_drag="half")
+    # The soft modes' drag given back when asked (written; "full", the plugin's default, is left out).
+    config = build_scene(material, "cloth", implicit_drag="critical").spec.plugins[0].config
+    assert config["implicit_drag"] == "critical"
 
 
 def test_material_file_errors_name_the_problem(tmp_path):
@@ -356,7 +362,7 @@ def test_cli_export_writes_a_scene_that_loads(material_file, tmp_path):
     out = yarnfit("export", str(material_file), "--scene", "wall", "--resolution", "6", "-o", str(path),
                   "--check", "0.05")
     assert out.returncode == 0, out.stderr
-    assert "built-in" in out.stdout and "stable" in out.stdout
+    assert "built-in" in out.stdout and "stable" in out.stdout and "implicit_drag full" in out.stdout
     # A fresh interpreter with nothing but `import mujoco`: our entry point registers the plugin.
     plain = subprocess.run([sys.executable, "-c", "import sys, mujoco; "
                             "print(mujoco.MjModel.from_xml_path(sys.argv[1]).nplugin)", str(path)],

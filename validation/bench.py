@@ -560,9 +560,10 @@ def bench_drape_stable_step() -> None:
     five presets at 2, 1 and 0.5 cm cells, before issue 15 (all bending explicit in the plugin, the
     built-in part covering half of S, constant-strain triangles), with the built-in part also
     bending and covering the stiffening up to split.DEFAULT_STIFFENING_BOUND ("triangle"), and now
-    (that, with node-smoothed membrane strains), with ms per step and per simulated second at
-    that step and the centre of mass's height at the end (a step that drags the drape shows as a
-    higher cloth). Long: hours at 0.5 cm."""
+    (that, with node-smoothed membrane strains, and the soft modes' drag given back: the plugin's
+    implicit_drag="critical"), and "now" with all of MuJoCo's drag kept ("full_drag", as until
+    session 53), with ms per step and per simulated second at that step and the centre of mass's
+    height at the end (a step that drags the drape shows as a higher cloth). Long: hours at 0.5 cm."""
     import tempfile
     import warnings
     from pathlib import Path
@@ -571,8 +572,10 @@ def bench_drape_stable_step() -> None:
     from yarnfit.fabric_fit import fit_fabric
     from yarnfit.mujoco.scenes import ClothMaterial
 
-    variants = {"before": {"implicit_bending": False, "stiffening_bound": 0.0, "membrane": "triangle"},
-                "triangle": {"membrane": "triangle"}, "now": {}}
+    variants = {"before": {"implicit_bending": False, "stiffening_bound": 0.0, "membrane": "triangle",
+                           "implicit_drag": "full"},
+                "triangle": {"membrane": "triangle", "implicit_drag": "full"}, "full_drag": {"implicit_drag": "full"},
+                "now": {}}
     for name in PRESETS:
         with warnings.catch_warnings(), tempfile.TemporaryDirectory() as folder:
             warnings.simplefilter("ignore")

@@ -108,8 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--figures", metavar="DIR",
                      help="where the fit's figures (PNG, SVG) and their tables (CSV) go (default: logs/<name>)")
 
-    from .mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE,
-                         DEFAULT_TIMESTEP, INTEGRATORS, SCENES)
+    from .mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_INTEGRATOR,
+                         DEFAULT_RESOLUTION, DEFAULT_SIZE, DEFAULT_TIMESTEP, IMPLICIT_DRAGS, INTEGRATORS, SCENES)
     from .validate import SCENES as VALIDATION_SCENES
 
     export = commands.add_parser(
@@ -156,6 +156,11 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--fallback", action="store_true",
                         help="no plugin: MuJoCo's built-in isotropic elasticity alone (stretch and bending) with the "
                              "material's isotropic fallback")
+    export.add_argument("--implicit-drag", default=DEFAULT_IMPLICIT_DRAG, choices=IMPLICIT_DRAGS,
+                        help="how much of the discrete step's drag through MuJoCo's isotropic share the cloth keeps: "
+                             "full (default) or critical (what damps each of the material's modes critically: a "
+                             "quasi-static pull such as the stretch strip comes to rest sooner; drapes on contact "
+                             "settle later)")
     export.add_argument("--self-collision", action="store_true", help="let the cloth collide with itself (slower)")
     export.add_argument("--check", type=float, metavar="SECONDS",
                         help="then step the scene this long and report stability and ms/step (exit 1 if unstable)")
@@ -555,7 +560,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     built = export_scene(material, args.scene, output, resolution=args.resolution, size=args.size, **strip,
                          timestep=args.timestep, integrator=args.integrator, friction=args.friction,
                          damping=args.damping, angle=math.radians(args.angle), fallback=args.fallback,
-                         self_collision=args.self_collision)
+                         self_collision=args.self_collision, implicit_drag=args.implicit_drag)
     print(export_summary(built, material, output, args))
     if args.check is not None:
         from .mujoco.run import run_scene
@@ -590,7 +595,7 @@ def export_summary(built, material, output, args) -> str:
         bending = (f"its own {kind}bending, the built-in hinge forces removed" if spec.flexes[0].elastic2d == 3
                    else f"all {kind}bending")
         lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, "
-                     f"{bending}), weft at {args.angle:g}° from x")
+                     f"{bending}), weft at {args.angle:g}° from x, implicit_drag {args.implicit_drag}")
     if not built.fallback and material.shell.nonlinear is not None and args.check is None:
         lines.append("  note            the strain-stiffening forces are explicit and can need a step below 1 ms "
                      "(plugins/README.md): check the scene with --check SECONDS, or export --linear")

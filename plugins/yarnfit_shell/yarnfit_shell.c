@@ -125,6 +125,14 @@
 // it). The step's inertia there is m + h^2 k_b, about h^2 k_b where the share is stiff, and the
 // drag that damps k_t on that inertia critically is 2 sqrt(k_t h^2 k_b) = h k_b 2 sqrt(r).
 #define YF_CRITICAL_DRAG 2.0
+// ... and at least YF_LEAST_DRAG of it: a mode with no tangent at all (a ridge membrane, base S zero,
+// strained where none of its ridges is engaged in some direction) keeps enough to lose its speed
+// in ~1 / YF_LEAST_DRAG steps instead of drifting undamped. Measured on the cotton jersey's 2 x 5
+// bias strip at 0.2 % (session 53): no floor, its force at rest within 1000 steps but a vertex
+// still drifting at 1.5 times the rest speed after 4000; 0.02, at rest within 1000; 0.1, within
+// 1000 but creeping slower after; full drag, at rest after ~5000. Modes with r < (0.02 / 2)^2 =
+// 1e-4 are then overdamped (~0.02 / r steps, against 1 / r with the full drag).
+#define YF_LEAST_DRAG 0.02
 
 static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
@@ -885,15 +893,27 @@ static void sym3_function(const double a[9], double (*fn)(double), double out[9]
 static double root_of(double value) { return sqrt(value); }
 static double inverse_root_of(double value) { return 1 / sqrt(value); }
 // The share of the drag given back in a mode of stiffness ratio r (YF_CRITICAL_DRAG).
-static double drag_returned_share(double r) { return 1 - fmin(1, YF_CRITICAL_DRAG * sqrt(fmax(r, 0))); }
+static double drag_returned_share(double r) {
+  return 1 - fmin(1, fmax(YF_LEAST_DRAG, YF_CRITICAL_DRAG * sqrt(fmax(r, 0))));
+}
 
-// The signature of the ridges engaged at strain eps (3, Voigt): FNV-1a over their indices (0 for
-// none). A collision only keeps a K_r built for other ridges, still between 0 and K_b.
+// Whether ridge r counts in the tangent the returned drag is built for at strain eps (3, Voigt):
+// engaged there, or engaged from zero strain (knot 0). A knot-0 ridge carries the small-strain
+// stiffness on its side only; counted on the other side too, a direction whose every ridge starts
+// at 0 on the far side keeps its drag rather than none (with none, a mode with no tangent at all
+// would drift undamped: a cotton jersey's 2 x 5 bias strip never came to rest at 0.2 %).
+static int drag_counts_ridge(const double* r, const double eps[3]) {
+  return mju_dot3(r, eps) - r[3] > 0;
+}
+
+// The signature of the ridges counted at strain eps (3, Voigt; drag_counts_ridge): FNV-1a over
+// their indices (0 for none). A collision only keeps a K_r built for other ridges, still between 0
+// and K_b.
 static uint64_t engaged_ridges(const Shell* s, const double eps[3]) {
   uint64_t hash = 0;
   for (int j = 0; j < s->nridge; j++) {
     const double* r = s->ridge + YF_RIDGE_NUMBERS * j;
-    if (!(mju_dot3(r, eps) - r[3] > 0)) continue;
+    if (!drag_counts_ridge(r, eps)) continue;
     if (!hash) hash = 1469598103934665603ULL;
     hash = (hash ^ (uint64_t)j) * 1099511628211ULL;
   }
@@ -907,7 +927,7 @@ static void update_returned_drag(Shell* s, int t, const double eps[3]) {
   double C[9] = {h * s->s00, h * s->s01, 0, h * s->s01, h * s->s11, 0, 0, 0, h * s->s22};
   for (int j = 0; j < s->nridge; j++) {
     const double* r = s->ridge + YF_RIDGE_NUMBERS * j;
-    if (!(mju_dot3(r, eps) - r[3] > 0)) continue;
+    if (!drag_counts_ridge(r, eps)) continue;
     for (int a = 0; a < 3; a++) {
       for (int b = 0; b < 3; b++) C[3 * a + b] += h * r[4] * r[a] * r[b];
     }
@@ -945,8 +965,8 @@ static void update_returned_drag(Shell* s, int t, const double eps[3]) {
 // the cloth back for k_b / k_t steps. The material's own tangent at the triangle's strain in the
 // same edge space, K_t = 2 A g^T C g (g_a the Voigt Green strain per unit l_a^2, C = h S plus the
 // ridges engaged), and the generalised eigenproblem of K_t against K_b give each mode's ratio r;
-// K_r = K_b^(1/2) Q diag(1 - min(1, 2 sqrt(r))) Q^T K_b^(1/2) returns what critical damping of the
-// mode on the step's inertia does not need. 0 <= K_r <= K_b in every direction: what is returned
+// K_r = K_b^(1/2) Q diag(1 - min(1, max(0.02, 2 sqrt(r)))) Q^T K_b^(1/2) returns what critical
+// damping of the mode on the step's inertia does not need. 0 <= K_r <= K_b in every direction: what is returned
 // never exceeds MuJoCo's drag, so the step stays as stable as without it (plugins/README.md).
 // Here the per-triangle basis (K_b's roots, g) and K_r at rest; compute rebuilds a triangle's K_r
 // when the ridges engaged at its strain change (return_drag).

@@ -54,18 +54,20 @@ from ..checks import non_negative_number, positive_number
 from ..material_file import MaterialFile
 from ..outputs import write_atomically
 from ..shell import ShellMaterial
-from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE,
-               DEFAULT_TIMESTEP, INTEGRATORS, SCENES)
+from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION,
+               DEFAULT_SIZE, DEFAULT_TIMESTEP, IMPLICIT_DRAGS, INTEGRATORS, SCENES)
 from .plugin import PLUGIN_NAME
 from .split import DEFAULT_STIFFENING_BOUND, MJCF_DIGITS, builtin_elasticity, isotropic_fallback
 
 __all__ = [
     "DEFAULT_DAMPING",
     "DEFAULT_FRICTION",
+    "DEFAULT_IMPLICIT_DRAG",
     "DEFAULT_INTEGRATOR",
     "DEFAULT_RESOLUTION",
     "DEFAULT_SIZE",
     "DEFAULT_TIMESTEP",
+    "IMPLICIT_DRAGS",
     "INTEGRATORS",
     "SCENES",
     "BuiltScene",
@@ -213,6 +215,7 @@ def build_scene(
     implicit_bending: bool = True,
     stiffening_bound: float = DEFAULT_STIFFENING_BOUND,
     membrane: str = DEFAULT_MEMBRANE,
+    implicit_drag: str = DEFAULT_IMPLICIT_DRAG,
 ) -> BuiltScene:
     """Build one of :data:`SCENES` for ``material`` (see the module docstring).
 
@@ -239,6 +242,9 @@ def build_scene(
         membrane: the plugin's membrane strains, one of :data:`MEMBRANES`: ``"node"`` (smoothed over
             each vertex's third of its triangles: no locking on any triangulation) or ``"triangle"``
             (constant per triangle: locks on one-diagonal and unstructured cells); plugins/README.md.
+        implicit_drag: the plugin's ``implicit_drag``, one of :data:`IMPLICIT_DRAGS`: ``"full"``
+            (all of the discrete step's drag through the built-in share) or ``"critical"`` (kept only
+            where the material's modes need it to be damped critically; the stretch scene's strips).
 
     Raises:
         ValueError: an unknown scene, integrator or mesh, a non-positive resolution, size, timestep,
@@ -271,7 +277,7 @@ def build_scene(
         layout = _square(spec, scene, resolution, size, friction, mesh == "crisscross")
 
     elasticity = _Elasticity.of(spec, material, fallback, implicit_bending, stiffening_bound, angle, damping,
-                                membrane=membrane)
+                                membrane=membrane, implicit_drag=implicit_drag)
     flex = _cloth(spec, layout, material.areal_density_kg_m2, elasticity.plugin)
     elasticity.apply(flex, damping, friction)
     flex.contype = flex.conaffinity = 1 if layout.collide else 0
@@ -386,7 +392,11 @@ def _header(built: BuiltScene) -> str:
                        + ". The flex's own <elasticity> is MuJoCo's implicit isotropic share that keeps the step "
                        + ("stable; the plugin adds the rest of the material to it (builtin_young, builtin_poisson "
                           "and builtin_thickness repeat it)." if "builtin_young" in config else
-                          "stable; the plugin removes its forces and carries the whole material."),
+                          "stable; the plugin removes its forces and carries the whole material.")
+                       + (" Under the discrete integrator that share also drags the cloth (the step's -h K v); "
+                          'with implicit_drag="critical" the plugin gives back what the material\'s soft modes '
+                          "(a woven's shear) do not need to be damped critically, so they come to rest sooner."
+                          if config.get("implicit_drag") == "critical" else ""),
                        "Getting the plugin: pip install yarnfit. Then import mujoco registers it in Python "
                        "(yarnfit's mujoco.plugins entry point) and mujoco.MjModel.from_xml_path loads this file "
                        "as it is; a C or C++ host first calls mj_loadPluginLibrary on "
@@ -682,16 +692,19 @@ class _Elasticity:
     @classmethod
     def of(cls, spec, material: ClothMaterial, fallback: bool, implicit_bending: bool, stiffening_bound: float,
            angle: float, damping: float, name: str = "shell", rest: str = "qpos0",
-           membrane: str = DEFAULT_MEMBRANE) -> "_Elasticity":
+           membrane: str = DEFAULT_MEMBRANE, implicit_drag: str = DEFAULT_IMPLICIT_DRAG) -> "_Elasticity":
         """The split of :func:`~yarnfit.mujoco.split.builtin_elasticity` with its plugin instance
         ``name`` added to ``spec``, or with ``fallback`` the isotropic fallback alone."""
         if membrane not in MEMBRANES:
             raise ValueError(f"unknown membrane {membrane!r}; membranes: {', '.join(MEMBRANES)}")
+        if implicit_drag not in IMPLICIT_DRAGS:
+            raise ValueError(f"unknown implicit_drag {implicit_drag!r}; choices: {', '.join(IMPLICIT_DRAGS)}")
         if fallback:
             iso = isotropic_fallback(material.shell)
             return cls(iso.young_pa, iso.poisson, iso.thickness_m, "both", None, iso.notes)
         split = builtin_elasticity(material.shell, bending=implicit_bending, stiffening_bound=stiffening_bound)
-        plugin = _plugin(spec, material.shell, split, angle, damping, name=name, rest=rest, membrane=membrane)
+        plugin = _plugin(spec, material.shell, split, angle, damping, name=name, rest=rest, membrane=membrane,
+                         implicit_drag=implicit_drag)
         return cls(split.young_pa, split.poisson, split.thickness_m, split.elastic2d, plugin, ())
 
     def apply(self, flex: mujoco.MjsFlex, damping: float, friction: float) -> None:
@@ -702,11 +715,12 @@ class _Elasticity:
 
 
 def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damping: float, name: str = "shell",
-            rest: str = "qpos0", membrane: str = DEFAULT_MEMBRANE):
+            rest: str = "qpos0", membrane: str = DEFAULT_MEMBRANE, implicit_drag: str = DEFAULT_IMPLICIT_DRAG):
     """The ``yarnfit.shell`` instance ``name``: the full material, its angle and damping, its rest
-    (``"qpos0"`` or ``"texcoord"``), its membrane strains (``"triangle"`` or ``"node"``) and, for the
-    qpos0 rest with triangle strains, ``builtin_*`` written exactly as the ``<elasticity>``
-    attributes are (``MJCF_DIGITS`` digits)."""
+    (``"qpos0"`` or ``"texcoord"``), its membrane strains (``"triangle"`` or ``"node"``), its
+    ``implicit_drag`` (written unless ``"full"``, the plugin's default) and, for the qpos0 rest with
+    triangle strains, ``builtin_*`` written exactly as the ``<elasticity>`` attributes are
+    (``MJCF_DIGITS`` digits)."""
     spec.activate_plugin(PLUGIN_NAME)
     plugin = spec.add_plugin(name=name, plugin_name=PLUGIN_NAME, active=True)
     config = {name: repr(value) for name, value in shell.parameters.items()}
@@ -726,6 +740,8 @@ def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damp
         config["rest"] = rest
     if membrane != "triangle":
         config["membrane"] = membrane
+    if implicit_drag != "full":
+        config["implicit_drag"] = implicit_drag
     plugin.config = config
     return plugin
 
@@ -761,7 +777,7 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
                    implicit_bending: bool = True, pinned: np.ndarray | None = None,
                    stiffening_bound: float = DEFAULT_STIFFENING_BOUND,
                    rest_uv: np.ndarray | None = None, fallback: bool = False,
-                   membrane: str = DEFAULT_MEMBRANE) -> mujoco.MjsFlex:
+                   membrane: str = DEFAULT_MEMBRANE, implicit_drag: str = DEFAULT_IMPLICIT_DRAG) -> mujoco.MjsFlex:
     """One free 2D flex ``name`` with rest positions ``points (n, 3)`` (m) and ``triangles (m, 3)``,
     built as :func:`build_scene` builds its cloth (vertex bodies ``<name>_<v>`` with three slide
     joints, the split's built-in ``<elasticity>`` and a ``yarnfit.shell`` instance
@@ -774,11 +790,11 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
     ``pinned (n,)``, if given, are held on the world at their rest positions (a clamp; the world
     then carries the plugin, as in the ``cloth`` scene). ``fallback``: no plugin, MuJoCo's own
     isotropic elasticity alone with :func:`~yarnfit.mujoco.split.isotropic_fallback`'s material
-    (``elastic2d="both"``), as :func:`build_scene` builds it. ``membrane``: as for
-    :func:`build_scene`."""
+    (``elastic2d="both"``), as :func:`build_scene` builds it. ``membrane``, ``implicit_drag``: as
+    for :func:`build_scene`."""
     elasticity = _Elasticity.of(spec, material, fallback, implicit_bending, stiffening_bound, angle, damping,
                                 name=f"{name}_shell", rest="qpos0" if rest_uv is None else "texcoord",
-                                membrane=membrane)
+                                membrane=membrane, implicit_drag=implicit_drag)
     holders = {} if pinned is None else {"world": np.asarray(pinned, bool)}
     layout = _Layout(np.asarray(points, float), np.asarray(triangles, int), holders, collide=True)
     flex = _cloth(spec, layout, material.areal_density_kg_m2, elasticity.plugin, name=name)
