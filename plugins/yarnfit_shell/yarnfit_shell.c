@@ -616,6 +616,27 @@ static int collect_builtin_membrane(const mjModel* m, Shell* s) {
   return s->builtin_delta ? 0 : -1;
 }
 
+// Add to grad (the energy gradient, so minus the force) the force of one triangle's edge metric:
+// scale * (K d)_b (x_q - x_p) on edge b's vertex q and its opposite on p, i.e. scale (1/2) J^T K d
+// with J = d(l^2)/dx over its edges (slot: its three flex-local edges in flex_elemedge order,
+// edge: the flex's vertex pairs, k: K's upper triangle (6), per_edge: d per flex edge).
+static void add_edge_metric_force(double* grad, const double* x, const int* edge, const int* slot, const double* k,
+                                  const double* per_edge, double scale) {
+  double K[3][3], d[3];
+  for (int a = 0, n = 0; a < 3; a++) {
+    d[a] = per_edge[slot[a]];
+    for (int b = a; b < 3; b++, n++) K[a][b] = K[b][a] = k[n];
+  }
+  for (int b = 0; b < 3; b++) {
+    double c = scale * (K[b][0] * d[0] + K[b][1] * d[1] + K[b][2] * d[2]);
+    int p = edge[2 * slot[b]], q = edge[2 * slot[b] + 1];
+    double along[3];
+    mju_sub3(along, x + 3 * q, x + 3 * p);  // (1/2) grad_q (l^2) = x_q - x_p
+    mju_addToScl3(grad + 3 * q, along, -c);
+    mju_addToScl3(grad + 3 * p, along, c);
+  }
+}
+
 // Remove MuJoCo's built-in membrane (rest="texcoord") from the plugin's total: MuJoCo's force is
 // minus the gradient of (1/4) Delta^T K Delta per triangle, Delta_a = l_a^2 - L_a^2 + (l_a^2 -
 // (l_a - h dl_a/dt)^2) damping / h over its edges (K its flex_stiffness block, L flexedge_length0,
@@ -632,21 +653,8 @@ static void remove_builtin_membrane(const mjModel* m, const mjData* d, Shell* s,
     s->builtin_delta[e] = l * l - rest * rest + (l * l - previous * previous) * rate;
   }
   for (int t = 0; t < s->ntri; t++) {
-    const mjtNum* k = s->builtin_metric + YF_STIFFNESS_STRIDE * t;
-    const int* slot = s->builtin_elemedge + 3 * t;
-    double K[3][3], delta[3];
-    for (int a = 0, n = 0; a < 3; a++) {
-      delta[a] = s->builtin_delta[slot[a]];
-      for (int b = a; b < 3; b++, n++) K[a][b] = K[b][a] = k[n];
-    }
-    for (int b = 0; b < 3; b++) {
-      double c = K[b][0] * delta[0] + K[b][1] * delta[1] + K[b][2] * delta[2];
-      int p = edge[2 * slot[b]], q = edge[2 * slot[b] + 1];
-      double along[3];
-      mju_sub3(along, x + 3 * q, x + 3 * p);  // (1/2) grad_q (l^2) = x_q - x_p
-      mju_addToScl3(s->grad + 3 * q, along, -c);
-      mju_addToScl3(s->grad + 3 * p, along, c);
-    }
+    add_edge_metric_force(s->grad, x, edge, s->builtin_elemedge + 3 * t,
+                          s->builtin_metric + YF_STIFFNESS_STRIDE * t, s->builtin_delta, 1);
   }
 }
 
@@ -1530,21 +1538,7 @@ static void return_drag(const mjModel* m, Shell* s, const double* x, const doubl
       green_strain(F, 0, eps);
       if (engaged_ridges(s, eps) != s->drag_active[t]) update_returned_drag(s, t, eps);
     }
-    const double* k = s->drag_returned + 6 * t;
-    const int* slot = s->drag_elemedge + 3 * t;
-    double K[3][3], rate[3];
-    for (int a = 0, n = 0; a < 3; a++) {
-      rate[a] = s->drag_rate[slot[a]];
-      for (int b = a; b < 3; b++, n++) K[a][b] = K[b][a] = k[n];
-    }
-    for (int b = 0; b < 3; b++) {
-      double c = h * (K[b][0] * rate[0] + K[b][1] * rate[1] + K[b][2] * rate[2]);
-      int p = edge[2 * slot[b]], q = edge[2 * slot[b] + 1];
-      double along[3];
-      mju_sub3(along, x + 3 * q, x + 3 * p);
-      mju_addToScl3(s->grad + 3 * q, along, -c);
-      mju_addToScl3(s->grad + 3 * p, along, c);
-    }
+    add_edge_metric_force(s->grad, x, edge, s->drag_elemedge + 3 * t, s->drag_returned + 6 * t, s->drag_rate, h);
   }
 }
 
