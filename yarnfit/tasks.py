@@ -27,8 +27,8 @@ the same on either backend:
 
 Worker processes ignore SIGINT: Ctrl-C in a terminal reaches the whole process group, and the
 parent alone decides what stops (the workers would otherwise each print a traceback). A task runs
-on one core (:func:`one_core`): its Numba kernels and BLAS (numpy's, scipy's) on one thread, as on a Dask worker
-(``distributed.nanny.pre-spawn-environ``), because a yarn-level solve's dense algebra is small (a
+on one core (:func:`one_core`): its Numba kernels and BLAS (numpy's, scipy's) on one thread, as on
+a Dask worker (``distributed.nanny.pre-spawn-environ``), because a yarn-level solve's dense algebra is small (a
 periodic repeat's constraint rows, 30 × 2400) and BLAS threads beside the other workers only
 contend for the cores.
 """
@@ -42,7 +42,7 @@ import os
 import pickle
 import signal
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any, Callable, Hashable, Iterable, Sequence
@@ -182,13 +182,17 @@ def ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+# A worker process's one core, entered by start_worker and never left (held here: a context
+# manager that is garbage-collected would run its exit and restore the threads).
+_WORKER_CORE = ExitStack()
+
+
 def start_worker() -> None:
     """A :class:`LocalPool` worker's initializer: SIGINT ignored (:func:`ignore_sigint`) and one
     core (:func:`one_core`) for the worker's life (``fork`` copies the parent's thread pools, so the
     environment variables a spawned process reads come too late)."""
     ignore_sigint()
-    numba.set_num_threads(1)
-    threadpool_limits(limits=1, user_api="blas")  # kept: only its ``with`` block's exit restores
+    _WORKER_CORE.enter_context(one_core())
 
 
 class Backend:

@@ -929,8 +929,8 @@ static uint64_t engaged_ridges(const Shell* s, const double eps[3]) {
 }
 
 // Triangle t's returned metric K_r (build_drag_return) for the material's tangent at strain eps
-// (3, Voigt): h S and the ridges engaged there.
-static void update_returned_drag(Shell* s, int t, const double eps[3]) {
+// (3, Voigt): h S and the ridges engaged there, whose signature (engaged_ridges) is `engaged`.
+static void update_returned_drag(Shell* s, int t, const double eps[3], uint64_t engaged) {
   double h = s->thickness;
   double C[9] = {h * s->s00, h * s->s01, 0, h * s->s01, h * s->s11, 0, 0, 0, h * s->s22};
   for (int j = 0; j < s->nridge; j++) {
@@ -962,7 +962,7 @@ static void update_returned_drag(Shell* s, int t, const double eps[3]) {
   for (int a = 0, n = 0; a < 3; a++) {
     for (int b = a; b < 3; b++, n++) s->drag_returned[6 * t + n] = 0.5 * (share[3 * a + b] + share[3 * b + a]);
   }
-  s->drag_active[t] = engaged_ridges(s, eps);
+  s->drag_active[t] = engaged;
 }
 
 // implicit_drag="critical": per triangle, the metric K_r of MuJoCo's drag that compute gives back.
@@ -1016,7 +1016,7 @@ static int build_drag_return(const mjModel* m, Shell* s, const int* tri_edge_loc
     }
     sym3_function(Kb, root_of, root);
     sym3_function(Kb, inverse_root_of, root + 9);
-    update_returned_drag(s, t, rest);
+    update_returned_drag(s, t, rest, engaged_ridges(s, rest));
   }
   return 0;
 }
@@ -1536,7 +1536,8 @@ static void return_drag(const mjModel* m, Shell* s, const double* x, const doubl
       for (int k = 0; k < 3; k++) mju_copy3(xt + 3 * k, x + 3 * v[k]);
       triangle_deformation(s->rest_inv + 4 * t, xt, NULL, F);
       green_strain(F, 0, eps);
-      if (engaged_ridges(s, eps) != s->drag_active[t]) update_returned_drag(s, t, eps);
+      uint64_t engaged = engaged_ridges(s, eps);
+      if (engaged != s->drag_active[t]) update_returned_drag(s, t, eps, engaged);
     }
     add_edge_metric_force(s->grad, x, edge, s->drag_elemedge + 3 * t, s->drag_returned + 6 * t, s->drag_rate, h);
   }
