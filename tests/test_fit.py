@@ -466,6 +466,25 @@ def test_a_stiffness_the_data_put_at_zero_is_reported_at_its_floor():
     assert fit.parameters["s00"] == pytest.approx(TRUE.s00, rel=RECOVERY_REL)
 
 
+def test_a_uniaxial_family_that_floors_a_stiffness_is_left_out_of_the_linear_fit():
+    """A woven's bias pull contracts both thread directions, which its yarns give for nothing and a
+    linear membrane charges at the stretch stiffness: with pulls whose energies are 1e-3 of the
+    material's (the cotton twill's at 2 % were 1/125 of what its contraction alone costs a linear
+    membrane), the least squares bought the difference back with s22 on its floor. The fit leaves
+    the family out, says so, and the rest of the samples give the material back exactly."""
+    samples = [s for s in make_samples(TRUE, energy=lambda family, W: 1e-3 * W if family == "bias_uniaxial" else W)
+               if s.family != "negative_bias_uniaxial"]
+    fit = fit_linear(samples, H)
+    assert fit.active_bounds == []
+    for name, value in TRUE.parameters.items():
+        assert fit.parameters[name] == pytest.approx(value, rel=RECOVERY_REL), name
+    assert fit.notes[0].startswith("fitted without the bias_uniaxial samples: with them s22 went to the positive floor")
+    # Its R² still counts them: the misfit is reported, not hidden.
+    assert fit.families["bias_uniaxial"]["r2"] < 0.0
+    # The same pulls with their true energies are kept (nothing is floored).
+    assert not any("fitted without" in note for note in fit_linear(make_samples(TRUE), H).notes)
+
+
 def test_non_converged_samples_are_excluded_and_listed():
     good = make_samples(TRUE)
     bad = [

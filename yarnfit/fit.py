@@ -56,7 +56,8 @@ from scipy.optimize import least_squares, lsq_linear, nnls
 
 from .checks import real_number
 from .jsonfile import finite_or_none
-from .samples import BENDING_FAMILIES, FAMILIES, MEMBRANE_FAMILIES, OTHER_BIAS_FAMILIES, Group, SampleResult
+from .samples import (BENDING_FAMILIES, FAMILIES, MEMBRANE_FAMILIES, OTHER_BIAS_FAMILIES, UNIAXIAL_FAMILIES, Group,
+                      SampleResult)
 from .shell import (
     BENDING_PARAMETERS,
     MEMBRANE_PARAMETERS,
@@ -624,9 +625,13 @@ def fit_shell(
     rest_stress = dict.fromkeys(_ALL_RESIDUAL, 0.0)
     reference = bool(np.any(undeformed & membrane_rows))
 
-    def linear_group(group, families, names, energies, residual):
-        """The linear fit of one group (with its residual-stress terms if ``residual``)."""
+    def linear_group(group, families, names, energies, residual, without=()):
+        """The linear fit of one group (with its residual-stress terms if ``residual``), leaving
+        out the samples of the families ``without``. A diagonal on its floor that one uniaxial
+        family put there (the fit without it is off the floor) is fitted without that family, and
+        a note says so; the R² are still over every sample."""
         rows = (membrane_rows if group == "membrane" else ~membrane_rows) & ~undeformed & linear_rows
+        rows &= np.array([s.family not in without for s in used], dtype=bool)
         offset = 0 if group == "membrane" else 3
         extra = list(RESIDUAL_STRESS_NAMES[group]) if residual else []
         group_notes = []
@@ -654,6 +659,18 @@ def fit_shell(
         limit = coupling_limit if off in free else None
         values, errors, at_bound, ratio = fit(free, limit)
         floors = [n for n in at_bound if n in _DIAGONAL]
+        if floors and not without:
+            # A uniaxial sample's free strains are the yarns' answer, not the linear membrane's: a
+            # woven's bias pull contracts both thread directions, which its yarns give freely (crimp)
+            # and a linear membrane charges at the stretch stiffness (the twill at 2 %: 0.064 J/m² for
+            # a pull whose whole energy is 5e-4), so the fit bought it back with a shear on its floor.
+            present = {used[i].family for i in np.flatnonzero(rows)}
+            for family in (f for f in UNIAXIAL_FAMILIES if f in present):
+                refit = linear_group(group, families, names, energies, residual, (family,))
+                if not set(floors) & set(refit[2]):
+                    return refit[:3] + ([f"fitted without the {family} samples: with them {', '.join(floors)} went "
+                                         f"to the positive floor (the linear membrane cannot follow their free "
+                                         f"contraction; its R² on them says by how much)"] + refit[3], refit[4])
         if off in free and {d0, d1} & set(floors):
             # A direction that carries no energy has nothing to couple to: refit with the coupling 0.
             free = [n for n in free if n != off]
