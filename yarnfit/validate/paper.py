@@ -172,7 +172,7 @@ def compare_fibre_drapes(fabric: Fabric, fibres=FIBRES, *, progress: Callable[[s
         finals[fibre] = result.positions
         summary = result.summary()
         figures[fibre] = {key: summary[key] for key in ("drape_coefficient", "lowest_point_m", "fold_count",
-                                                       "weft_warp_asymmetry", "settled")}
+                                                       "weft_warp_asymmetry", "settled", "creep_m_per_s")}
         engineering = material.shell.engineering()
         figures[fibre].update({key: engineering[key] for key in ("weft_stretch_n_per_m", "bending_weft_nm",
                                                                  "bending_warp_nm")})

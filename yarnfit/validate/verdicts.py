@@ -7,6 +7,7 @@ not apply to the fabric (the bias criterion for a knit) is listed as not applica
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 from . import DRAPES
@@ -124,7 +125,10 @@ def verdicts(summary: dict, family: str | None) -> list[Verdict]:
         if scene in scenes:
             drape = scenes[scene]
             settled = bool(drape["settled"]) and drape["bad_qacc"] == 0
-            figure = (f"{'at rest' if drape['settled'] else 'still moving'} after {drape['simulated_s']:.2f} s, "
+            creep = drape.get("creep_m_per_s")  # absent from summaries before session 54
+            moving = ("still moving" if creep is None or not math.isfinite(creep)
+                      else f"still creeping at {1e3 * creep:.2g} mm/s")
+            figure = (f"{'at rest' if drape['settled'] else moving} after {drape['simulated_s']:.2f} s, "
                       f"{drape['bad_qacc']} bad-QACC warnings")
             criterion = "at rest, no solver warning"
             if scene == "cusick":  # the standard's figures, reported with the check (not judged)
