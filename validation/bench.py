@@ -238,8 +238,15 @@ def bench_fit() -> None:
         # figures above run every core at once, and a sample then shares the machine's caches and
         # memory with another (10–15 % slower on 2 cores); this is one core to itself.
         alone = fit_fabric(fabrics[-1], workers=1, relaxed=fitted.relaxed, friction=False)
-        report("fit_stockinette_one_worker_mean_sample_seconds",
-               sum(r.seconds for r in alone.samples) / len(alone.samples), "s (one core, nothing else running)")
+        seconds = sum(r.seconds for r in alone.samples)
+        report("fit_stockinette_one_worker_mean_sample_seconds", seconds / len(alone.samples),
+               "s (one core, nothing else running)")
+        # The same run in Newton iterations, which the machine does not change (its time per sample
+        # moved by 15 % between two quiet runs of one commit, sessions 53 and 54): a change to the
+        # solver's path shows here, one to its cost per iteration in the next figure.
+        iterations = sum(r.iterations for r in alone.samples)
+        report("fit_stockinette_one_worker_newton_iterations", iterations, "")
+        report("fit_stockinette_one_worker_ms_per_iteration", 1e3 * seconds / iterations, "ms (one core)")
 
 
 # -- mujoco ---------------------------------------------------------------------------------------
