@@ -242,7 +242,7 @@ def bench_fit() -> None:
         report("fit_stockinette_one_worker_mean_sample_seconds", seconds / len(alone.samples),
                "s (one core, nothing else running)")
         # The same run in Newton iterations, which the machine does not change (its time per sample
-        # moved by 15 % between two quiet runs of one commit, sessions 53 and 54): a change to the
+        # moved by 15 % between two quiet runs of the same solver, sessions 53 and 54): a change to the
         # solver's path shows here, one to its cost per iteration in the next figure.
         iterations = sum(r.iterations for r in alone.samples)
         report("fit_stockinette_one_worker_newton_iterations", iterations, "")
