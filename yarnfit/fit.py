@@ -667,10 +667,12 @@ def fit_shell(
             present = {used[i].family for i in np.flatnonzero(rows)}
             for family in (f for f in UNIAXIAL_FAMILIES if f in present):
                 refit = linear_group(group, families, names, energies, residual, (family,))
-                if not set(floors) & set(refit[2]):
-                    return refit[:3] + ([f"fitted without the {family} samples: with them {', '.join(floors)} went "
-                                         f"to the positive floor (the linear membrane cannot follow their free "
-                                         f"contraction; its R² on them says by how much)"] + refit[3], refit[4])
+                refit_values, refit_errors, refit_bound, refit_notes, refit_stress = refit
+                if not set(floors) & set(refit_bound):
+                    note = (f"fitted without the {family} samples: with them {', '.join(floors)} went to the "
+                            f"positive floor (the linear membrane cannot follow their free contraction; its R² on "
+                            f"them says by how much)")
+                    return refit_values, refit_errors, refit_bound, [note] + refit_notes, refit_stress
         if off in free and {d0, d1} & set(floors):
             # A direction that carries no energy has nothing to couple to: refit with the coupling 0.
             free = [n for n in free if n != off]

@@ -206,11 +206,11 @@ def fold_count(positions: np.ndarray, boundary: np.ndarray, size: float) -> int:
 class DrapeResult(SceneResult):
     """A drape at rest (or at the time limit): the drape coefficient (dimensionless; the scene's
     definition, module docstring), the projected area (m²), the lowest point (m), whether it
-    ``settled`` and how fast its vertices still crept over the last window (m/s), simulated and wall time (s), ms per step, MuJoCo's bad-QACC warnings, the mesh's
-    nominal cell (m) and, on the grids, vertices per side; on the sphere and the Cusick the fold
-    (node) count, on the sphere the weft/warp extent asymmetry, on the wall the largest distance
-    from it (m); the final mesh file if one was written, and the final vertex positions ``(n, 3)``
-    (m) and triangles ``(m, 3)``."""
+    ``settled`` and how fast its vertices still crept over the last window (m/s), simulated and
+    wall time (s), ms per step, MuJoCo's bad-QACC warnings, the mesh's nominal cell (m) and, on the
+    grids, vertices per side; on the sphere and the Cusick the fold (node) count, on the sphere the
+    weft/warp extent asymmetry, on the wall the largest distance from it (m); the final mesh file
+    if one was written, and the final vertex positions ``(n, 3)`` (m) and triangles ``(m, 3)``."""
 
     drape_coefficient: float
     projected_area_m2: float

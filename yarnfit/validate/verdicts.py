@@ -11,6 +11,7 @@ import math
 from dataclasses import asdict, dataclass
 
 from . import DRAPES
+from .drape import REST_CREEP_SPEED
 
 # The shell's force per width against the explicit yarn swatch's, at the swatch's strains (up to
 # 10 %), strips of the swatch's proportions: the product's target (issue 6, kept by issue 14).
@@ -130,7 +131,7 @@ def verdicts(summary: dict, family: str | None) -> list[Verdict]:
                       else f"still creeping at {1e3 * creep:.2g} mm/s")
             figure = (f"{'at rest' if drape['settled'] else moving} after {drape['simulated_s']:.2f} s, "
                       f"{drape['bad_qacc']} bad-QACC warnings")
-            criterion = "at rest, no solver warning"
+            criterion = f"at rest (creeping below {1e3 * REST_CREEP_SPEED:g} mm/s), no solver warning"
             if scene == "cusick":  # the standard's figures, reported with the check (not judged)
                 figure = f"drape coefficient {drape['drape_coefficient']:.3f}, {drape['fold_count']} nodes; {figure}"
                 criterion += "; drape coefficient and nodes reported"
