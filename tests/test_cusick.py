@@ -28,6 +28,10 @@ MIN_ANGLE = 35.0
 # circles (the disc's ring of 38 vertices at 1.5 cm cells is 0.5 % short of π 0.09²) put the
 # drape coefficient within 1 % of the exact one.
 DC_ATOL = 0.01
+# A drape at rest moves its coefficient by less than this a second: a vertex creeping at
+# REST_CREEP_SPEED (0.1 mm/s) moves the hem's shadow by ~0.002 of the annulus a second; the test
+# woven at rest measured 2e-5, a creeping preset 2.5e-3 at 15 s.
+DC_RATE_AT_REST = 1e-3
 
 
 def signed_areas(points, triangles):
@@ -128,6 +132,7 @@ def test_quick_cusick_run_through_the_suite(tmp_path):
     summary, path = run_suite(material_file(tmp_path), ("cusick",), quick=True, logs=tmp_path / "logs")
     cusick = json.loads(path.read_text())["scenes"]["cusick"]
     assert cusick["settled"] and cusick["bad_qacc"] == 0
+    assert abs(cusick["drape_coefficient_rate_per_s"]) < DC_RATE_AT_REST
     assert 0 < cusick["drape_coefficient"] < 1 and cusick["fold_count"] >= 3
     assert cusick["cell_m"] == CUSICK_CELL[True] and "resolution" not in cusick
     overhang = CUSICK_RADIUS - CUSICK_DISC_RADIUS
@@ -151,8 +156,10 @@ def test_cusick_verdict_is_settled_without_bad_accelerations():
     assert "drape coefficient 0.432, 7 nodes" in line.figure
     assert not verdicts({"scenes": {"cusick": {**scene, "bad_qacc": 2}}}, "woven")[0].passed
     assert not verdicts({"scenes": {"cusick": {**scene, "settled": False}}}, "woven")[0].passed
-    creeping = verdicts({"scenes": {"cusick": {**scene, "settled": False, "creep_m_per_s": 8.66e-4}}}, "woven")[0]
+    creeping = verdicts({"scenes": {"cusick": {**scene, "settled": False, "creep_m_per_s": 8.66e-4,
+                                               "drape_coefficient_rate_per_s": -2.54e-3}}}, "woven")[0]
     assert not creeping.passed and "still creeping at 0.87 mm/s after 3.20 s" in creeping.figure
+    assert "drape coefficient 0.432 (changing -0.0025 a second), 7 nodes" in creeping.figure
 
 
 def test_a_drape_that_creeps_is_not_at_rest(tmp_path):
@@ -169,3 +176,4 @@ def test_a_drape_that_creeps_is_not_at_rest(tmp_path):
     result = drape(path, "cusick", quick=True)
     assert not result.settled and result.simulated_s == pytest.approx(MAX_SECONDS)
     assert result.creep_m_per_s > REST_CREEP_SPEED
+    assert result.drape_coefficient_rate_per_s < -DC_RATE_AT_REST  # still sagging

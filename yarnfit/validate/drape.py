@@ -31,6 +31,8 @@ Summaries (keys carry units):
 - ``max_distance_from_wall_m`` (wall): how far the hanging swatch stands off the wall;
 - ``creep_m_per_s``: the largest net displacement of a vertex over the last :data:`REST_WINDOW`
   over that time (m/s; NaN if the run was shorter than a window);
+- ``drape_coefficient_rate_per_s``: the drape coefficient's change over that window over its
+  length (1/s; NaN likewise): how far from rest the figure is;
 - ``settled``, ``simulated_s``, ``wall_seconds``, ``ms_per_step``, ``bad_qacc``, ``cell_m`` (the
   mesh's nominal edge), ``resolution`` (sphere, wall: vertices per side of the grid).
 
@@ -206,13 +208,15 @@ def fold_count(positions: np.ndarray, boundary: np.ndarray, size: float) -> int:
 class DrapeResult(SceneResult):
     """A drape at rest (or at the time limit): the drape coefficient (dimensionless; the scene's
     definition, module docstring), the projected area (m²), the lowest point (m), whether it
-    ``settled`` and how fast its vertices still crept over the last window (m/s), simulated and
+    ``settled`` and how fast its vertices still crept and its drape coefficient still changed over
+    the last window (m/s, 1/s), simulated and
     wall time (s), ms per step, MuJoCo's bad-QACC warnings, the mesh's nominal cell (m) and, on the
     grids, vertices per side; on the sphere and the Cusick the fold (node) count, on the sphere the
     weft/warp extent asymmetry, on the wall the largest distance from it (m); the final mesh file
     if one was written, and the final vertex positions ``(n, 3)`` (m) and triangles ``(m, 3)``."""
 
     drape_coefficient: float
+    drape_coefficient_rate_per_s: float
     projected_area_m2: float
     lowest_point_m: float
     settled: bool
@@ -300,17 +304,27 @@ def drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = Fal
     mujoco.mj_forward(model, data)
     x = data.flexvert_xpos.copy()
     area = projected_area(x, triangles)
+
+    def coefficient(shadow_m2: float) -> float:
+        return _cusick_coefficient(shadow_m2) if scene == "cusick" else shadow_m2 / SIZE**2
+
+    # How fast the drape coefficient still moved over the last window (1/s), from the window's first
+    # frame: what a creep (REST_CREEP_SPEED) does to the figure the scene reports.
+    span = frames[-1][0] - frames[0][0]
+    rate = ((coefficient(area) - coefficient(projected_area(frames[0][1], triangles))) / span
+            if span >= REST_WINDOW - 0.5 * dt else math.nan)
     if scene == "sphere":
         extent = np.ptp(x[:, :2], axis=0)
-        figures = {"drape_coefficient": area / SIZE**2, "fold_count": fold_count(x, hem(triangles), SIZE),
+        figures = {"fold_count": fold_count(x, hem(triangles), SIZE),
                    "weft_warp_asymmetry": float((extent[0] - extent[1]) / extent.mean())}
     elif scene == "wall":
         wall_face = -0.5 * SIZE - WALL_GAP
-        figures = {"drape_coefficient": area / SIZE**2, "max_distance_from_wall_m": float((x[:, 0] - wall_face).max())}
+        figures = {"max_distance_from_wall_m": float((x[:, 0] - wall_face).max())}
     else:
-        figures = {"drape_coefficient": _cusick_coefficient(area),
-                   "fold_count": fold_count(x, hem(triangles), 2 * CUSICK_RADIUS)}
+        figures = {"fold_count": fold_count(x, hem(triangles), 2 * CUSICK_RADIUS)}
     result = DrapeResult(
+        drape_coefficient=coefficient(area),
+        drape_coefficient_rate_per_s=rate,
         projected_area_m2=area,
         lowest_point_m=float(x[:, 2].min()),
         settled=settled,

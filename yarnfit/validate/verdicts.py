@@ -133,7 +133,11 @@ def verdicts(summary: dict, family: str | None) -> list[Verdict]:
                       f"{drape['bad_qacc']} bad-QACC warnings")
             criterion = f"at rest (creeping below {1e3 * REST_CREEP_SPEED:g} mm/s), no solver warning"
             if scene == "cusick":  # the standard's figures, reported with the check (not judged)
-                figure = f"drape coefficient {drape['drape_coefficient']:.3f}, {drape['fold_count']} nodes; {figure}"
+                rate = drape.get("drape_coefficient_rate_per_s")  # absent before session 54
+                moving = ("" if drape["settled"] or rate is None or not math.isfinite(rate)
+                          else f" (changing {rate:+.2g} a second)")
+                figure = (f"drape coefficient {drape['drape_coefficient']:.3f}{moving}, {drape['fold_count']} nodes; "
+                          f"{figure}")
                 criterion += "; drape coefficient and nodes reported"
             out.append(Verdict(f"{scene} drape settled", settled, figure, criterion))
     if "body" in scenes:
