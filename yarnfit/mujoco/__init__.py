@@ -29,8 +29,10 @@ DEFAULT_DAMPING = 1e-3  # s
 # critically on the step's inertia, the rest given back: a woven's shear, 1e-3 of the share, rests
 # in ~sqrt(k_b / k_t) steps instead of k_b / k_t; plugins/README.md, Split). Full by default:
 # measured in session 53, critical settles the stretch strips (validate.stretch uses it) but drapes
-# on contact settle later and elsewhere (the twill's Cusick drape coefficient 0.543 -> 0.795, its
-# wall drape at rest after 6.6 s against 2.2 s; a cotton jersey's sphere drape, centre of mass at
-# 2 s, 2.1 mm further from the converged one even at 0.0625 ms steps).
+# on contact get to rest later: the twill's Cusick drape coefficient 0.790 / 0.575 at 2.5 / 10 s
+# against 0.547 / 0.397 with the full drag, both ~0.32 at 40 s (session 54: its membrane has no
+# compressive tangent, and with the drag given back the sheet first shrinks in its plane; design
+# notes §8); a cotton jersey's sphere drape, centre of mass at 2 s, 2.1 mm further from the
+# converged one even at 0.0625 ms steps.
 IMPLICIT_DRAGS = ("full", "critical")
 DEFAULT_IMPLICIT_DRAG = "full"

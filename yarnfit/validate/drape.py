@@ -277,6 +277,7 @@ def drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = Fal
     settled, start = False, time.perf_counter()
     quiet_since = None  # simulated time (s) since which every frame's kinetic energy was below rest
     frames: deque = deque()  # (t, vertex positions) over the last window, for the creep
+    window = REST_WINDOW - 0.5 * dt  # a window's span, to the frames' round-off in t
     creep = math.nan
     step = 0
     for step in range(1, steps + 1):
@@ -290,14 +291,13 @@ def drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = Fal
             if progress and step % (10 * frame_every) == 0:
                 progress(f"{scene} drape: {t:.2f} s simulated")
             frames.append((t, data.flexvert_xpos.copy()))
-            while len(frames) > 1 and t - frames[1][0] >= REST_WINDOW - 0.5 * dt:
+            while len(frames) > 1 and t - frames[1][0] >= window:
                 frames.popleft()  # the oldest kept is the last frame at least a window back
-            if t - frames[0][0] >= REST_WINDOW - 0.5 * dt:
+            if t - frames[0][0] >= window:
                 creep = float(np.linalg.norm(frames[-1][1] - frames[0][1], axis=1).max()) / (t - frames[0][0])
             quiet = t > 0.3 and kinetic / mass < 0.5 * REST_SPEED**2
             quiet_since = (t if quiet_since is None else quiet_since) if quiet else None
-            if (quiet_since is not None and t - quiet_since >= REST_WINDOW - 0.5 * dt
-                    and creep <= REST_CREEP_SPEED):
+            if quiet_since is not None and t - quiet_since >= window and creep <= REST_CREEP_SPEED:
                 settled = True
                 break
     wall_seconds = time.perf_counter() - start
@@ -312,7 +312,7 @@ def drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = Fal
     # frame: what a creep (REST_CREEP_SPEED) does to the figure the scene reports.
     span = frames[-1][0] - frames[0][0]
     rate = ((coefficient(area) - coefficient(projected_area(frames[0][1], triangles))) / span
-            if span >= REST_WINDOW - 0.5 * dt else math.nan)
+            if span >= window else math.nan)
     if scene == "sphere":
         extent = np.ptp(x[:, :2], axis=0)
         figures = {"fold_count": fold_count(x, hem(triangles), SIZE),

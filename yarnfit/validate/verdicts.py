@@ -134,10 +134,10 @@ def verdicts(summary: dict, family: str | None) -> list[Verdict]:
             criterion = f"at rest (creeping below {1e3 * REST_CREEP_SPEED:g} mm/s), no solver warning"
             if scene == "cusick":  # the standard's figures, reported with the check (not judged)
                 rate = drape.get("drape_coefficient_rate_per_s")  # absent before session 54
-                moving = ("" if drape["settled"] or rate is None or not math.isfinite(rate)
-                          else f" (changing {rate:+.2g} a second)")
-                figure = (f"drape coefficient {drape['drape_coefficient']:.3f}{moving}, {drape['fold_count']} nodes; "
-                          f"{figure}")
+                changing = ("" if drape["settled"] or rate is None or not math.isfinite(rate)
+                            else f" (changing {rate:+.2g} a second)")
+                figure = (f"drape coefficient {drape['drape_coefficient']:.3f}{changing}, {drape['fold_count']} "
+                          f"nodes; {figure}")
                 criterion += "; drape coefficient and nodes reported"
             out.append(Verdict(f"{scene} drape settled", settled, figure, criterion))
     if "body" in scenes:
