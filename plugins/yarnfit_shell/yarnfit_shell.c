@@ -66,6 +66,19 @@
 // (its linearisation enters the step's matrix, not the force): yarnfit.mujoco.garment.
 // use_pattern_rest rewrites that part's rest from the pattern, so that it too pulls towards it.
 //
+// Anisotropic implicit share (optional key implicit_share: six numbers c00 c01 c02 c11 c12 c22, the
+// upper triangle of a symmetric positive-definite 3x3 C in Pa per the key thickness, in the
+// material frame's Voigt strain (E00, E11, 2 E01)). MuJoCo 4's <elasticity> is isotropic, so a share
+// stiff enough for a woven's yarns is as stiff in its shear (1e-3 ... 1e-5 of them) and holds its
+// soft modes back (see Returned drag). MuJoCo reads each triangle's built-in membrane from
+// mjModel.flex_stiffness at every step (its 3x3 metric over the triangle's edges, energy (1/4)
+// Delta^T K Delta, Delta_a = l_a^2 - L_a^2), and that metric can hold any such C: K_ab = 2 A h g_a^T C
+// g_b with g_a the Voigt Green strain per unit l_a^2. With the key, init writes that K into the
+// flex's flex_stiffness (the <elasticity> then only sizes the bending share and allocates the
+// metric), the plugin removes MuJoCo's membrane exactly and carries the whole material, and the
+// implicit share follows the material's anisotropy. yarnfit writes C = half the largest tangent the
+// membrane reaches within its strain bound, as it sizes the isotropic share.
+//
 // Returned drag (optional key implicit_drag: "full", the default, or "critical"). Under
 // integrator="discrete" MuJoCo steps (M + h^2 K) a = f - h K v with K the built-in elasticity's
 // stiffness: the isotropic share, stiff enough for the material's stiffest direction, is as stiff
@@ -137,7 +150,7 @@
 static const char* const kAttributes[] = {
   "s00", "s01", "s11", "s22", "b00", "b01", "b11", "b22", "thickness", "angle", "damping",
   "builtin_young", "builtin_poisson", "builtin_thickness", "ridges", "rest", "membrane", "b00_neg", "b11_neg",
-  "implicit_drag",
+  "implicit_drag", "implicit_share",
 };
 enum { kNumAttributes = sizeof(kAttributes) / sizeof(kAttributes[0]) };
 
@@ -169,6 +182,8 @@ typedef struct {
   int nedge;
   // implicit_drag="critical": the share of MuJoCo's step drag -h K v (integrator="discrete") that
   // compute gives back, per triangle in MuJoCo's edge space (see drag_returned):
+  int has_share;                 // implicit_share given: init writes it into MuJoCo's metric
+  double share[9];               // implicit_share's C (Pa, 3x3 row-major, material-frame Voigt)
   int critical_drag;             // 1 with implicit_drag="critical", 0 with "full" (default)
   const int* drag_elemedge;      // (ntri x 3) flex-local edges of each triangle, flex_elemedge order
   double* drag_basis;            // (ntri x 27) K_b^(1/2), K_b^(-1/2) (row-major) and g_0 g_1 g_2
@@ -247,6 +262,50 @@ static int read_choice(const mjModel* m, int instance, const char* key, const ch
     *out = 1;
   } else {
     mju_error(YF_NAME ": config key '%s' must be '%s' or '%s', got '%s'", key, first, second, text);
+    return -1;
+  }
+  return 0;
+}
+
+// The implicit_share key: absent, empty or blank leaves *given 0; else six finite numbers c00 c01
+// c02 c11 c12 c22 forming a positive-definite C (Pa), stored in out (3x3 row-major), *given 1.
+static int read_share(const mjModel* m, int instance, double out[9], int* given) {
+  const char* text = mj_getPluginConfig(m, instance, "implicit_share");
+  double value[6];
+  int n = 0;
+  for (const char* p = text ? text : ""; ; ) {
+    while (*p && isspace((unsigned char)*p)) p++;
+    if (!*p) break;
+    const char* stop = p;
+    while (*stop && !isspace((unsigned char)*stop)) stop++;
+    char* end = NULL;
+    double v = strtod(p, &end);
+    if (end != stop || !isfinite(v)) {
+      mju_error(YF_NAME ": config key 'implicit_share': number %d of 6 (c00 c01 c02 c11 c12 c22) must be a "
+                "finite number, got '%.*s'", n + 1, (int)(stop - p > 40 ? 40 : stop - p), p);
+      return -1;
+    }
+    if (n < 6) value[n] = v;
+    n++;
+    p = stop;
+  }
+  *given = n > 0;
+  if (!n) return 0;
+  if (n != 6) {
+    mju_error(YF_NAME ": config key 'implicit_share' must hold six numbers (c00 c01 c02 c11 c12 c22, the upper "
+              "triangle of a symmetric 3x3 in Pa), got %d", n);
+    return -1;
+  }
+  const int upper[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
+  for (int i = 0; i < 3; i++) {
+    for (int j = 0; j < 3; j++) out[3 * i + j] = value[upper[i][j]];
+  }
+  double eigenvalue[3], vector[9], quat[4];
+  mju_eig3(eigenvalue, vector, quat, out);
+  double least = fmin(eigenvalue[0], fmin(eigenvalue[1], eigenvalue[2]));
+  if (!(least > 0)) {
+    mju_error(YF_NAME ": config key 'implicit_share' must be positive definite (MuJoCo factorises the step's "
+              "matrix with it), got least eigenvalue %g Pa", least);
     return -1;
   }
   return 0;
@@ -371,6 +430,7 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
   if (read_choice(m, instance, "membrane", "triangle", "node", &s->node_membrane) ||
       read_choice(m, instance, "rest", "qpos0", "texcoord", &s->rest_texcoord) ||
       read_choice(m, instance, "implicit_drag", "full", "critical", &s->critical_drag)) return -1;
+  if (read_share(m, instance, s->share, &s->has_share)) return -1;
   if (read_ridges(m, instance, NULL, &s->nridge)) return -1;
   if (s->nridge > 0) {
     double* ridge = malloc(sizeof(double) * YF_RIDGE_NUMBERS * s->nridge);
@@ -438,6 +498,12 @@ static int read_config(const mjModel* m, int instance, Shell* s) {
     mju_error(YF_NAME ": config keys 'builtin_*' are for rest=\"qpos0\" with membrane=\"triangle\"; with "
               "rest=\"texcoord\" or membrane=\"node\" the plugin removes MuJoCo's built-in elasticity exactly, "
               "whatever its parameters, and carries the whole material itself");
+    return -1;
+  }
+  if (s->has_share && (s->builtin_young > 0 || s->builtin_poisson > 0)) {
+    mju_error(YF_NAME ": config keys 'builtin_*' describe an isotropic share the plugin adds to; with "
+              "'implicit_share' the plugin writes MuJoCo's share itself, removes it exactly and carries the "
+              "whole material");
     return -1;
   }
   if (!(s->builtin_poisson >= 0 && s->builtin_poisson < 0.5)) {
@@ -600,6 +666,37 @@ static int collect_builtin_bending(const mjModel* m, Shell* s) {
     int* h = s->builtin_hinge + 4 * s->nbuiltin_hinge;
     h[0] = edge[0]; h[1] = edge[1]; h[2] = flap[0]; h[3] = flap[1];
     s->builtin_edge[s->nbuiltin_hinge++] = e;
+  }
+  return 0;
+}
+
+// implicit_share: write K_ab = 2 A h g_a^T C g_b into each triangle's flex_stiffness block (its
+// edges in flex_elemedge order), so that MuJoCo's implicit membrane is C in the material frame.
+// mjModel is const to a plugin; its arrays are ordinary heap memory, and MuJoCo reads this block at
+// every step (measured: a model whose flex_stiffness was rewritten steps exactly as one compiled
+// with that metric), so init rewrites it for every mjData made from the model (the same values each
+// time, from the same rest).
+static int write_share(const mjModel* m, Shell* s, const int* tri_edge_local) {
+  int f = s->flex;
+  if (m->flex_stiffnessadr[f] < 0) {
+    mju_error(YF_NAME ": config key 'implicit_share' needs flex %d to carry built-in stretch elasticity "
+              "(<elasticity elastic2d=\"stretch\"> or \"both\">): it is the metric the key rewrites", f);
+    return -1;
+  }
+  mjtNum* stiffness = (mjtNum*)(m->flex_stiffness + m->flex_stiffnessadr[f]);
+  for (int t = 0; t < s->ntri; t++) {
+    double G[3][4], g[3][3], Cg[3][3];
+    strain_basis(s->rest_inv + 4 * t, G);
+    for (int a = 0; a < 3; a++) {
+      const double* Ga = G[tri_edge_local[3 * t + a]];
+      g[a][0] = Ga[0]; g[a][1] = Ga[3]; g[a][2] = Ga[1] + Ga[2];
+      mju_mulMatVec3(Cg[a], s->share, g[a]);
+    }
+    for (int a = 0, n = 0; a < 3; a++) {
+      for (int b = a; b < 3; b++, n++) {
+        stiffness[YF_STIFFNESS_STRIDE * t + n] = 2 * s->area[t] * s->thickness * mju_dot3(g[a], Cg[b]);
+      }
+    }
   }
   return 0;
 }
@@ -1179,8 +1276,10 @@ static int shell_init(const mjModel* m, mjData* d, int instance) {
   }
   int status = build_hinges(m, s, rest2d, tri_edge_local);
   // The split shares the membrane with MuJoCo's isotropic triangles only for triangle strains with
-  // the qpos0 rest; otherwise the plugin removes MuJoCo's part exactly and carries all of it.
-  int exact = s->rest_texcoord || s->node_membrane;
+  // the qpos0 rest and no implicit_share; otherwise the plugin removes MuJoCo's part exactly and
+  // carries all of it (with implicit_share, after writing that part).
+  int exact = s->rest_texcoord || s->node_membrane || s->has_share;
+  if (status == 0 && s->has_share) status = write_share(m, s, tri_edge_local);
   if (status == 0 && !exact) status = check_builtin(m, s, tri_edge_local);
   if (status == 0 && exact) status = collect_builtin_membrane(m, s);
   if (status == 0 && s->node_membrane) status = build_domains(m, s);

@@ -36,3 +36,9 @@ DEFAULT_DAMPING = 1e-3  # s
 # converged one even at 0.0625 ms steps.
 IMPLICIT_DRAGS = ("full", "critical")
 DEFAULT_IMPLICIT_DRAG = "full"
+# The implicit share's membrane: "isotropic", MuJoCo's <elasticity> as compiled (stiff enough for
+# the material's stiffest direction in every direction), or "anisotropic", the plugin's
+# implicit_share key (half the material's tangent in each of its modes, written over MuJoCo's metric;
+# split.anisotropic_share, plugins/README.md).
+IMPLICIT_SHARES = ("isotropic", "anisotropic")
+DEFAULT_IMPLICIT_SHARE = "isotropic"

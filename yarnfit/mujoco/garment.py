@@ -34,7 +34,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-__all__ = ["Garment", "Panel", "Seam", "builtin_bending_operator", "builtin_membrane_metric", "sew",
+from .split import isotropic_stiffness
+
+__all__ = ["Garment", "Panel", "Seam", "builtin_bending_operator", "builtin_membrane_metric", "membrane_metric", "sew",
            "use_pattern_rest"]
 
 # Relative disagreement allowed between the two panels' lengths of a seam edge (both cut from the
@@ -173,14 +175,16 @@ def _corner_uv(model: mujoco.MjModel, f: int) -> np.ndarray:
     return uv[corner].reshape(elems, 3, 2)
 
 
-def builtin_membrane_metric(corner_uv: np.ndarray, elem_edge_local: np.ndarray, young: float, poisson: float,
-                            thickness: float) -> np.ndarray:
-    """MuJoCo's per-triangle membrane metric for a flat rest ``corner_uv (T, 3, 2)`` (m): ``(T, 6)``,
-    the upper triangle of ``K_ab = 4 A t (μ tr(G_a G_b) + λ*/2 tr G_a tr G_b)`` over the triangle's
-    edges in ``flex_elemedge`` order (``elem_edge_local (T, 3)``: the local edge, vertices k → k+1,
-    of each slot), ``G_k = ∂E/∂(l_k²)`` the Green strain's derivative by the squared edge length,
-    μ = E/(2(1 + ν)), λ* = Eν/(1 − ν²) (the plane-stress Lamé constant)."""
-    mu, lam = young / (2 * (1 + poisson)), young * poisson / (1 - poisson**2)
+def membrane_metric(corner_uv: np.ndarray, elem_edge_local: np.ndarray, stiffness: np.ndarray,
+                    thickness: float) -> np.ndarray:
+    """The per-triangle membrane metric of MuJoCo's ``flex_stiffness`` for a flat rest ``corner_uv
+    (T, 3, 2)`` (m) and a membrane ``stiffness (3, 3)`` (Pa, Voigt strain ``(E00, E11, 2 E01)`` in
+    the frame of ``corner_uv``) of ``thickness`` (m): ``(T, 6)``, the upper triangle of ``K_ab = 2 A
+    t g_aᵀ C g_b`` over the triangle's edges in ``flex_elemedge`` order (``elem_edge_local (T, 3)``:
+    the local edge, vertices k → k+1, of each slot), ``g_k`` the Voigt Green strain per unit squared
+    length of edge k (``G_k = ∂E/∂(l_k²)``), so that the energy ``¼ Δᵀ K Δ``, ``Δ_a = l_a² − L_a²``,
+    is ``A t ½ εᵀ C ε``. MuJoCo compiles the isotropic one (:func:`builtin_membrane_metric`); the
+    plugin's ``implicit_share`` writes an anisotropic one (plugins/README.md, Split)."""
     D = np.stack([corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]], axis=2)  # columns e1, e2
     Dinv = np.linalg.inv(D)
     area = 0.5 * np.abs(np.linalg.det(D))
@@ -189,13 +193,18 @@ def builtin_membrane_metric(corner_uv: np.ndarray, elem_edge_local: np.ndarray, 
     dC = np.array([[[1, 0.5], [0.5, 0]], [[0, -0.5], [-0.5, 0]], [[0, 0.5], [0.5, 1]]])
     G = 0.5 * np.einsum("tji,kjl,tlm->tkim", Dinv, dC, Dinv)  # (T, 3, 2, 2): ½ D⁻ᵀ dC_k D⁻¹
     G = G[np.arange(len(G))[:, None], elem_edge_local]  # slot order
-    trace = np.einsum("taii->ta", G)
-    metric = []
-    for a in range(3):
-        for b in range(a, 3):
-            inner = np.einsum("tij,tji->t", G[:, a], G[:, b])
-            metric.append(4 * area * thickness * (mu * inner + 0.5 * lam * trace[:, a] * trace[:, b]))
+    g = np.stack([G[..., 0, 0], G[..., 1, 1], G[..., 0, 1] + G[..., 1, 0]], axis=-1)  # (T, 3, 3): g per slot
+    metric = [2 * area * thickness * np.einsum("ti,ij,tj->t", g[:, a], stiffness, g[:, b])
+              for a in range(3) for b in range(a, 3)]
     return np.stack(metric, axis=1)
+
+
+def builtin_membrane_metric(corner_uv: np.ndarray, elem_edge_local: np.ndarray, young: float, poisson: float,
+                            thickness: float) -> np.ndarray:
+    """MuJoCo's compiled membrane metric for a flat rest ``corner_uv (T, 3, 2)`` (m): :func:`membrane_metric`
+    of the isotropic plane-stress membrane (``young`` Pa, ``poisson``), whose ``½ g_aᵀ C g_b`` is
+    MuJoCo's ``μ tr(G_a G_b) + λ*/2 tr G_a tr G_b``, μ = E/(2(1 + ν)), λ* = Eν/(1 − ν²)."""
+    return membrane_metric(corner_uv, elem_edge_local, isotropic_stiffness(young, poisson), thickness)
 
 
 def builtin_bending_operator(diamond: np.ndarray, young: float, poisson: float, thickness: float) -> np.ndarray:

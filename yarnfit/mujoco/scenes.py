@@ -54,10 +54,10 @@ from ..checks import non_negative_number, positive_number
 from ..material_file import MaterialFile
 from ..outputs import write_atomically
 from ..shell import ShellMaterial
-from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION,
-               DEFAULT_SIZE, DEFAULT_TIMESTEP, IMPLICIT_DRAGS, INTEGRATORS, SCENES)
+from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_IMPLICIT_SHARE, DEFAULT_INTEGRATOR,
+               DEFAULT_RESOLUTION, DEFAULT_SIZE, DEFAULT_TIMESTEP, IMPLICIT_DRAGS, IMPLICIT_SHARES, INTEGRATORS, SCENES)
 from .plugin import PLUGIN_NAME
-from .split import DEFAULT_STIFFENING_BOUND, MJCF_DIGITS, builtin_elasticity, isotropic_fallback
+from .split import DEFAULT_STIFFENING_BOUND, MJCF_DIGITS, anisotropic_share, builtin_elasticity, isotropic_fallback
 
 __all__ = [
     "DEFAULT_DAMPING",
@@ -216,6 +216,7 @@ def build_scene(
     stiffening_bound: float = DEFAULT_STIFFENING_BOUND,
     membrane: str = DEFAULT_MEMBRANE,
     implicit_drag: str = DEFAULT_IMPLICIT_DRAG,
+    implicit_share: str = DEFAULT_IMPLICIT_SHARE,
 ) -> BuiltScene:
     """Build one of :data:`SCENES` for ``material`` (see the module docstring).
 
@@ -245,6 +246,10 @@ def build_scene(
         implicit_drag: the plugin's ``implicit_drag``, one of :data:`IMPLICIT_DRAGS`: ``"full"``
             (all of the discrete step's drag through the built-in share) or ``"critical"`` (kept only
             where the material's modes need it to be damped critically; the stretch scene's strips).
+        implicit_share: the implicit part's membrane, one of :data:`IMPLICIT_SHARES`:
+            ``"isotropic"`` (MuJoCo's ``<elasticity>`` as compiled) or ``"anisotropic"`` (the
+            plugin's ``implicit_share``, half the material's tangent in each mode, written over
+            MuJoCo's metric: the soft modes are not held back; plugins/README.md, Split).
 
     Raises:
         ValueError: an unknown scene, integrator or mesh, a non-positive resolution, size, timestep,
@@ -277,7 +282,7 @@ def build_scene(
         layout = _square(spec, scene, resolution, size, friction, mesh == "crisscross")
 
     elasticity = _Elasticity.of(spec, material, fallback, implicit_bending, stiffening_bound, angle, damping,
-                                membrane=membrane, implicit_drag=implicit_drag)
+                                membrane=membrane, implicit_drag=implicit_drag, implicit_share=implicit_share)
     flex = _cloth(spec, layout, material.areal_density_kg_m2, elasticity.plugin)
     elasticity.apply(flex, damping, friction)
     flex.contype = flex.conaffinity = 1 if layout.collide else 0
@@ -692,19 +697,24 @@ class _Elasticity:
     @classmethod
     def of(cls, spec, material: ClothMaterial, fallback: bool, implicit_bending: bool, stiffening_bound: float,
            angle: float, damping: float, name: str = "shell", rest: str = "qpos0",
-           membrane: str = DEFAULT_MEMBRANE, implicit_drag: str = DEFAULT_IMPLICIT_DRAG) -> "_Elasticity":
+           membrane: str = DEFAULT_MEMBRANE, implicit_drag: str = DEFAULT_IMPLICIT_DRAG,
+           implicit_share: str = DEFAULT_IMPLICIT_SHARE) -> "_Elasticity":
         """The split of :func:`~yarnfit.mujoco.split.builtin_elasticity` with its plugin instance
         ``name`` added to ``spec``, or with ``fallback`` the isotropic fallback alone."""
         if membrane not in MEMBRANES:
             raise ValueError(f"unknown membrane {membrane!r}; membranes: {', '.join(MEMBRANES)}")
         if implicit_drag not in IMPLICIT_DRAGS:
             raise ValueError(f"unknown implicit_drag {implicit_drag!r}; choices: {', '.join(IMPLICIT_DRAGS)}")
+        if implicit_share not in IMPLICIT_SHARES:
+            raise ValueError(f"unknown implicit_share {implicit_share!r}; choices: {', '.join(IMPLICIT_SHARES)}")
         if fallback:
             iso = isotropic_fallback(material.shell)
             return cls(iso.young_pa, iso.poisson, iso.thickness_m, "both", None, iso.notes)
         split = builtin_elasticity(material.shell, bending=implicit_bending, stiffening_bound=stiffening_bound)
         plugin = _plugin(spec, material.shell, split, angle, damping, name=name, rest=rest, membrane=membrane,
-                         implicit_drag=implicit_drag)
+                         implicit_drag=implicit_drag,
+                         share=anisotropic_share(material.shell, stiffening_bound) if implicit_share == "anisotropic"
+                         else None)
         return cls(split.young_pa, split.poisson, split.thickness_m, split.elastic2d, plugin, ())
 
     def apply(self, flex: mujoco.MjsFlex, damping: float, friction: float) -> None:
@@ -715,11 +725,13 @@ class _Elasticity:
 
 
 def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damping: float, name: str = "shell",
-            rest: str = "qpos0", membrane: str = DEFAULT_MEMBRANE, implicit_drag: str = DEFAULT_IMPLICIT_DRAG):
+            rest: str = "qpos0", membrane: str = DEFAULT_MEMBRANE, implicit_drag: str = DEFAULT_IMPLICIT_DRAG,
+            share: np.ndarray | None = None):
     """The ``yarnfit.shell`` instance ``name``: the full material, its angle and damping, its rest
     (``"qpos0"`` or ``"texcoord"``), its membrane strains (``"triangle"`` or ``"node"``), its
-    ``implicit_drag`` (written unless ``"full"``, the plugin's default) and, for the qpos0 rest with
-    triangle strains, ``builtin_*`` written exactly as the ``<elasticity>`` attributes are
+    ``implicit_drag`` (written unless ``"full"``, the plugin's default), the anisotropic implicit
+    share ``share (3, 3)`` (Pa) as ``implicit_share`` if given and, for the qpos0 rest with triangle
+    strains and no such share, ``builtin_*`` written exactly as the ``<elasticity>`` attributes are
     (``MJCF_DIGITS`` digits)."""
     spec.activate_plugin(PLUGIN_NAME)
     plugin = spec.add_plugin(name=name, plugin_name=PLUGIN_NAME, active=True)
@@ -731,7 +743,10 @@ def _plugin(spec: mujoco.MjSpec, shell: ShellMaterial, split, angle: float, damp
     config["thickness"] = repr(shell.thickness)
     config["angle"] = repr(float(angle))
     config["damping"] = repr(float(damping))
-    if rest == "qpos0" and membrane == "triangle":
+    if share is not None:  # upper triangle c00 c01 c02 c11 c12 c22, every digit (plugins/README.md, Split)
+        config["implicit_share"] = " ".join(repr(float(share[i, j])) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1),
+                                                                                  (1, 2), (2, 2)))
+    elif rest == "qpos0" and membrane == "triangle":
         for key, value in (("builtin_young", split.young_pa), ("builtin_poisson", split.poisson),
                            ("builtin_thickness", split.thickness_m)):
             config[key] = f"{value:.{MJCF_DIGITS}g}"
@@ -777,7 +792,8 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
                    implicit_bending: bool = True, pinned: np.ndarray | None = None,
                    stiffening_bound: float = DEFAULT_STIFFENING_BOUND,
                    rest_uv: np.ndarray | None = None, fallback: bool = False,
-                   membrane: str = DEFAULT_MEMBRANE, implicit_drag: str = DEFAULT_IMPLICIT_DRAG) -> mujoco.MjsFlex:
+                   membrane: str = DEFAULT_MEMBRANE, implicit_drag: str = DEFAULT_IMPLICIT_DRAG,
+                   implicit_share: str = DEFAULT_IMPLICIT_SHARE) -> mujoco.MjsFlex:
     """One free 2D flex ``name`` with rest positions ``points (n, 3)`` (m) and ``triangles (m, 3)``,
     built as :func:`build_scene` builds its cloth (vertex bodies ``<name>_<v>`` with three slide
     joints, the split's built-in ``<elasticity>`` and a ``yarnfit.shell`` instance
@@ -790,11 +806,11 @@ def add_cloth_flex(spec: mujoco.MjSpec, name: str, points: np.ndarray, triangles
     ``pinned (n,)``, if given, are held on the world at their rest positions (a clamp; the world
     then carries the plugin, as in the ``cloth`` scene). ``fallback``: no plugin, MuJoCo's own
     isotropic elasticity alone with :func:`~yarnfit.mujoco.split.isotropic_fallback`'s material
-    (``elastic2d="both"``), as :func:`build_scene` builds it. ``membrane``, ``implicit_drag``: as
-    for :func:`build_scene`."""
+    (``elastic2d="both"``), as :func:`build_scene` builds it. ``membrane``, ``implicit_drag``,
+    ``implicit_share``: as for :func:`build_scene`."""
     elasticity = _Elasticity.of(spec, material, fallback, implicit_bending, stiffening_bound, angle, damping,
                                 name=f"{name}_shell", rest="qpos0" if rest_uv is None else "texcoord",
-                                membrane=membrane, implicit_drag=implicit_drag)
+                                membrane=membrane, implicit_drag=implicit_drag, implicit_share=implicit_share)
     holders = {} if pinned is None else {"world": np.asarray(pinned, bool)}
     layout = _Layout(np.asarray(points, float), np.asarray(triangles, int), holders, collide=True)
     flex = _cloth(spec, layout, material.areal_density_kg_m2, elasticity.plugin, name=name)

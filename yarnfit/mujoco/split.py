@@ -23,6 +23,11 @@ Two uses, one function each:
   stiffnesses.
 * :func:`builtin_elasticity` — the split rounded to what an MJCF file can hold (``spec.to_xml()``
   writes 6 significant digits), rounded so that ``S_iso ⪰ S/2`` still holds exactly.
+* :func:`anisotropic_share` — the **anisotropic share** the plugin writes over MuJoCo's isotropic
+  membrane metric (its key ``implicit_share``): ``C = S/2`` itself, in the material frame, so that
+  the implicit part is no stiffer than half the material in any mode (its soft modes are no longer
+  held back by a drag sized for its stiffest; plugins/README.md, Split). The ``<elasticity>`` is
+  then :func:`builtin_elasticity`'s as before: it sizes the bending share and allocates the metric.
 
 Nothing here imports ``mujoco``.
 """
@@ -46,6 +51,7 @@ __all__ = [
     "BuiltinElasticity",
     "IsotropicFallback",
     "IsotropicPart",
+    "anisotropic_share",
     "builtin_bending_rigidity",
     "builtin_elasticity",
     "builtin_isotropic",
@@ -82,6 +88,11 @@ MJCF_DIGITS = 6
 POISSON_SCAN = 201
 # Poisson ratio tolerance of the refinement: far below anything the 6-digit file resolves.
 POISSON_XATOL = 1e-10
+# The anisotropic share's least eigenvalue, relative to its largest: half the cover may be singular
+# (a membrane with no tangent in some mode within the bound: a ridge membrane fitted without a base),
+# and MuJoCo factorises the step's matrix with it (the plugin refuses a share that is not positive
+# definite). A mode that stiff adds ~1e-6 of the stiffest mode's drag, nothing a drape sees.
+SHARE_FLOOR = 1e-6
 # A weft/warp ratio or a shear stiffness within 1 % of the fallback's is reported as matched: the
 # fit's own standard errors are rarely below a percent.
 ANISOTROPY_NOTE_RTOL = 0.01
@@ -175,6 +186,27 @@ def builtin_isotropic(material: ShellMaterial, stiffening_bound: float = 0.0) ->
     refined = minimize_scalar(trace, bounds=(low, high), method="bounded", options={"xatol": POISSON_XATOL})
     poisson = float(refined.x) if refined.fun < values[best] else float(grid[best])
     return IsotropicPart(_least_young(half, _unit_stiffness(poisson)), poisson)
+
+
+def anisotropic_share(material: ShellMaterial, stiffening_bound: float = DEFAULT_STIFFENING_BOUND) -> np.ndarray:
+    """``C (3, 3)`` (Pa, at the material's thickness, material-frame Voigt strain): the implicit
+    membrane share the plugin's ``implicit_share`` key writes into MuJoCo's metric, half of
+    :func:`membrane_to_cover`'s tangent (so ``−C ⪯ T − C ⪯ C`` for every tangent ``T`` the membrane
+    reaches within ``±stiffening_bound``, the split's stability condition, in every mode), its
+    eigenvalues floored at :data:`SHARE_FLOOR` of the largest so that it is positive definite.
+
+    Raises:
+        ValueError: the membrane block is not positive definite.
+    """
+    if not material.membrane_positive_definite:
+        material.check_positive_definite()  # raises, naming the entries
+    half = 0.5 * membrane_to_cover(material, stiffening_bound)
+    half = 0.5 * (half + half.T)
+    values, vectors = np.linalg.eigh(half)
+    floor = SHARE_FLOOR * values.max()
+    if values.min() >= floor:
+        return half
+    return (vectors * np.maximum(values, floor)) @ vectors.T
 
 
 def builtin_bending_rigidity(material: ShellMaterial) -> float:
