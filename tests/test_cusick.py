@@ -17,6 +17,7 @@ from yarnfit.mujoco.scenes import disc_mesh
 from yarnfit.validate import SCENES
 from yarnfit.validate.drape import (CUSICK_CELL, CUSICK_DISC_RADIUS, CUSICK_HEIGHT, CUSICK_RADIUS, MAX_SECONDS,
                                     REST_CREEP_SPEED, cusick_drape_coefficient, drape, fold_count, hem)
+from yarnfit.validate import drape as drape_module
 from yarnfit.validate.suite import run_suite
 from yarnfit.validate.verdicts import verdicts
 
@@ -125,23 +126,26 @@ def material_file(folder):
     return path
 
 
-def test_quick_cusick_run_through_the_suite(tmp_path):
+def test_cusick_run_through_the_suite(tmp_path):
     """The test woven (bending length (B/w g)^⅓ ≈ 1.7 cm on a 6 cm overhang) drapes in folds: DC
-    strictly between 0 and 1, at rest without solver warnings; recorded, summarised and judged."""
+    strictly between 0 and 1, at rest without solver warnings; recorded, summarised and judged. At
+    full size (1.25 cm cells, at rest after 8.6 s): on the quick disc's 2.5 cm cells this woven's
+    specimen, lightly damped under the drapes' anisotropic share, still swings at the time limit
+    (its coefficient 0.264 at 15 s, a vertex still moving at 1.2 mm/s; design notes §8)."""
     assert "cusick" in SCENES
-    summary, path = run_suite(material_file(tmp_path), ("cusick",), quick=True, logs=tmp_path / "logs")
+    summary, path = run_suite(material_file(tmp_path), ("cusick",), quick=False, logs=tmp_path / "logs")
     cusick = json.loads(path.read_text())["scenes"]["cusick"]
     assert cusick["settled"] and cusick["bad_qacc"] == 0
     assert abs(cusick["drape_coefficient_rate_per_s"]) < DC_RATE_AT_REST
     assert 0 < cusick["drape_coefficient"] < 1 and cusick["fold_count"] >= 3
-    assert cusick["cell_m"] == CUSICK_CELL[True] and "resolution" not in cusick
+    assert cusick["cell_m"] == CUSICK_CELL[False] and "resolution" not in cusick
     overhang = CUSICK_RADIUS - CUSICK_DISC_RADIUS
     assert CUSICK_HEIGHT - 1.05 * overhang < cusick["lowest_point_m"] < CUSICK_HEIGHT
     folder = path.parent
     paths = {chunk.entity_path for chunk in rr.chunk.RrdReader(folder / "cusick.rrd").stream()}
     assert {"/cusick/cloth", "/cusick/bodies/obstacle", "/cusick/plots/kinetic_energy", "/cusick/summary"} <= paths
     final = trimesh.load(cusick["final_mesh"], process=False)
-    rest, _ = disc_mesh(CUSICK_RADIUS, CUSICK_CELL[True], rings_at=(CUSICK_DISC_RADIUS,))
+    rest, _ = disc_mesh(CUSICK_RADIUS, CUSICK_CELL[False], rings_at=(CUSICK_DISC_RADIUS,))
     assert final.vertices.shape == rest.shape
     clamped = np.hypot(rest[:, 0], rest[:, 1]) <= CUSICK_DISC_RADIUS * (1 + 1e-9)
     np.testing.assert_allclose(final.vertices[clamped, 2], CUSICK_HEIGHT, atol=1e-6)  # the clamp held
@@ -162,12 +166,17 @@ def test_cusick_verdict_is_settled_without_bad_accelerations():
     assert "drape coefficient 0.432 (changing -0.0025 a second), 7 nodes" in creeping.figure
 
 
-def test_a_drape_that_creeps_is_not_at_rest(tmp_path):
+def test_a_drape_that_creeps_is_not_at_rest(tmp_path, monkeypatch):
     """The satin's fitted shell (tests/data/satin_shell.json: shear 0.05 N/m against 3700–5600 N/m
-    of stretch) on the quick Cusick: its kinetic energy falls below the rest speed's within 3 s
-    while the split's implicit share drags its shear, and the specimen goes on sagging at ~1 mm/s.
-    Judged on the kinetic energy alone it was at rest there, its drape coefficient whatever the
-    creep had reached; it is reported still moving, with its creep."""
+    of stretch) on the quick Cusick under the export's split (the isotropic implicit share, node
+    strains, the full drag): its kinetic energy falls below the rest speed's within 3 s while the
+    isotropic share drags its shear, and the specimen goes on sagging at ~1 mm/s. Judged on the
+    kinetic energy alone it was at rest there, its drape coefficient whatever the creep had
+    reached; it is reported still moving, with its creep. (The drapes' own split, the anisotropic
+    share, settles it in 3.5 s.)"""
+    monkeypatch.setattr(drape_module, "MEMBRANE", "node")
+    monkeypatch.setattr(drape_module, "IMPLICIT_SHARE", "isotropic")
+    monkeypatch.setattr(drape_module, "IMPLICIT_DRAG", "full")
     with open(Path(__file__).parent / "data" / "satin_shell.json") as source:
         shell = json.load(source)["shell"]
     path = tmp_path / "satin.json"

@@ -504,3 +504,22 @@ def test_exported_file_says_what_it_needs(scene, fallback, material_file, tmp_pa
     assert ("clamp" in header) == (scene == "stretch")  # flexcomp pins to one body only
     assert f'<frame childclass="{VERTEX_CLASS}">' in text
     assert comment in mujoco.MjSpec.from_file(str(path)).to_xml()
+
+
+def test_cli_export_with_the_anisotropic_share(material_file, tmp_path):
+    """`--implicit-share anisotropic` writes the plugin's implicit_share key; loaded in a fresh
+    interpreter (`import mujoco` alone), the plugin rewrites MuJoCo's membrane metric from it, as
+    build_scene's model has it."""
+    path = tmp_path / "cloth.xml"
+    out = yarnfit("export", str(material_file), "--scene", "cloth", "--resolution", "6", "-o", str(path),
+                  "--implicit-share", "anisotropic", "--check", "0.05")
+    assert out.returncode == 0, out.stderr
+    assert "implicit_share anisotropic" in out.stdout and "stable" in out.stdout
+    assert 'key="implicit_share"' in path.read_text()
+    plain = subprocess.run([sys.executable, "-c", "import sys, mujoco, numpy; m = mujoco.MjModel.from_xml_path(sys.argv[1]); "
+                            "mujoco.MjData(m); numpy.save(sys.argv[2], m.flex_stiffness)", str(path),
+                            str(tmp_path / "metric.npy")], capture_output=True, text=True, timeout=60)
+    assert plain.returncode == 0, plain.stderr
+    built = build_scene(ClothMaterial.from_file(material_file), "cloth", resolution=6, implicit_share="anisotropic")
+    model = built.spec.compile()
+    np.testing.assert_array_equal(np.load(tmp_path / "metric.npy"), model.flex_stiffness)

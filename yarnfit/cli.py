@@ -108,8 +108,9 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--figures", metavar="DIR",
                      help="where the fit's figures (PNG, SVG) and their tables (CSV) go (default: logs/<name>)")
 
-    from .mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_INTEGRATOR,
-                         DEFAULT_RESOLUTION, DEFAULT_SIZE, DEFAULT_TIMESTEP, IMPLICIT_DRAGS, INTEGRATORS, SCENES)
+    from .mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_IMPLICIT_SHARE,
+                         DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE, DEFAULT_TIMESTEP, IMPLICIT_DRAGS,
+                         IMPLICIT_SHARES, INTEGRATORS, SCENES)
     from .validate import SCENES as VALIDATION_SCENES
 
     export = commands.add_parser(
@@ -161,6 +162,12 @@ def build_parser() -> argparse.ArgumentParser:
                              "full (default) or critical (what damps each of the material's modes critically: a "
                              "quasi-static pull such as the stretch strip comes to rest sooner; drapes on contact "
                              "settle later)")
+    export.add_argument("--implicit-share", default=DEFAULT_IMPLICIT_SHARE, choices=IMPLICIT_SHARES,
+                        help="the membrane MuJoCo integrates implicitly: isotropic (default; its <elasticity>, stiff "
+                             "enough for the material's stiffest direction in every direction, which drags the soft "
+                             "modes) or anisotropic (half the material's tangent in each mode, written by the plugin "
+                             "over MuJoCo's metric: a woven's shear is no longer held back, and lightly damped modes "
+                             "swing longer)")
     export.add_argument("--self-collision", action="store_true", help="let the cloth collide with itself (slower)")
     export.add_argument("--check", type=float, metavar="SECONDS",
                         help="then step the scene this long and report stability and ms/step (exit 1 if unstable)")
@@ -560,7 +567,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     built = export_scene(material, args.scene, output, resolution=args.resolution, size=args.size, **strip,
                          timestep=args.timestep, integrator=args.integrator, friction=args.friction,
                          damping=args.damping, angle=math.radians(args.angle), fallback=args.fallback,
-                         self_collision=args.self_collision, implicit_drag=args.implicit_drag)
+                         self_collision=args.self_collision, implicit_drag=args.implicit_drag,
+                         implicit_share=args.implicit_share)
     print(export_summary(built, material, output, args))
     if args.check is not None:
         from .mujoco.run import run_scene
@@ -581,6 +589,9 @@ def export_summary(built, material, output, args) -> str:
              f"{material.areal_density_kg_m2 * 1e3:.4g} g/m², {args.integrator} Δt = {args.timestep:g} s"]
     if built.fallback:
         part = "elastic2d both: stretch and bending"
+    elif args.implicit_share == "anisotropic":
+        part = ("its bending share implicit under discrete; its membrane metric rewritten by the plugin with the "
+                "anisotropic share, half the material's tangent in each mode")
     elif spec.flexes[0].elastic2d == 3:
         part = "elastic2d both: isotropic stretch and bending shares, implicit under discrete"
     else:
@@ -595,7 +606,8 @@ def export_summary(built, material, output, args) -> str:
         bending = (f"its own {kind}bending, the built-in hinge forces removed" if spec.flexes[0].elastic2d == 3
                    else f"all {kind}bending")
         lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, "
-                     f"{bending}), weft at {args.angle:g}° from x, implicit_drag {args.implicit_drag}")
+                     f"{bending}), weft at {args.angle:g}° from x, implicit_drag {args.implicit_drag}, "
+                     f"implicit_share {args.implicit_share}")
     if not built.fallback and material.shell.nonlinear is not None and args.check is None:
         lines.append("  note            the strain-stiffening forces are explicit and can need a step below 1 ms "
                      "(plugins/README.md): check the scene with --check SECONDS, or export --linear")

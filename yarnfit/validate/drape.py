@@ -11,6 +11,11 @@
   world, a thin disc (a cylinder of that radius) lies under the clamped part, and the free annulus
   hangs. Its drape coefficient is the standard's.
 
+Every drape runs the export's time step, integrator, damping and friction with the drapes' split
+(:data:`MEMBRANE`, :data:`IMPLICIT_SHARE`, :data:`IMPLICIT_DRAG`): constant-strain triangles, the
+anisotropic implicit share and the drag of modes without a tangent given back, so that a fabric's
+soft modes are not held back by a share sized for its yarns (docs/design.md §8, "At rest").
+
 A drape is at rest once its kinetic energy per unit mass has stayed below :data:`REST_SPEED`² / 2
 for :data:`REST_WINDOW` (after 0.3 s) and no vertex has moved on by more than
 :data:`REST_CREEP_SPEED` over that window (a creep whose kinetic energy is far below the rest
@@ -77,6 +82,23 @@ SIZE = 0.3  # m: the swatch's side
 # Cotton twill on the sphere: drape coefficient 0.620 on the old 1.5 cm grid, 0.594 here.
 RESOLUTION = {False: 25, True: 13}
 MESH = "crisscross"
+# The split the drapes run (session 55, docs/design.md §8 "At rest"). Membrane strains per triangle:
+# the node-smoothed membrane's hourglass modes (in-plane motions its smoothing does not see, held
+# by nothing) drift under gravity for as long as a drape runs (the cotton twill's quick Cusick with
+# the export's split: still moving 0.5–1.3 mm/s after 60 s, its coefficient falling 0.314 → 0.265
+# from 15 to 60 s; with triangle strains at rest by ~30 s), and criss-cross cells do not lock (design
+# notes §7); the Cusick's unstructured disc does a little, ~8 % on clamped panel strips at its
+# 1.25 cm (plugins/README.md, Membrane strains). The anisotropic implicit share: the isotropic one,
+# stiff enough for the yarns in every direction, dragged a woven's shear (1e-4–1e-5 of its
+# stretch) for tens of seconds; with half the material's own tangent in each mode the twill's
+# Cusick coefficient reads 0.332 at 2.5 s and 0.326 at 15 s, where the export's split read 0.547
+# and 0.375 (both near 0.32 by 40 s). The drag given back ("critical"): with that share it returns
+# only the drag of modes with no tangent (the ridge membrane's compression, which keeps the 2 %
+# floor), which otherwise flow slowly and ring: the same Cusick still creeping at 1.7 mm/s after
+# 15 s with the full drag, 0.23 mm/s with it given back.
+MEMBRANE = "triangle"
+IMPLICIT_SHARE = "anisotropic"
+IMPLICIT_DRAG = "critical"
 # Step and solver. The step stays the export's 1 ms: larger ones drag the soft modes through the
 # implicit share and friction keeps the dragged shape (cotton twill on the sphere, this mesh: drape
 # coefficient 0.594 / 0.607 / 0.623 at 1 / 2 / 4 ms). MuJoCo's CG solver gives the same drape as
@@ -345,11 +367,12 @@ def drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = Fal
 
 
 def _square_spec(material: ClothMaterial, scene: str, resolution: int):
-    """The sphere scene, or the wall drape: the exported ``cloth`` scene and a wall behind it."""
+    """The sphere scene, or the wall drape: the exported ``cloth`` scene and a wall behind it, with the
+    drapes' split (:data:`MEMBRANE`, :data:`IMPLICIT_SHARE`, :data:`IMPLICIT_DRAG`)."""
     import mujoco
 
     built = build_scene(material, "sphere" if scene == "sphere" else "cloth", resolution=resolution, size=SIZE,
-                        mesh=MESH)
+                        mesh=MESH, membrane=MEMBRANE, implicit_share=IMPLICIT_SHARE, implicit_drag=IMPLICIT_DRAG)
     spec = built.spec
     if scene == "wall":
         spec.worldbody.add_geom(name="wall", type=mujoco.mjtGeom.mjGEOM_BOX,
@@ -364,7 +387,8 @@ def cusick_spec(material: ClothMaterial, cell: float):
     """The Cusick scene (module docstring) with the specimen meshed at ``cell`` (m): a floor, the
     supporting disc (geom ``disc``), the specimen (flex ``cloth``, weft along x, the vertices
     within :data:`CUSICK_DISC_RADIUS` pinned) at :data:`CUSICK_HEIGHT`; the export's time step,
-    integrator, damping and friction. Returns the ``mujoco.MjSpec``."""
+    integrator, damping and friction, the drapes' split (:data:`MEMBRANE`, :data:`IMPLICIT_SHARE`,
+    :data:`IMPLICIT_DRAG`). Returns the ``mujoco.MjSpec``."""
     import mujoco
 
     spec = mujoco.MjSpec()
@@ -385,7 +409,7 @@ def cusick_spec(material: ClothMaterial, cell: float):
     # The clamp ring lies exactly at the disc's radius (up to round-off in cos and sin).
     clamped = np.hypot(points[:, 0], points[:, 1]) <= CUSICK_DISC_RADIUS * (1 + 1e-9)
     add_cloth_flex(spec, "cloth", points, triangles, material, damping=DEFAULT_DAMPING, friction=DEFAULT_FRICTION,
-                   pinned=clamped)
+                   pinned=clamped, membrane=MEMBRANE, implicit_share=IMPLICIT_SHARE, implicit_drag=IMPLICIT_DRAG)
     return spec
 
 
