@@ -267,27 +267,39 @@ static int read_choice(const mjModel* m, int instance, const char* key, const ch
   return 0;
 }
 
+// The next whitespace-separated token of *cursor: 0 at the end of the text; else 1, with *cursor
+// moved past it, the token at *token (its first *length characters, at most 40, for a message) and
+// its value in *value, *finite 0 unless it is a finite number.
+static int next_number(const char** cursor, const char** token, int* length, double* value, int* finite) {
+  const char* p = *cursor;
+  while (*p && isspace((unsigned char)*p)) p++;
+  *cursor = p;
+  if (!*p) return 0;
+  const char* stop = p;
+  while (*stop && !isspace((unsigned char)*stop)) stop++;
+  char* end = NULL;
+  *value = strtod(p, &end);
+  *finite = end == stop && isfinite(*value);
+  *token = p;
+  *length = (int)(stop - p > 40 ? 40 : stop - p);
+  *cursor = stop;
+  return 1;
+}
+
 // The implicit_share key: absent, empty or blank leaves *given 0; else six finite numbers c00 c01
 // c02 c11 c12 c22 forming a positive-definite C (Pa), stored in out (3x3 row-major), *given 1.
 static int read_share(const mjModel* m, int instance, double out[9], int* given) {
-  const char* text = mj_getPluginConfig(m, instance, "implicit_share");
-  double value[6];
-  int n = 0;
-  for (const char* p = text ? text : ""; ; ) {
-    while (*p && isspace((unsigned char)*p)) p++;
-    if (!*p) break;
-    const char* stop = p;
-    while (*stop && !isspace((unsigned char)*stop)) stop++;
-    char* end = NULL;
-    double v = strtod(p, &end);
-    if (end != stop || !isfinite(v)) {
+  const char* cursor = mj_getPluginConfig(m, instance, "implicit_share");
+  const char* token;
+  double value[6], v;
+  int n = 0, length, finite;
+  for (cursor = cursor ? cursor : ""; next_number(&cursor, &token, &length, &v, &finite); n++) {
+    if (!finite) {
       mju_error(YF_NAME ": config key 'implicit_share': number %d of 6 (c00 c01 c02 c11 c12 c22) must be a "
-                "finite number, got '%.*s'", n + 1, (int)(stop - p > 40 ? 40 : stop - p), p);
+                "finite number, got '%.*s'", n + 1, length, token);
       return -1;
     }
     if (n < 6) value[n] = v;
-    n++;
-    p = stop;
   }
   *given = n > 0;
   if (!n) return 0;
@@ -317,24 +329,18 @@ static int read_share(const mjModel* m, int instance, double out[9], int* given)
 // number of ridges (0 when the key is absent, empty or blank); else store them in out (count x 5),
 // as validated by an earlier call. The signs of the stiffnesses are check_ridge_tangents' to judge.
 static int read_ridges(const mjModel* m, int instance, double* out, int* count) {
-  const char* text = mj_getPluginConfig(m, instance, "ridges");
-  int n = 0;  // numbers read
-  double ridge[YF_RIDGE_NUMBERS];
-  for (const char* p = text ? text : ""; ; ) {
-    while (*p && isspace((unsigned char)*p)) p++;
-    if (!*p) break;
-    const char* stop = p;
-    while (*stop && !isspace((unsigned char)*stop)) stop++;
-    char* end = NULL;
-    double value = strtod(p, &end);
+  const char* cursor = mj_getPluginConfig(m, instance, "ridges");
+  const char* token;
+  int n = 0, length, finite;  // numbers read
+  double ridge[YF_RIDGE_NUMBERS], value;
+  for (cursor = cursor ? cursor : ""; next_number(&cursor, &token, &length, &value, &finite); ) {
     int j = n / YF_RIDGE_NUMBERS;
-    if (end != stop || !isfinite(value)) {
+    if (!finite) {
       mju_error(YF_NAME ": config key 'ridges': ridge %d: number %d of 5 (n0 n1 n2 t c) must be a finite number, "
-                "got '%.*s'", j, n % YF_RIDGE_NUMBERS + 1, (int)(stop - p > 40 ? 40 : stop - p), p);
+                "got '%.*s'", j, n % YF_RIDGE_NUMBERS + 1, length, token);
       return -1;
     }
     ridge[n % YF_RIDGE_NUMBERS] = value;
-    p = stop;
     if (++n % YF_RIDGE_NUMBERS) continue;
     if (out) {
       memcpy(out + YF_RIDGE_NUMBERS * j, ridge, sizeof(ridge));
