@@ -568,9 +568,11 @@ def bench_drape_stable_step() -> None:
     built-in part covering half of S, constant-strain triangles), with the built-in part also
     bending and covering the stiffening up to split.DEFAULT_STIFFENING_BOUND ("triangle"), now (that,
     with node-smoothed membrane strains), and now with the soft modes' drag given back
-    ("critical_drag": the plugin's implicit_drag="critical", not the export's default), with ms per
-    step and per simulated second at that step and the centre of mass's height at the end (a step
-    that drags the drape shows as a higher cloth). Long: hours at 0.5 cm."""
+    ("critical_drag": the plugin's implicit_drag="critical", not the export's default), and with the
+    anisotropic implicit share (the plugin's implicit_share, half the material's tangent in each
+    mode: "anisotropic" with node strains, "anisotropic_triangle" with constant-strain triangles),
+    with ms per step and per simulated second at that step and the centre of mass's height at the
+    end (a step that drags the drape shows as a higher cloth). Long: hours at 0.5 cm."""
     import tempfile
     import warnings
     from pathlib import Path
@@ -580,7 +582,9 @@ def bench_drape_stable_step() -> None:
     from yarnfit.mujoco.scenes import ClothMaterial
 
     variants = {"before": {"implicit_bending": False, "stiffening_bound": 0.0, "membrane": "triangle"},
-                "triangle": {"membrane": "triangle"}, "now": {}, "critical_drag": {"implicit_drag": "critical"}}
+                "triangle": {"membrane": "triangle"}, "now": {}, "critical_drag": {"implicit_drag": "critical"},
+                "anisotropic": {"implicit_share": "anisotropic"},
+                "anisotropic_triangle": {"implicit_share": "anisotropic", "membrane": "triangle"}}
     for name in PRESETS:
         with warnings.catch_warnings(), tempfile.TemporaryDirectory() as folder:
             warnings.simplefilter("ignore")
