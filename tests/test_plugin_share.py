@@ -171,6 +171,8 @@ def test_build_scene_writes_the_share_and_no_builtin_keys():
         built.spec.compile()
     with pytest.raises(ValueError, match="unknown implicit_share 'diagonal'"):
         build_scene(material, "cloth", implicit_share="diagonal")
+    with pytest.raises(ValueError, match="the fallback has none"):
+        build_scene(material, "cloth", implicit_share="anisotropic", fallback=True)
 
 
 BAD = {

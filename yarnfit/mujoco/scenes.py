@@ -20,7 +20,9 @@ integrated implicitly under the ``discrete`` integrator, which keeps the step st
 whole material, its membrane on node-smoothed strains (no locking on any triangulation). With
 ``membrane="triangle"`` it keeps constant-strain triangles and, with ``builtin_*`` keys repeating
 the ``<elasticity>``, adds only the orthotropic membrane remainder (and all the bending; plugins/
-README.md). With ``fallback=True`` the scene has no plugin: MuJoCo's
+README.md). With ``implicit_share="anisotropic"`` the plugin also writes MuJoCo's implicit
+membrane as half the material's own tangent in each mode (its key ``implicit_share``, removed
+exactly like the node membrane's share). With ``fallback=True`` the scene has no plugin: MuJoCo's
 ``elastic2d="both"`` with :func:`~yarnfit.mujoco.split.isotropic_fallback`. One damping time
 (s) goes to both parts, so the total damping is that time times the full material's stiffness.
 
@@ -707,6 +709,8 @@ class _Elasticity:
             raise ValueError(f"unknown implicit_drag {implicit_drag!r}; choices: {', '.join(IMPLICIT_DRAGS)}")
         if implicit_share not in IMPLICIT_SHARES:
             raise ValueError(f"unknown implicit_share {implicit_share!r}; choices: {', '.join(IMPLICIT_SHARES)}")
+        if fallback and implicit_share != "isotropic":
+            raise ValueError(f"implicit_share {implicit_share!r} is written by the plugin, and the fallback has none")
         if fallback:
             iso = isotropic_fallback(material.shell)
             return cls(iso.young_pa, iso.poisson, iso.thickness_m, "both", None, iso.notes)

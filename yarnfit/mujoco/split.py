@@ -24,9 +24,10 @@ Two uses, one function each:
 * :func:`builtin_elasticity` — the split rounded to what an MJCF file can hold (``spec.to_xml()``
   writes 6 significant digits), rounded so that ``S_iso ⪰ S/2`` still holds exactly.
 * :func:`anisotropic_share` — the **anisotropic share** the plugin writes over MuJoCo's isotropic
-  membrane metric (its key ``implicit_share``): ``C = S/2`` itself, in the material frame, so that
-  the implicit part is no stiffer than half the material in any mode (its soft modes are no longer
-  held back by a drag sized for its stiffest; plugins/README.md, Split). The ``<elasticity>`` is
+  membrane metric (its key ``implicit_share``): half the tangent the isotropic share covers
+  (:func:`membrane_to_cover`: ``S``, or the ridge membrane's largest within the strain bound) itself,
+  in the material frame, so that the implicit part is no stiffer than that in any mode (the soft
+  modes are no longer held back by a drag sized for the stiffest; plugins/README.md, Split). The ``<elasticity>`` is
   then :func:`builtin_elasticity`'s as before: it sizes the bending share and allocates the metric.
 
 Nothing here imports ``mujoco``.
