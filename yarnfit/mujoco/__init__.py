@@ -33,7 +33,8 @@ DEFAULT_DAMPING = 1e-3  # s
 # against 0.547 / 0.397 with the full drag, both ~0.32 at 40 s (session 54: its membrane has no
 # compressive tangent, and with the drag given back the sheet first shrinks in its plane; design
 # notes §8); a cotton jersey's sphere drape, centre of mass at 2 s, 2.1 mm further from the
-# converged one even at 0.0625 ms steps.
+# converged one even at 0.0625 ms steps. (Under the anisotropic share, IMPLICIT_SHARES, it returns
+# only the drag of modes without a tangent; the drapes run it so: validate.drape, session 55.)
 IMPLICIT_DRAGS = ("full", "critical")
 DEFAULT_IMPLICIT_DRAG = "full"
 # The implicit share's membrane: "isotropic", MuJoCo's <elasticity> as compiled (stiff enough for
