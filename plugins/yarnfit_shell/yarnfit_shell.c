@@ -594,9 +594,33 @@ static void strain_basis(const double Dinv[4], double G[3][4]) {
   }
 }
 
-// Check the builtin_* keys against the flex's compiled built-in membrane stiffness. MuJoCo stores,
-// per triangle, K_ab = 4 A t (mu tr(G_a G_b) + lambda*/2 tr G_a tr G_b) for its edges a, b in
-// flex_elemedge order (upper triangle), lambda* = E nu / (1 - nu^2) the plane-stress Lame constant,
+// One triangle's Voigt Green strain per unit squared length of each of its edges, in flex_elemedge
+// order: g (3 x 3, row a = (E00, E11, 2 E01) per unit l_a^2 of slot a), from its inverse rest edge
+// matrix Dinv and slot_local, the local edge (vertices k, k+1) of each slot.
+static void slot_strains(const double Dinv[4], const int slot_local[3], double g[9]) {
+  double G[3][4];
+  strain_basis(Dinv, G);
+  for (int a = 0; a < 3; a++) {
+    const double* Ga = G[slot_local[a]];
+    g[3 * a] = Ga[0]; g[3 * a + 1] = Ga[3]; g[3 * a + 2] = Ga[1] + Ga[2];
+  }
+}
+
+// One triangle's membrane metric in MuJoCo's edge space (flex_stiffness, the energy (1/4) Delta^T K
+// Delta) for a membrane C (3x3 row-major, Pa, material-frame Voigt strain) over its rest area times
+// thickness: the upper triangle (6) of K_ab = 2 A h g_a^T C g_b, g from slot_strains. MuJoCo compiles
+// its isotropic <elasticity> as this with C = S_iso (2 g_a^T S_iso g_b = 4 (mu tr(G_a G_b) + lambda*/2
+// tr G_a tr G_b)); implicit_share writes it with the key's C.
+static void membrane_metric(const double g[9], const double C[9], double area_thickness, double out[6]) {
+  double Cg[9];
+  for (int a = 0; a < 3; a++) mju_mulMatVec3(Cg + 3 * a, C, g + 3 * a);
+  for (int a = 0, n = 0; a < 3; a++) {
+    for (int b = a; b < 3; b++, n++) out[n] = 2 * area_thickness * mju_dot3(g + 3 * a, Cg + 3 * b);
+  }
+}
+
+// Check the builtin_* keys against the flex's compiled built-in membrane stiffness (membrane_metric
+// of the isotropic plane-stress S_iso, lambda* = E nu / (1 - nu^2) the plane-stress Lame constant),
 static int check_builtin(const mjModel* m, const Shell* s, const int* tri_edge_local) {
   int f = s->flex;
   double E = s->builtin_young, nu = s->builtin_poisson, t = s->builtin_thickness;
@@ -609,22 +633,14 @@ static int check_builtin(const mjModel* m, const Shell* s, const int* tri_edge_l
     return 0;
   }
   double mu = E / (2 * (1 + nu)), lambda = E * nu / (1 - nu * nu);
+  const double isotropic[9] = {lambda + 2 * mu, lambda, 0, lambda, lambda + 2 * mu, 0, 0, 0, mu};
   const mjtNum* stiffness = m->flex_stiffness + m->flex_stiffnessadr[f];
   for (int tri = 0; tri < s->ntri; tri++) {
-    double G[3][4], expected[6], largest = 0, worst = 0;
-    strain_basis(s->rest_inv + 4 * tri, G);
-    int n = 0;
-    for (int a = 0; a < 3; a++) {
-      for (int b = a; b < 3; b++) {
-        const double* Ga = G[tri_edge_local[3 * tri + a]];
-        const double* Gb = G[tri_edge_local[3 * tri + b]];
-        double trace_ab = Ga[0] * Gb[0] + Ga[1] * Gb[2] + Ga[2] * Gb[1] + Ga[3] * Gb[3];
-        double value = 4 * s->area[tri] * t * (mu * trace_ab + 0.5 * lambda * (Ga[0] + Ga[3]) * (Gb[0] + Gb[3]));
-        expected[n++] = value;
-        largest = fmax(largest, fabs(value));
-      }
-    }
+    double g[9], expected[6], largest = 0, worst = 0;
+    slot_strains(s->rest_inv + 4 * tri, tri_edge_local + 3 * tri, g);
+    membrane_metric(g, isotropic, s->area[tri] * t, expected);
     for (int k = 0; k < 6; k++) {
+      largest = fmax(largest, fabs(expected[k]));
       double compiled = stiffness[YF_STIFFNESS_STRIDE * tri + k];
       largest = fmax(largest, fabs(compiled));
       worst = fmax(worst, fabs(compiled - expected[k]));
@@ -691,18 +707,9 @@ static int write_share(const mjModel* m, Shell* s, const int* tri_edge_local) {
   }
   mjtNum* stiffness = (mjtNum*)(m->flex_stiffness + m->flex_stiffnessadr[f]);
   for (int t = 0; t < s->ntri; t++) {
-    double G[3][4], g[3][3], Cg[3][3];
-    strain_basis(s->rest_inv + 4 * t, G);
-    for (int a = 0; a < 3; a++) {
-      const double* Ga = G[tri_edge_local[3 * t + a]];
-      g[a][0] = Ga[0]; g[a][1] = Ga[3]; g[a][2] = Ga[1] + Ga[2];
-      mju_mulMatVec3(Cg[a], s->share, g[a]);
-    }
-    for (int a = 0, n = 0; a < 3; a++) {
-      for (int b = a; b < 3; b++, n++) {
-        stiffness[YF_STIFFNESS_STRIDE * t + n] = 2 * s->area[t] * s->thickness * mju_dot3(g[a], Cg[b]);
-      }
-    }
+    double g[9];
+    slot_strains(s->rest_inv + 4 * t, tri_edge_local + 3 * t, g);
+    membrane_metric(g, s->share, s->area[t] * s->thickness, stiffness + YF_STIFFNESS_STRIDE * t);
   }
   return 0;
 }
@@ -1100,14 +1107,9 @@ static int build_drag_return(const mjModel* m, Shell* s, const int* tri_edge_loc
   const mjtNum* stiffness = m->flex_stiffness + m->flex_stiffnessadr[f];
   const double rest[3] = {0, 0, 0};
   for (int t = 0; t < s->ntri; t++) {
-    double G[3][4], Kb[9];
+    double Kb[9];
     double* root = s->drag_basis + 27 * t;
-    double* g = root + 18;
-    strain_basis(s->rest_inv + 4 * t, G);
-    for (int a = 0; a < 3; a++) {
-      const double* Ga = G[tri_edge_local[3 * t + a]];
-      g[3 * a] = Ga[0]; g[3 * a + 1] = Ga[3]; g[3 * a + 2] = Ga[1] + Ga[2];  // (E00, E11, 2 E01) per unit l_a^2
-    }
+    slot_strains(s->rest_inv + 4 * t, tri_edge_local + 3 * t, root + 18);  // (E00, E11, 2 E01) per unit l_a^2
     for (int a = 0, n = 0; a < 3; a++) {
       for (int b = a; b < 3; b++, n++) Kb[3 * a + b] = Kb[3 * b + a] = stiffness[YF_STIFFNESS_STRIDE * t + n];
     }

@@ -9,7 +9,7 @@ MuJoCo's 2D flexes have one elastic law of their own: isotropic plane-stress StV
 (``λ* + 2μ = E/(1 − ν²)``, ``λ* = Eν/(1 − ν²)``, ``μ = E/(2(1 + ν))``), and its bending stores
 ``D κ²/2`` per area for a cylindrical bend, ``D = E h³/(12(1 − ν²))``.
 
-Two uses, one function each:
+What it gives, one function each:
 
 * :func:`builtin_isotropic` — the **split**. The ``yarnfit.shell`` plugin's forces are explicit
   under every integrator, MuJoCo's own elasticity is implicit under ``discrete``. One degree of
@@ -25,10 +25,11 @@ Two uses, one function each:
   writes 6 significant digits), rounded so that ``S_iso ⪰ S/2`` still holds exactly.
 * :func:`anisotropic_share` — the **anisotropic share** the plugin writes over MuJoCo's isotropic
   membrane metric (its key ``implicit_share``): half the tangent the isotropic share covers
-  (:func:`membrane_to_cover`: ``S``, or the ridge membrane's largest within the strain bound) itself,
-  in the material frame, so that the implicit part is no stiffer than that in any mode (the soft
-  modes are no longer held back by a drag sized for the stiffest; plugins/README.md, Split). The ``<elasticity>`` is
-  then :func:`builtin_elasticity`'s as before: it sizes the bending share and allocates the metric.
+  (:func:`membrane_to_cover`: ``S``, or the ridge membrane's largest within the strain bound)
+  itself, in the material frame, so that the implicit part is no stiffer than that in any mode (the
+  soft modes are no longer held back by a drag sized for the stiffest; plugins/README.md, Split).
+  The ``<elasticity>`` is then :func:`builtin_elasticity`'s as before: it sizes the bending share
+  and allocates the metric.
 
 Nothing here imports ``mujoco``.
 """
@@ -201,8 +202,7 @@ def anisotropic_share(material: ShellMaterial, stiffening_bound: float = DEFAULT
     """
     if not material.membrane_positive_definite:
         material.check_positive_definite()  # raises, naming the entries
-    half = 0.5 * membrane_to_cover(material, stiffening_bound)
-    half = 0.5 * (half + half.T)
+    half = 0.5 * membrane_to_cover(material, stiffening_bound)  # symmetric: S, or sums of outer products
     values, vectors = np.linalg.eigh(half)
     floor = SHARE_FLOOR * values.max()
     if values.min() >= floor:
