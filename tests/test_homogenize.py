@@ -52,6 +52,7 @@ from yarnfit.fibers import Fiber, get_fiber
 from yarnfit.patterns import YarnPattern
 from yarnfit.relax import relax, relax_pattern
 from yarnfit.samples import (
+    COMPRESSION_LIMIT,
     FAMILIES,
     OTHER_BIAS_FAMILIES,
     Family,
@@ -248,10 +249,11 @@ def test_images_on_a_cylinder_are_rotations_about_its_axis():
         np.testing.assert_allclose(b[:, 1], a[:, 1], atol=1e-15)
 
 
-def test_the_design_samples_every_family_in_tension_and_compression_only_on_request():
+def test_the_design_samples_every_family_in_tension_and_the_stretches_in_compression():
     ranges = SampleRanges(stretch=0.2, curvature=100.0)
+    assert ranges.compression == COMPRESSION_LIMIT  # the stretch range, but at most 10 %
     design = sample_design(ranges, 3)
-    assert len(design) == design_size(3) == 2 + 3 * 13 + 3 * 9  # and weft, warp, bias pulls at nine strains
+    assert len(design) == design_size(3) == 2 + 3 * 16 + 3 * 9  # and weft, warp, bias pulls at nine strains
     assert {s.family for s in design} == set(FAMILIES) - set(OTHER_BIAS_FAMILIES)
     # First the undeformed sample, the energy reference of the membrane samples, then the unbent
     # bending sample (solved at zero membrane force), the bends' reference.
@@ -262,7 +264,16 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
     # Magnitudes spaced logarithmically from SMALLEST_STRAIN (SMALLEST_CURVATURE) to the range.
     strains = np.geomspace(SMALLEST_STRAIN, 0.2, 3)
     curvatures = np.geomspace(SMALLEST_CURVATURE, 100.0, 3)
-    assert [s.parameter for s in design[1:] if s.family == "weft_stretch"] == pytest.approx(strains)
+    # The stretches pressed too, at as many levels from SMALLEST_STRAIN to the compression range.
+    pressed = np.geomspace(SMALLEST_STRAIN, COMPRESSION_LIMIT, 3)
+    for family in ("weft_stretch", "warp_stretch", "biaxial_stretch"):
+        assert [s.parameter for s in design[1:] if s.family == family] == pytest.approx(
+            np.concatenate([-pressed[::-1], strains])), family
+    assert [s.compressed for s in design[1:] if s.family == "biaxial_stretch"] == [True] * 3 + [False] * 3
+    assert not any(s.compressed for s in design if s.family not in ("weft_stretch", "warp_stretch",
+                                                                      "biaxial_stretch"))
+    biaxial = [s for s in design if s.family == "biaxial_stretch"][0]
+    assert np.allclose(biaxial.I, (1.0 - COMPRESSION_LIMIT) ** 2 * np.eye(2))
     # Uniaxial tension log-spaced from SMALLEST_STRAIN to UNIAXIAL_LARGEST_STRAIN (10 %) at
     # UNIAXIAL_LEVELS strains, and once more within each of the largest two intervals (their
     # geometric means, 3.2 and 6.8 %); each starts from the pure stretch.
@@ -295,15 +306,20 @@ def test_the_design_samples_every_family_in_tension_and_compression_only_on_requ
             np.concatenate([-values[::-1], values])), family
     squeezed = sample_design(SampleRanges(stretch=0.2, curvature=100.0, compression=0.25), 2)
     weft = [s for s in squeezed[1:] if s.family == "weft_stretch"]
-    assert [s.parameter for s in weft] == pytest.approx([-0.05, SMALLEST_STRAIN, 0.2])
-    assert np.allclose(weft[0].I, np.diag([0.95**2, 1.0]))
+    assert [s.parameter for s in weft] == pytest.approx([-0.25, -SMALLEST_STRAIN, SMALLEST_STRAIN, 0.2])
+    assert np.allclose(weft[0].I, np.diag([0.75**2, 1.0]))
+    assert SampleRanges(stretch=0.05, curvature=1.0).compression == 0.05  # a range below the limit
+    # Compression 0: tension only, three samples fewer per level.
+    unpressed = sample_design(SampleRanges(stretch=0.2, curvature=100.0, compression=0.0), 3)
+    assert len(unpressed) == len(design) - 9 and not any(s.compressed for s in unpressed)
     # A range at or below the smallest magnitude is sampled at fractions of itself.
     assert magnitudes(5e-4, SMALLEST_STRAIN, 2) == pytest.approx([2.5e-4, 5e-4])
-    with pytest.raises(ValueError, match="compression"):
-        SampleRanges(stretch=0.2, curvature=100.0, compression=-0.1)
+    for bad in (-0.1, 1.0, math.nan):
+        with pytest.raises(ValueError, match="compression"):
+            SampleRanges(stretch=0.2, curvature=100.0, compression=bad)
     with pytest.raises(ValueError, match=f"at least {design_size(1)}"):
         levels_for(25)
-    assert [levels_for(n) for n in (42, 55, 68, 81)] == [1, 2, 3, 4]  # 2 + 13 levels + 27 pulls
+    assert [levels_for(n) for n in (45, 61, 77, 93)] == [1, 2, 3, 4]  # 2 + 16 levels + 27 pulls
     assert levels_for(DEFAULT_SAMPLES) == DEFAULT_LEVELS
 
 

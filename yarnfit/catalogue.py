@@ -62,7 +62,7 @@ NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 # R² of a family says something only over a spread of magnitudes: with two samples (±κ of a bend,
 # equal energies) its total variance is ~0 and R² reads −1e19 for a fit within 1 % (measured on a
 # 16-sample plain weave). The table's minimum R² counts families of at least this many samples
-# (the default 81-sample design has 3 to 9 per family); the worst family is ranked by relative RMS.
+# (the default 93-sample design has 4 to 9 per family); the worst family is ranked by relative RMS.
 R2_MIN_SAMPLES = 4
 ENGINEERING_KEYS = ("weft_stretch_n_per_m", "warp_stretch_n_per_m", "poisson_weft", "poisson_warp", "shear_n_per_m",
                     "bending_weft_nm", "bending_warp_nm", "bending_bias_nm")

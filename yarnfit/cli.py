@@ -90,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("preset", nargs="?", help="a built-in fabric (see `yarnfit materials`)")
     add_fabric_arguments(fit)
     fit.add_argument("--samples", type=int, default=None, metavar="N",
-                     help="about how many deformation samples (at least 42; default 81; a woven, pulled "
+                     help="about how many deformation samples (at least 45; default 93; a woven, pulled "
                           "along both biases, 9 more)")
     fit.add_argument("--model", choices=("full", "paper"), default="full",
                      help="full: fit b01 too (default); paper: b01 = 0, the paper's 7 parameters")
@@ -188,7 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
     catalogue.add_argument("labels", metavar="LABELS.csv", help="the labels table")
     catalogue.add_argument("-o", "--output", required=True, metavar="DIR", help="where the results go")
     catalogue.add_argument("--samples", type=int, default=None, metavar="N",
-                           help="about how many deformation samples per fabric (at least 42; default 81; a "
+                           help="about how many deformation samples per fabric (at least 45; default 93; a "
                                 "woven, pulled along both biases, 9 more)")
     catalogue.add_argument("--model", choices=("full", "paper"), default="full", help="as for `yarnfit fit`")
     add_sample_friction_arguments(catalogue)
@@ -654,7 +654,9 @@ def fit_summary(fitted, output, recording_path) -> str:
             ("weft_bend", "warp_bend", "bias_bend", "saddle_bend") if fit.bending == "signed" else ())
         linear_quality = ", ".join(f"{family} {q['r2']:.3f}" for family, q in fit.linear_families.items()
                                    if family.startswith(shown))
-        lines.append(f"  linear R²       {linear_quality}")
+        # The linear membrane is fitted to tension alone (even in the strain's sign, fit.fit_shell).
+        over = " (membrane: over tension)" if fit.membrane == "nonlinear" else ""
+        lines.append(f"  linear R²       {linear_quality}{over}")
     if fit.membrane == "nonlinear":
         lines.append(f"  stiffening      {_stiffening_summary(fit)}")
     lines.append(f"  pulled          {_pull_summary(fitted.material)}")

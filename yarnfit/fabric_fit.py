@@ -26,10 +26,11 @@ from .samples import SampleRanges, SampleResult, SampleSpec, design_size, levels
 from .shell import ShellMaterial
 from .tasks import Backend
 
-# Four magnitudes per family and sign, from 0.1 % (1 /m) to the range, free-width pulls along weft,
-# warp and the bias at nine strains from 0.1 to 10 % (samples.uniaxial_strains), and the
-# undeformed sample (81 in all; a woven, pulled along both biases, 90): each stretch and shear curve
-# from four points and each free-width pull from nine, at about a second per small-strain sample.
+# Four magnitudes per family and sign, from 0.1 % (1 /m) to the range (the stretches pressed too,
+# to 10 % at most), free-width pulls along weft, warp and the bias at nine strains from 0.1 to 10 %
+# (samples.uniaxial_strains), and the undeformed sample (93 in all; a woven, pulled along both
+# biases, 102): each stretch and shear curve from four points a side and each free-width pull from
+# nine, at about a second per small-strain sample.
 DEFAULT_LEVELS = 4
 DEFAULT_SAMPLES = design_size(DEFAULT_LEVELS)
 
@@ -156,9 +157,9 @@ def design_specs(relaxed: RelaxedRepeat, samples: int = DEFAULT_SAMPLES,
 def design_groups(samples: int = DEFAULT_SAMPLES, friction: bool = False,
                   both_biases: bool = False) -> list[tuple[int, ...]]:
     """:func:`~yarnfit.homogenize.sample_groups` of the design of about ``samples`` samples, known
-    before the repeat is relaxed (a catalogue's task graph): default ranges (no in-plane
-    compression) change the design's magnitudes from one fabric to the next, never which family and
-    sign each sample is, which is all the groups depend on (so any ranges give them).
+    before the repeat is relaxed (a catalogue's task graph): default ranges (compression sampled)
+    change the design's magnitudes from one fabric to the next, never which family and sign each
+    sample is, which is all the groups depend on (so any ranges give them).
     :func:`solve_design_group` checks them against the relaxed repeat's own design."""
     return sample_groups(sample_design(SampleRanges(stretch=0.1, curvature=10.0), levels_for(samples), both_biases),
                          friction)

@@ -141,7 +141,8 @@ class Family(StrEnum):
                     _stretched(0))
     WARP_STRETCH = ("warp_stretch", Group.MEMBRANE, "λ − 1", "", "s11", None, False, _TENSION_AND_COMPRESSION,
                     _stretched(1))
-    BIAXIAL_STRETCH = ("biaxial_stretch", Group.MEMBRANE, "λ − 1", "", "s01", None, False, _TENSION, _stretched(None))
+    BIAXIAL_STRETCH = ("biaxial_stretch", Group.MEMBRANE, "λ − 1", "", "s01", None, False, _TENSION_AND_COMPRESSION,
+                       _stretched(None))
     SHEAR = ("shear", Group.MEMBRANE, "I12", "", "s22", None, False, _BOTH_SIGNS, _sheared)
     # The free strains are found by the solve; the deformation is where its search starts.
     WEFT_UNIAXIAL = ("weft_uniaxial", Group.MEMBRANE, "λ − 1", "", None, 0.0, True, _UNIAXIAL_TENSION, _stretched(0))
@@ -243,6 +244,11 @@ class SampleSpec:
     @property
     def is_membrane(self) -> bool:
         return self.family.group is Group.MEMBRANE
+
+    @property
+    def compressed(self) -> bool:
+        """An in-plane compression sample: weft, warp or biaxial stretch at λ < 1."""
+        return self.family.layout == _TENSION_AND_COMPRESSION and self.parameter < 0.0
 
 
 # A stretch share may exceed 1 by round-off when bending and twist hold nothing (a straight yarn).
@@ -446,11 +452,11 @@ def _free_membrane_strain(value: object, number: Callable[[object, str], float])
 
 # The design's energy references: the undeformed sample, and the unbent one at zero membrane force.
 REFERENCE_SAMPLES = 2
-# Samples per level of the design: weft, warp and biaxial stretch (tension), shear of both signs,
-# four bend families of both signs; plus weft, warp and bias uniaxial tension at UNIAXIAL_LEVELS strains
+# Samples per level of the default design: weft, warp and biaxial stretch in tension and in
+# compression, shear of both signs, four bend families of both signs; plus weft, warp and bias uniaxial tension at UNIAXIAL_LEVELS strains
 # each and between the largest (uniaxial_strains), and with both biases the other bias's
 # (−45°) too.
-SAMPLES_PER_LEVEL = 13
+SAMPLES_PER_LEVEL = 16
 # Uniaxial tension (the transverse direction free) per direction: log-spaced from SMALLEST_STRAIN
 # to the range or UNIAXIAL_LARGEST_STRAIN, whichever is less. The strain-stiffening membrane follows
 # a free-width pull only where one is sampled: a knit's pull jams across its width between 2 and
@@ -503,32 +509,45 @@ SMALLEST_STRAIN = 1.0e-3
 # Smallest sampled curvature (1/m): a draping fabric's folds have radii of 1 cm – 1 m; a metre's
 # radius is where a drape's gentlest curvature lies.
 SMALLEST_CURVATURE = 1.0
+# Largest in-plane compression (1 − λ) a default design samples (SampleRanges.compression). The
+# drapes' compressed regions reach −2 to −5 % in their plane before they fold (the cotton twill's
+# Cusick specimen, docs/design.md §8), and a repeat pressed further jams (HYLC's stockinette at
+# 10 %: three times its tensile stiffness), where its solves cost more (wool jersey frictionless:
+# 0.1 s a sample to 5 %, 0.3 s at 20 %); past the largest sample the membrane's last tangent
+# carries on.
+COMPRESSION_LIMIT = 0.10
 
 
 @dataclass(frozen=True)
 class SampleRanges:
     """Largest sampled deformations: ``stretch`` (λ − 1 along a yarn direction, and ``I12`` for
-    shear), ``curvature`` (1/m) and ``compression``, the in-plane compression sampled along weft and
-    warp as a fraction of ``stretch`` (0, the default: none).
+    shear), ``curvature`` (1/m) and ``compression`` (1 − λ), the in-plane compression sampled along
+    weft, along warp and along both at once, at as many levels as tension (``None``, the default:
+    ``stretch``, but no more than :data:`COMPRESSION_LIMIT`; 0: none).
 
-    In-plane compression is off by default because a flat repeat cannot show what a fabric does
-    under it: real cloth buckles out of plane at once, while the flat-constrained repeat either goes
-    slack (single jersey: Ū = 0 to round-off at 2.5 % along the wales) or jams (HYLC stockinette:
-    three times its tensile stiffness at 10 %). Fitted together with tension, a quadratic shell
-    takes the average and the knits' membrane blocks came out indefinite.
+    Why compression is sampled (session 56): the shell is the repeat's material law, and the
+    repeat's own compression (its yarns pressed together, bowing within a repeat) is part of it;
+    buckling over many repeats is the cloth's, which the simulated sheet does itself. Left out, the
+    strain-stiffening membrane extrapolated compression from the free-width pulls' transverse
+    strains: wool jersey's weft at −1 % 2.2× the energy its compression samples give, the cotton
+    twill's biaxial −1 % 1/30 of it (a sheet that shrinks in its plane for free and flows instead
+    of folding; docs/design.md §8). The linear StVK membrane, even in the strain's sign, is fitted
+    to tension only (:attr:`SampleSpec.compressed`): fitted with both it took their average.
     """
 
     stretch: float
     curvature: float
-    compression: float = 0.0
+    compression: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("stretch", "curvature"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"sample range {name} must be positive, got {value!r}")
+        if self.compression is None:
+            object.__setattr__(self, "compression", min(float(self.stretch), COMPRESSION_LIMIT))
         if not (math.isfinite(self.compression) and 0.0 <= self.compression < 1.0):
-            raise ValueError(f"sample range compression must be a fraction of the stretch range in [0, 1), "
+            raise ValueError(f"sample range compression must be a strain 1 − λ in [0, 1) (0: none), "
                              f"got {self.compression!r}")
 
 
@@ -542,9 +561,9 @@ def sample_design(ranges: SampleRanges, levels: int = 2, both_biases: bool = Fal
     of its 0.1 % samples). The second is the unbent repeat at zero membrane force
     (:func:`free_rest_sample`), the reference of the bends, which are solved so.
 
-    - weft, warp stretch: ``I = diag(λ², 1)`` / ``diag(1, λ²)``, λ − 1 at the stretch magnitudes,
-      and one compression at ``ranges.compression`` of the range if that is not 0; biaxial
-      ``I = λ² Id``, all in tension;
+    - weft, warp, biaxial stretch: ``I = diag(λ², 1)`` / ``diag(1, λ²)`` / ``λ² Id``, λ − 1 at the
+      stretch magnitudes and 1 − λ at as many compression magnitudes, from :data:`SMALLEST_STRAIN`
+      to ``ranges.compression`` (none if that is 0);
     - shear: ``I = [[1, s], [s, 1]]``, ``s = ±`` the stretch magnitudes;
     - weft, warp uniaxial tension: λ − 1 at :func:`uniaxial_strains`, the other direction free
       (its stretch μ minimises Ū; the spec holds μ = 1, the result the μ found);
@@ -563,9 +582,10 @@ def sample_design(ranges: SampleRanges, levels: int = 2, both_biases: bool = Fal
     for group, largest, smallest in ((Group.MEMBRANE, ranges.stretch, SMALLEST_STRAIN),
                                      (Group.BENDING, ranges.curvature, SMALLEST_CURVATURE)):
         values = magnitudes(largest, smallest, levels)
+        compressions = (magnitudes(ranges.compression, smallest, levels)
+                        if group is Group.MEMBRANE and ranges.compression > 0 else np.empty(0))
         layouts = {
-            _TENSION_AND_COMPRESSION: np.concatenate(
-                [[-ranges.compression * largest] if ranges.compression > 0 else [], values]),
+            _TENSION_AND_COMPRESSION: np.concatenate([-compressions[::-1], values]),
             _TENSION: values,
             _BOTH_SIGNS: np.concatenate([-values[::-1], values]),
             _UNIAXIAL_TENSION: uniaxial_strains(largest),
@@ -599,7 +619,7 @@ def uniaxial_strains(largest: float) -> np.ndarray:
 
 def design_size(levels: int, both_biases: bool = False) -> int:
     """Samples in a design of ``levels`` magnitudes per family and sign (``both_biases``: with
-    the uniaxial pulls along −45°, :func:`sample_design`)."""
+    the uniaxial pulls along −45°, :func:`sample_design`), compression sampled (the default)."""
     other = len(OTHER_BIAS_FAMILIES) * UNIAXIAL_STRAINS_PER_DIRECTION if both_biases else 0
     return REFERENCE_SAMPLES + SAMPLES_PER_LEVEL * levels + UNIAXIAL_SAMPLES + other
 

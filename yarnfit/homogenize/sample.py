@@ -50,7 +50,8 @@ MAX_TURN_PER_REPEAT = 0.25
 def default_ranges(relaxed: RelaxedRepeat) -> SampleRanges:
     """What the fibre can bear: stretch up to its breaking strain, curvature up to the one that
     strains a yarn's surface fibres to breaking (``ε_max / r``), and no more than
-    MAX_TURN_PER_REPEAT across one repeat."""
+    MAX_TURN_PER_REPEAT across one repeat; compression as :class:`~yarnfit.samples.SampleRanges`
+    defaults it (the stretch range, at most ``samples.COMPRESSION_LIMIT``)."""
     strain = relaxed.fiber.breaking_strain
     curvature = min(strain / relaxed.radius, MAX_TURN_PER_REPEAT / float(max(relaxed.repeat_size)))
     return SampleRanges(stretch=strain, curvature=curvature)
