@@ -609,10 +609,11 @@ def fit_shell(
     # and fitted to both the cotton twill's s22 went to its floor (its −45° pulls, 4-18 times its
     # +45° ones, asked more of the normal strains than the samples hold, session 47). It keeps the
     # design's first bias, as before the other was sampled; the stiffening membrane takes both.
-    # Nor can it be stiffer one way than the other: a knit's weft is several times stiffer pressed
-    # than pulled, a woven's biaxial compression ~1e-3 of its tension, and fitted to both it took
-    # their average (wool jersey's s00 29.3e6 → 12.2e6 Pa). It is the small-strain tangent in
-    # tension; the stiffening membrane takes the compression samples (samples.SampleRanges).
+    # Nor can it be stiffer one way than the other: at 0.1 % a woven's biaxial compression stores
+    # ~1/50 of its tension's energy, a knit's weft from 1/100 (cotton jersey) to 15 times (wool
+    # jersey) its tension's, and fitted to both the linear model took a compromise (wool jersey's
+    # s00 29.3e6 → 12.2e6 Pa). It is the small-strain tangent in tension; the stiffening membrane
+    # takes the compression samples (samples.SampleRanges).
     linear_rows = np.array([s.family not in OTHER_BIAS_FAMILIES and not s.spec.compressed for s in used], dtype=bool)
     reference_energy = float(np.mean(target[undeformed & membrane_rows])) if np.any(undeformed & membrane_rows) else 0.0
     bending_reference_energy = (float(np.mean(target[undeformed & ~membrane_rows]))

@@ -69,7 +69,6 @@ class Group(StrEnum):
 
 # How a family's parameters are laid out in the design (see :func:`sample_design`).
 _TENSION_AND_COMPRESSION = "tension and compression"
-_TENSION = "tension"
 _BOTH_SIGNS = "both signs"
 _UNIAXIAL_TENSION = "tension up to UNIAXIAL_LARGEST_STRAIN"
 
@@ -453,9 +452,9 @@ def _free_membrane_strain(value: object, number: Callable[[object, str], float])
 # The design's energy references: the undeformed sample, and the unbent one at zero membrane force.
 REFERENCE_SAMPLES = 2
 # Samples per level of the default design: weft, warp and biaxial stretch in tension and in
-# compression, shear of both signs, four bend families of both signs; plus weft, warp and bias uniaxial tension at UNIAXIAL_LEVELS strains
-# each and between the largest (uniaxial_strains), and with both biases the other bias's
-# (−45°) too.
+# compression, shear of both signs, four bend families of both signs; plus weft, warp and bias
+# uniaxial tension at UNIAXIAL_LEVELS strains each and between the largest (uniaxial_strains), and
+# with both biases the other bias's (−45°) too.
 SAMPLES_PER_LEVEL = 16
 # Uniaxial tension (the transverse direction free) per direction: log-spaced from SMALLEST_STRAIN
 # to the range or UNIAXIAL_LARGEST_STRAIN, whichever is less. The strain-stiffening membrane follows
@@ -532,7 +531,7 @@ class SampleRanges:
     strains: wool jersey's weft at −1 % 2.2× the energy its compression samples give, the cotton
     twill's biaxial −1 % 1/30 of it (a sheet that shrinks in its plane for free and flows instead
     of folding; docs/design.md §8). The linear StVK membrane, even in the strain's sign, is fitted
-    to tension only (:attr:`SampleSpec.compressed`): fitted with both it took their average.
+    to tension only (:attr:`SampleSpec.compressed`): fitted to both it took a compromise.
     """
 
     stretch: float
@@ -586,7 +585,6 @@ def sample_design(ranges: SampleRanges, levels: int = 2, both_biases: bool = Fal
                         if group is Group.MEMBRANE and ranges.compression > 0 else np.empty(0))
         layouts = {
             _TENSION_AND_COMPRESSION: np.concatenate([-compressions[::-1], values]),
-            _TENSION: values,
             _BOTH_SIGNS: np.concatenate([-values[::-1], values]),
             _UNIAXIAL_TENSION: uniaxial_strains(largest),
         }
