@@ -1016,10 +1016,10 @@ static double drag_returned_share(double r) {
 }
 
 // Whether ridge r counts in the tangent the returned drag is built for at strain eps (3, Voigt):
-// engaged there, or engaged from zero strain (knot 0). A knot-0 ridge carries the small-strain
-// stiffness on its side only; counted on the other side too, a direction whose every ridge starts
-// at 0 on the far side keeps its drag rather than none (with none, a mode with no tangent at all
-// would drift undamped: a cotton jersey's 2 x 5 bias strip never came to rest at 0.2 %).
+// engaged there, n . eps > t (a knot-0 ridge on its own side only, as the force has it). A mode
+// with no ridge engaged and no base has no tangent: all but YF_LEAST_DRAG of its drag comes back,
+// and that floor is what keeps it from drifting undamped (a cotton jersey's 2 x 5 bias strip never
+// came to rest at 0.2 % without it).
 static int drag_counts_ridge(const double* r, const double eps[3]) {
   return mju_dot3(r, eps) - r[3] > 0;
 }
