@@ -17,9 +17,11 @@ import pytest
 import scipy.optimize
 
 from yarnfit.engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticSolver
+from yarnfit.engine.contact import TilingReachError
 from yarnfit.engine.energy import internal_forces
 from yarnfit.engine.model import aligned_frames
 from yarnfit.homogenize import equilibrium as equilibrium_module
+from yarnfit.homogenize import loading as loading_module
 from yarnfit.homogenize import uniaxial as uniaxial_module
 from yarnfit.engine.tiling import transform_images, yarn_strips
 from yarnfit.fabric import Fabric
@@ -878,6 +880,30 @@ def test_knits_are_loaded_with_friction_and_shear_evenly_unless_told_and_wovens_
     assert samples_both_biases(Fabric.preset("cotton-twill")) and samples_both_biases(plain())
     assert not samples_both_biases(Fabric.preset("cotton-jersey")) and not samples_both_biases(stockinette)
     assert len(fitted().samples) == design_size(1, both_biases=True)
+
+
+def test_a_loading_path_that_leaves_its_tiles_ends_with_its_samples_unsolved(monkeypatch):
+    # A jam's yarns pushed past one another under compression carry a solve beyond the tiles mapped
+    # (the cotton jersey pattern in another fibre, validate.paper's check c): the path ends there, that sample and the larger ones
+    # unsolved (not converged, energy NaN), the smaller ones as they were: not an error that stops
+    # the whole fit. Here every solve past -1.75 % weft leaves its tiles.
+    relaxed = fitted().relaxed
+    solve = loading_module._solve_from
+
+    def leaving(relaxed, form, *args, **kwargs):
+        if form[0, 0] < (1.0 - 0.0175) ** 2:
+            raise TilingReachError("the solve left the tiles mapped (test)")
+        return solve(relaxed, form, *args, **kwargs)
+
+    monkeypatch.setattr(loading_module, "_solve_from", leaving)
+    with pytest.warns(ConvergenceWarning, match="did not converge"):
+        samples = loading_path_samples(relaxed, Family.WEFT_STRETCH, [-0.01, -0.02, -0.03], 0.26)
+    assert [s.spec.parameter for s in samples] == [-0.01, -0.02, -0.03]
+    assert samples[0].converged and math.isfinite(samples[0].energy_density)
+    assert all(not s.converged and math.isnan(s.energy_density) for s in samples[1:])
+    assert samples[1].spec.compressed and np.allclose(samples[1].spec.I, np.diag([0.98**2, 1.0]))
+    alone, = loading_path_samples(relaxed, Family.WEFT_STRETCH, [-0.01], 0.26)
+    assert alone.energy_density == samples[0].energy_density
 
 
 def test_loading_samples_refuse_bad_input():

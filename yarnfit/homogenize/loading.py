@@ -35,6 +35,7 @@ from typing import Sequence
 import numpy as np
 
 from ..engine import ConvergenceWarning, QuasiStaticOptions
+from ..engine.contact import TilingReachError
 from ..engine.lagged import FRICTION_STRAIN_STEP
 from ..relax import RelaxedRepeat
 from ..samples import OTHER_BIAS_FAMILIES, Family, Group, SampleResult, SampleSpec, stretch_share
@@ -124,13 +125,26 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
 
         def solve_pass(anchors, anchor_form, warm, contacts, guess, probe, form=form) -> _Pass:
             mapped = anchors.transformed(_form_map(form, anchor_form))
-            tiled, result = _solve_from(relaxed, form, flat, options, (warm.result.state, warm.form), friction=mapped,
-                                        contacts=contacts)
+            try:
+                tiled, result = _solve_from(relaxed, form, flat, options, (warm.result.state, warm.form),
+                                            friction=mapped, contacts=contacts)
+            except TilingReachError:
+                return _Pass(_Trial(0.0, form, None, None, mapped, None), 0, "failed")
             return _Pass(_Trial(0.0, form, tiled, result, mapped, None), result.iterations,
                          "minimum" if result.converged else "failed")
 
         step = _frictional_step(solve_pass, state, coefficient, 0.0, 0.0)
         trial, result = step.trial, step.trial.result
+        if result is None:
+            # Its solves left the tiles mapped (a jam's yarns pushed past one another under
+            # compression: the cotton jersey pattern's in one of validate.paper's other fibres):
+            # the path ends, this sample and every larger one unsolved, not the whole fit.
+            reached = grid.index(magnitude)
+            samples += [SampleResult.unsolved(SampleSpec(family, family.deformation(sign * m)[0], flat, sign * m),
+                                              step.iterations if m == magnitude else 0,
+                                              time.perf_counter() - clock if m == magnitude else 0.0)
+                        for m in grid[reached:]]
+            break
         dissipated += trial.anchors.energy_gradient(result.state.node_position)[0] / trial.tiled.area
         state = trial
         samples.append(SampleResult(
