@@ -884,9 +884,9 @@ def test_knits_are_loaded_with_friction_and_shear_evenly_unless_told_and_wovens_
 
 def test_a_loading_path_that_leaves_its_tiles_ends_with_its_samples_unsolved(monkeypatch):
     # A jam's yarns pushed past one another under compression carry a solve beyond the tiles mapped
-    # (the cotton jersey pattern in another fibre, validate.paper's check c): the path ends there, that sample and the larger ones
-    # unsolved (not converged, energy NaN), the smaller ones as they were: not an error that stops
-    # the whole fit. Here every solve past -1.75 % weft leaves its tiles.
+    # (the cotton jersey pattern in another fibre, validate.paper's check c): the path ends there,
+    # that sample and the larger ones unsolved (not converged, energy NaN), the smaller ones as they
+    # were: not an error that stops the whole fit. Here every solve past -1.75 % weft leaves its tiles.
     relaxed = fitted().relaxed
     solve = loading_module._solve_from
 

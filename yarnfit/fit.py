@@ -614,7 +614,8 @@ def fit_shell(
     # jersey) its tension's, and fitted to both the linear model took a compromise (wool jersey's
     # s00 29.3e6 → 12.2e6 Pa). It is the small-strain tangent in tension; the stiffening membrane
     # takes the compression samples (samples.SampleRanges).
-    linear_rows = np.array([s.family not in OTHER_BIAS_FAMILIES and not s.spec.compressed for s in used], dtype=bool)
+    pulled = np.array([not s.spec.compressed for s in used], dtype=bool)
+    linear_rows = np.array([s.family not in OTHER_BIAS_FAMILIES for s in used], dtype=bool) & pulled
     reference_energy = float(np.mean(target[undeformed & membrane_rows])) if np.any(undeformed & membrane_rows) else 0.0
     bending_reference_energy = (float(np.mean(target[undeformed & ~membrane_rows]))
                                 if np.any(undeformed & ~membrane_rows) else None)
@@ -778,8 +779,7 @@ def fit_shell(
 
     # Over the samples the linear model was fitted to: it is even in the strain's sign, and the
     # compression samples' misfit is the stiffening membrane's to take.
-    linear_families = _family_statistics(used, predicted(linear, rest_stress), target,
-                                         np.array([not s.spec.compressed for s in used], dtype=bool))
+    linear_families = _family_statistics(used, predicted(linear, rest_stress), target, pulled)
     if unused_signed is not None:
         tried = _family_statistics(used, predicted(ShellMaterial(h, **parameters, signed_bending=unused_signed),
                                                    rest_stress), target)

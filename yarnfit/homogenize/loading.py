@@ -119,7 +119,7 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
     flat = np.zeros((2, 2))
     state = _rest(relaxed, options)
     dissipated, samples = 0.0, []
-    for magnitude in grid:
+    for reached, magnitude in enumerate(grid):
         clock = time.perf_counter()
         form = family.deformation(sign * magnitude)[0]
 
@@ -139,11 +139,9 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
             # Its solves left the tiles mapped (a jam's yarns pushed past one another under
             # compression: the cotton jersey pattern's in one of validate.paper's other fibres):
             # the path ends, this sample and every larger one unsolved, not the whole fit.
-            reached = grid.index(magnitude)
-            samples += [SampleResult.unsolved(SampleSpec(family, family.deformation(sign * m)[0], flat, sign * m),
-                                              step.iterations if m == magnitude else 0,
-                                              time.perf_counter() - clock if m == magnitude else 0.0)
-                        for m in grid[reached:]]
+            samples.append(SampleResult.unsolved(SampleSpec(family, form, flat, sign * magnitude), step.iterations,
+                                                 time.perf_counter() - clock))
+            samples += [SampleResult.unsolved(SampleSpec.at(family, sign * m), 0, 0.0) for m in grid[reached + 1:]]
             break
         dissipated += trial.anchors.energy_gradient(result.state.node_position)[0] / trial.tiled.area
         state = trial
