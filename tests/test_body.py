@@ -122,5 +122,5 @@ def test_humanoid_is_human_sized():
 
 def test_an_unknown_solver_is_refused():
     material = ClothMaterial("woven", FABRIC, 0.2)
-    with pytest.raises(ValueError, match="unknown solver 'pgs'; solvers: cg, newton"):
+    with pytest.raises(ValueError, match="unknown solver 'pgs'; solvers: newton, cg"):
         build_body_scene(material, material, solver="pgs")

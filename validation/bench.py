@@ -274,8 +274,9 @@ def _without_plugin(spec):
 
 def bench_mujoco() -> None:
     """A 40×40 cloth as ``yarnfit export --scene cloth`` and ``--scene sphere`` write it (their
-    integrator and Δt), with the plugin and without it (the same scene, plugin removed), and the
-    plugin's own compute at the same states: mj_passive with the plugin minus without it."""
+    integrator, Δt and solver), with the plugin and without it (the same scene, plugin removed), the
+    plugin's own compute at the same states (mj_passive with the plugin minus without it), and the
+    scene with the plugin under the other constraint solver."""
     from pathlib import Path
 
     import mujoco
@@ -317,11 +318,22 @@ def bench_mujoco() -> None:
         plugin_ms = passive_ms["with"] - passive_ms["without"]
         key = f"mujoco_{scene}_40x40"
         integrator = mujoco.mjtIntegrator(models["with"].opt.integrator).name.removeprefix("mjINT_").lower()
-        info = f"{models['with'].opt.timestep:g} s step, {integrator}"
+        solver = mujoco.mjtSolver(models["with"].opt.solver).name.removeprefix("mjSOL_")
+        info = f"{models['with'].opt.timestep:g} s step, {integrator}, {solver}"
         report(f"{key}_ms_per_step_with_plugin", ms_per_step["with"], f"ms ({info})")
         report(f"{key}_ms_per_step_without_plugin", ms_per_step["without"], "ms")
         report(f"{key}_plugin_compute_ms", plugin_ms, "ms per step")
         report(f"{key}_plugin_compute_fraction", plugin_ms / ms_per_step["without"], "of the step without it")
+        # The other solver on the same scene, in the same run (the scenes' DEFAULT_SOLVER: CG where
+        # the cloth touches something).
+        other = "newton" if solver == "CG" else "cg"
+        model = build_scene(material, scene, resolution=40, solver=other).spec.compile()
+        data = mujoco.MjData(model)
+        mujoco.mj_step(model, data, nstep=10)
+        start = time.perf_counter()
+        mujoco.mj_step(model, data, nstep=steps)
+        other_ms = 1e3 * (time.perf_counter() - start) / steps
+        report(f"{key}_ms_per_step_with_plugin_{other}", other_ms, f"ms ({other_ms / ms_per_step['with']:.2f}× the default's)")
 
 
 # -- plugin_nonlinear_stable_step -----------------------------------------------------------------

@@ -16,6 +16,20 @@ INTEGRATORS = ("discrete", "euler", "rk4")
 # Measured (README, "Export to MuJoCo"): discrete keeps the built-in part implicit in position.
 DEFAULT_INTEGRATOR = "discrete"
 DEFAULT_TIMESTEP = 1e-3  # s
+# MuJoCo's constraint solvers a scene may ask for, by MJCF name, lower case, and each scene's own.
+# CG where the cloth touches something: Newton factorises the implicit flex metric's Hessian every
+# iteration, CG does not. Measured (session 57, cotton twill, one run each, the export's defaults):
+# the sphere scene 37.2 ms a step with Newton against 18.7 with CG, its centre of mass after 0.5 s
+# 0.2323 against 0.2328 m; the hanging cloth (no contacts) 10.9 against 11.2 ms; the drapes'
+# sphere 0.5945 against 0.5944 in drape coefficient (validate.drape, session 49). `bench.py mujoco`
+# (the test woven, 40 x 40, both solvers in one run): sphere 79.6 ms with Newton, 20.1 with CG;
+# hanging 11.1 against 12.3 (Newton ~10 % faster without contacts, CG kept there for a cloth that
+# meets something: a wall, a gripper, itself). Newton for the
+# FAB strip: there CG took 3.2 times as long (the twill's 8 x 5 weft strip pulled to 10 %: 34.3
+# against 10.7 s, the same forces to 3e-5 N/m) and MuJoCo warned that the clamped strip's flex
+# stiffness was too ill-conditioned for CG's effective-metric preconditioner.
+SOLVERS = ("newton", "cg")
+DEFAULT_SOLVER = {"cloth": "cg", "stretch": "newton", "sphere": "cg", "wall": "cg"}
 # Vertices per side (stretch: along the strip). 40 resolves a 0.5 m cloth at 12.8 mm; the strip's
 # 25 × 16 grid resolves the 8 × 5 cm FAB strip at 3.3 mm, where its uniform part is exact for
 # linear triangles anyway.

@@ -57,7 +57,8 @@ from ..material_file import MaterialFile
 from ..outputs import write_atomically
 from ..shell import ShellMaterial
 from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_IMPLICIT_SHARE, DEFAULT_INTEGRATOR,
-               DEFAULT_RESOLUTION, DEFAULT_SIZE, DEFAULT_TIMESTEP, IMPLICIT_DRAGS, IMPLICIT_SHARES, INTEGRATORS, SCENES)
+               DEFAULT_RESOLUTION, DEFAULT_SIZE, DEFAULT_SOLVER, DEFAULT_TIMESTEP, IMPLICIT_DRAGS, IMPLICIT_SHARES,
+               INTEGRATORS, SCENES, SOLVERS)
 from .plugin import PLUGIN_NAME
 from .split import DEFAULT_STIFFENING_BOUND, MJCF_DIGITS, anisotropic_share, builtin_elasticity, isotropic_fallback
 
@@ -68,10 +69,12 @@ __all__ = [
     "DEFAULT_INTEGRATOR",
     "DEFAULT_RESOLUTION",
     "DEFAULT_SIZE",
+    "DEFAULT_SOLVER",
     "DEFAULT_TIMESTEP",
     "IMPLICIT_DRAGS",
     "INTEGRATORS",
     "SCENES",
+    "SOLVERS",
     "BuiltScene",
     "ClothMaterial",
     "add_cloth_flex",
@@ -85,6 +88,8 @@ DEFAULT_MAX_STRAIN = 0.1  # the pull actuator's range: 10 % engineering strain
 # MJCF integrator names (``yarnfit.mujoco.INTEGRATORS``) to MuJoCo's enum.
 INTEGRATOR_ENUM = {"discrete": mujoco.mjtIntegrator.mjINT_DISCRETE, "euler": mujoco.mjtIntegrator.mjINT_EULER,
                    "rk4": mujoco.mjtIntegrator.mjINT_RK4}
+# MJCF solver names (``yarnfit.mujoco.SOLVERS``) to MuJoCo's enum.
+SOLVER_ENUM = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG}
 # Collision radius of the flex (m): a few cloth thicknesses, small against the grid spacing
 # (12.8 mm at the defaults) so the cloth does not float visibly above what it lies on.
 FLEX_RADIUS = 2e-3
@@ -206,6 +211,7 @@ def build_scene(
     size: float | None = None,
     timestep: float = DEFAULT_TIMESTEP,
     integrator: str = DEFAULT_INTEGRATOR,
+    solver: str | None = None,
     friction: float = DEFAULT_FRICTION,
     damping: float = DEFAULT_DAMPING,
     angle: float = 0.0,
@@ -228,6 +234,9 @@ def build_scene(
         size: side length (m) (stretch: strip length); default :data:`DEFAULT_SIZE`.
         timestep: Δt (s).
         integrator: one of :data:`INTEGRATORS` (case-insensitive).
+        solver: MuJoCo's constraint solver, one of :data:`SOLVERS` (case-insensitive); default
+            the scene's :data:`DEFAULT_SOLVER` (CG where the cloth touches something, Newton for
+            the strip).
         friction: sliding friction of cloth and obstacles.
         damping: stiffness-proportional damping time (s) of the built-in part and the plugin.
         angle: weft direction (rad) from world x, about z (the plugin's ``angle``).
@@ -254,7 +263,7 @@ def build_scene(
             MuJoCo's metric: the soft modes are not held back; plugins/README.md, Split).
 
     Raises:
-        ValueError: an unknown scene, integrator or mesh, a non-positive resolution, size, timestep,
+        ValueError: an unknown scene, integrator, solver or mesh, a non-positive resolution, size, timestep,
             width or max_strain, a negative friction or damping.
     """
     if scene not in SCENES:
@@ -272,11 +281,15 @@ def build_scene(
     key = integrator.lower()
     if key not in INTEGRATOR_ENUM:
         raise ValueError(f"unknown integrator {integrator!r}; integrators: {', '.join(INTEGRATORS)}")
+    solver_key = DEFAULT_SOLVER[scene] if solver is None else str(solver).lower()
+    if solver_key not in SOLVER_ENUM:
+        raise ValueError(f"unknown solver {solver!r}; solvers: {', '.join(SOLVERS)}")
 
     spec = mujoco.MjSpec()
     spec.modelname = f"yarnfit {scene}: {material.name}" + (" (isotropic fallback)" if fallback else "")
     spec.option.timestep = timestep
     spec.option.integrator = INTEGRATOR_ENUM[key]
+    spec.option.solver = SOLVER_ENUM[solver_key]
     spec.worldbody.add_light(pos=[0, 0, 3 * size + 1], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     if scene == "stretch":
         layout = _strip(spec, material.shell, resolution, size, width, max_strain, mesh == "crisscross")

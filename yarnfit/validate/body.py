@@ -64,7 +64,7 @@ import trimesh
 from ..engine.rotations import quaternion_between, xyzw
 from ..mujoco import DEFAULT_DAMPING, DEFAULT_FRICTION
 from ..mujoco.garment import Garment, Panel, Seam, sew, use_pattern_rest
-from ..mujoco.scenes import ClothMaterial, add_cloth_flex, compile_quietly
+from ..mujoco.scenes import SOLVER_ENUM, ClothMaterial, add_cloth_flex, compile_quietly
 from ..record import Recording, folded_panels, markdown_table
 from . import OPTIONAL, SceneResult
 
@@ -81,7 +81,6 @@ QUICK_SPACING = 0.07  # m (quick run)
 # jersey): Newton 26 ms per 1 ms step, 32 ms per 4 ms step; CG 14 ms per 4 ms step, its constraint
 # stage 6 ms against Newton's 24 (the Hessian of the implicit flex metric).
 BODY_TIMESTEP = 4e-3
-SOLVERS = {"cg": mujoco.mjtSolver.mjSOL_CG, "newton": mujoco.mjtSolver.mjSOL_NEWTON}
 BODY_SOLVER = "cg"
 # MuJoCo's solver tolerance (its default 1e-8). Measured on the full scene, cotton twill: CG ran 67
 # iterations a step on average (its cap of 100 often), the constraint stage 11 of 23 ms; at 1e-6 and
@@ -235,12 +234,12 @@ def build_body_scene(material_shirt: ClothMaterial, material_pants: ClothMateria
     waistband on the pelvis where it starts. Returns the spec and, per
     garment, its :class:`~yarnfit.mujoco.garment.Garment`, vertex, triangle and seam-vertex
     counts. Compile it with :func:`compile_body_scene`."""
-    if solver not in SOLVERS:
-        raise ValueError(f"unknown solver {solver!r}; solvers: {', '.join(SOLVERS)}")
+    if solver not in SOLVER_ENUM:
+        raise ValueError(f"unknown solver {solver!r}; solvers: {', '.join(SOLVER_ENUM)}")
     spec = mujoco.MjSpec.from_file(str(HUMANOID))
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
-    spec.option.solver = SOLVERS[solver]
+    spec.option.solver = SOLVER_ENUM[solver]
     spec.option.tolerance = tolerance
     spec.worldbody.add_light(pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     garments = {}

@@ -67,9 +67,9 @@ import rerun as rr
 import rerun.blueprint as rrb
 from scipy.signal import find_peaks
 
-from ..mujoco import DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_TIMESTEP
-from ..mujoco.scenes import (FLEX_RADIUS, INTEGRATOR_ENUM, ClothMaterial, add_cloth_flex, build_scene,
-                             compile_quietly, disc_mesh)
+from ..mujoco import DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_SOLVER, DEFAULT_TIMESTEP
+from ..mujoco.scenes import (FLEX_RADIUS, INTEGRATOR_ENUM, SOLVER_ENUM, ClothMaterial, add_cloth_flex,
+                             build_scene, compile_quietly, disc_mesh)
 from ..record import Recording, markdown_table
 from . import DRAPES, NOT_SUMMARISED, OPTIONAL, SceneResult
 
@@ -101,7 +101,8 @@ IMPLICIT_SHARE = "anisotropic"
 IMPLICIT_DRAG = "critical"
 # Step and solver. The step stays the export's 1 ms: larger ones drag the soft modes through the
 # implicit share and friction keeps the dragged shape (cotton twill on the sphere, this mesh: drape
-# coefficient 0.594 / 0.607 / 0.623 at 1 / 2 / 4 ms). MuJoCo's CG solver gives the same drape as
+# coefficient 0.594 / 0.607 / 0.623 at 1 / 2 / 4 ms). The solver is the exported sphere's
+# (yarnfit.mujoco.DEFAULT_SOLVER, CG), the Cusick's too: MuJoCo's CG solver gives the same drape as
 # Newton (0.5945 against 0.5944) in half the time (31 against 60 ms a step): Newton factorises the
 # implicit flex metric's Hessian every iteration.
 # Rest: speed scale (m/s) of the kinetic energy per mass at which a drape counts as settled.
@@ -286,7 +287,6 @@ def drape(material: ClothMaterial | str | Path, scene: str, *, quick: bool = Fal
     else:
         spec, resolution = _square_spec(material, scene, RESOLUTION[quick]), RESOLUTION[quick]
         cell = SIZE / (resolution - 1)
-    spec.option.solver = mujoco.mjtSolver.mjSOL_CG  # see MESH: the same drape as Newton's, twice as fast
     model = compile_quietly(spec)
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
@@ -388,13 +388,14 @@ def cusick_spec(material: ClothMaterial, cell: float):
     supporting disc (geom ``disc``), the specimen (flex ``cloth``, weft along x, the vertices
     within :data:`CUSICK_DISC_RADIUS` pinned) at :data:`CUSICK_HEIGHT`; the export's time step,
     integrator, damping and friction, the drapes' split (:data:`MEMBRANE`, :data:`IMPLICIT_SHARE`,
-    :data:`IMPLICIT_DRAG`). Returns the ``mujoco.MjSpec``."""
+    :data:`IMPLICIT_DRAG`) and the sphere scene's solver. Returns the ``mujoco.MjSpec``."""
     import mujoco
 
     spec = mujoco.MjSpec()
     spec.modelname = f"yarnfit cusick: {material.name}"
     spec.option.timestep = DEFAULT_TIMESTEP
     spec.option.integrator = INTEGRATOR_ENUM[DEFAULT_INTEGRATOR]
+    spec.option.solver = SOLVER_ENUM[DEFAULT_SOLVER["sphere"]]  # a drape on contact, as the sphere
     spec.worldbody.add_light(pos=[0, 0, 3 * CUSICK_HEIGHT + 1], dir=[0, 0, -1],
                              type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     friction = [DEFAULT_FRICTION, 0.005, 0.0001]
