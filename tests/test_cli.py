@@ -362,3 +362,23 @@ def test_show_opens_each_kind_of_file_with_its_viewer(tmp_path, monkeypatch):
     assert cli.main(["show", str(tmp_path / "notes.txt")]) == 2
     (tmp_path / "other.json").write_text("{}")
     assert cli.main(["show", str(tmp_path / "other.json")]) == 2
+
+
+def test_the_export_help_names_the_splits_validate_runs():
+    """cli.DRAPE_SPLIT and cli.STRIP_SPLIT are literals (the parser is built without MuJoCo): they
+    must say what the drapes and the strips run."""
+    from yarnfit import cli
+    from yarnfit.mujoco import DEFAULT_IMPLICIT_SHARE
+    from yarnfit.validate import drape, stretch
+
+    def options(split):
+        words = split.split()
+        return dict(zip(words[::2], words[1::2]))
+
+    assert options(cli.DRAPE_SPLIT) == {"--mesh": drape.MESH, "--membrane": drape.MEMBRANE,
+                                        "--implicit-share": drape.IMPLICIT_SHARE,
+                                        "--implicit-drag": drape.IMPLICIT_DRAG}
+    assert options(cli.STRIP_SPLIT) == {"--mesh": stretch.MESH, "--membrane": stretch.MEMBRANE,
+                                        "--implicit-drag": stretch.IMPLICIT_DRAG}
+    assert DEFAULT_IMPLICIT_SHARE == "isotropic"  # the strips' share, left out of STRIP_SPLIT
+    assert (drape.SIZE, drape.RESOLUTION[False]) == (0.3, 25)  # "--size 0.3 --resolution 25" in the help

@@ -372,6 +372,29 @@ def test_cli_export_writes_a_scene_that_loads(material_file, tmp_path):
     assert plain.returncode == 0 and plain.stdout.strip() == "1", plain.stderr
 
 
+def test_cli_export_writes_the_validated_drapes_split(material_file, tmp_path):
+    """The split `yarnfit validate` drapes with (the export's help names it, cli.DRAPE_SPLIT) is one
+    command away: criss-cross cells, triangle strains, the anisotropic share and the critical drag
+    reach the file, and the scene is the drapes' own to the vertex."""
+    from yarnfit.cli import DRAPE_SPLIT
+    from yarnfit.validate import drape
+
+    path = tmp_path / "sphere.xml"
+    out = yarnfit("export", str(material_file), "--scene", "sphere", "--resolution", "6", "-o", str(path),
+                  *DRAPE_SPLIT.split())
+    assert out.returncode == 0, out.stderr
+    assert "triangle membrane strains" in out.stdout and "CG solver" in out.stdout
+    config = mujoco.MjSpec.from_file(str(path)).plugins[0].config
+    # Triangle strains are the plugin's own default: the key is written only for node strains.
+    assert "membrane" not in config and config["implicit_drag"] == "critical" and "implicit_share" in config
+    exported = mujoco.MjModel.from_xml_path(str(path))
+    assert exported.nflexvert == 6 * 6 + 5 * 5
+    material = ClothMaterial.from_file(material_file)
+    validated = compile_quietly(drape._square_spec(material, "sphere", 6))
+    np.testing.assert_array_equal(exported.flex_elem, validated.flex_elem)
+    assert exported.opt.solver == validated.opt.solver
+
+
 @pytest.mark.parametrize("args, message", [
     (["missing.json", "--scene", "cloth"], "no such material file"),
     (["{material}", "--scene", "drape"], "invalid choice: 'drape'"),

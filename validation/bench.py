@@ -333,7 +333,8 @@ def bench_mujoco() -> None:
         start = time.perf_counter()
         mujoco.mj_step(model, data, nstep=steps)
         other_ms = 1e3 * (time.perf_counter() - start) / steps
-        report(f"{key}_ms_per_step_with_plugin_{other}", other_ms, f"ms ({other_ms / ms_per_step['with']:.2f}× the default's)")
+        report(f"{key}_ms_per_step_with_plugin_{other}", other_ms,
+               f"ms ({other_ms / ms_per_step['with']:.2f}× the default's)")
 
 
 # -- plugin_nonlinear_stable_step -----------------------------------------------------------------

@@ -27,6 +27,12 @@ EXIT_FAILED = 1
 EXIT_USAGE = 2
 # What a shell reports for a program ended by SIGINT (128 + 2), so scripts see an interrupt.
 EXIT_INTERRUPTED = 130
+# The splits `yarnfit validate` runs its MuJoCo scenes with, as `yarnfit export` options, for its
+# help: the drapes' (yarnfit.validate.drape) and the strips' (yarnfit.validate.stretch, whose
+# built-in share also covers the stiffening up to the largest strain pulled). Literals, checked
+# against those modules by tests/test_cli.py: importing them would load MuJoCo to build the parser.
+DRAPE_SPLIT = "--mesh crisscross --membrane triangle --implicit-share anisotropic --implicit-drag critical"
+STRIP_SPLIT = "--mesh crisscross --membrane triangle --implicit-drag critical"
 
 
 class UsageError(Exception):
@@ -109,8 +115,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="where the fit's figures (PNG, SVG) and their tables (CSV) go (default: logs/<name>)")
 
     from .mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_IMPLICIT_SHARE,
-                         DEFAULT_INTEGRATOR, DEFAULT_RESOLUTION, DEFAULT_SIZE, DEFAULT_SOLVER, DEFAULT_TIMESTEP,
-                         IMPLICIT_DRAGS, IMPLICIT_SHARES, INTEGRATORS, SCENES, SOLVERS)
+                         DEFAULT_INTEGRATOR, DEFAULT_MEMBRANE, DEFAULT_MESH, DEFAULT_RESOLUTION, DEFAULT_SIZE,
+                         DEFAULT_SOLVER, DEFAULT_TIMESTEP, IMPLICIT_DRAGS, IMPLICIT_SHARES, INTEGRATORS, MEMBRANES,
+                         MESHES, SCENES, SOLVERS)
     from .validate import SCENES as VALIDATION_SCENES
 
     export = commands.add_parser(
@@ -122,11 +129,13 @@ def build_parser() -> argparse.ArgumentParser:
             "sphere) or wall (dropped across a wall's top edge). The flex carries MuJoCo's built-in isotropic "
             "elasticity (integrated implicitly under the discrete integrator) at least half as stiff as the material "
             "in every direction, which keeps the step stable; the yarnfit.shell plugin removes its forces exactly and "
-            "carries the whole material on node-smoothed strains (no locking on any triangulation), with the "
-            "material's strain-stiffening membrane (--linear: the linear StVK membrane fitted from the same "
+            "carries the whole material (by default on node-smoothed strains: no locking on any triangulation), "
+            "with the material's strain-stiffening membrane (--linear: the linear StVK membrane fitted from the same "
             "samples). --fallback writes a plugin-free scene with one isotropic material instead. The file opens "
             "with a comment naming the plugin and how to get it, and spells the cloth out (one body per vertex, "
-            "every number exact): a <flexcomp> cannot hold its area-lumped vertex masses. Lengths in m, times in s."
+            "every number exact): a <flexcomp> cannot hold its area-lumped vertex masses. `yarnfit validate` "
+            f"drapes its cloth with {DRAPE_SPLIT} (the sphere's at --size 0.3 --resolution 25) and pulls its "
+            f"strips with {STRIP_SPLIT}; the body's garments run the default split. Lengths in m, times in s."
         ),
     )
     export.add_argument("material", metavar="MATERIAL.json", help="a material file written by `yarnfit fit`")
@@ -173,6 +182,14 @@ def build_parser() -> argparse.ArgumentParser:
                              "modes) or anisotropic (half the material's tangent in each mode, written by the plugin "
                              "over MuJoCo's metric: a woven's shear is no longer held back, and lightly damped modes "
                              "swing longer)")
+    export.add_argument("--mesh", default=DEFAULT_MESH, choices=list(MESHES),
+                        help=f"the cloth's cells: grid (default {DEFAULT_MESH}: one diagonal per cell) or crisscross "
+                             "(both diagonals around a centre vertex: twice the vertices, no locking with triangle "
+                             "strains)")
+    export.add_argument("--membrane", default=DEFAULT_MEMBRANE, choices=list(MEMBRANES),
+                        help=f"the plugin's membrane strains: node (default {DEFAULT_MEMBRANE}: smoothed over each "
+                             "vertex's triangles, no locking on any mesh) or triangle (constant per triangle: locks on "
+                             "one-diagonal cells, use it with --mesh crisscross)")
     export.add_argument("--self-collision", action="store_true", help="let the cloth collide with itself (slower)")
     export.add_argument("--check", type=float, metavar="SECONDS",
                         help="then step the scene this long and report stability and ms/step (exit 1 if unstable)")
@@ -574,7 +591,7 @@ def cmd_export(args: argparse.Namespace) -> int:
                          friction=args.friction,
                          damping=args.damping, angle=math.radians(args.angle), fallback=args.fallback,
                          self_collision=args.self_collision, implicit_drag=args.implicit_drag,
-                         implicit_share=args.implicit_share)
+                         implicit_share=args.implicit_share, mesh=args.mesh, membrane=args.membrane)
     print(export_summary(built, material, output, args))
     if args.check is not None:
         from .mujoco.run import run_scene
@@ -615,8 +632,8 @@ def export_summary(built, material, output, args) -> str:
         bending = (f"its own {kind}bending, the built-in hinge forces removed" if spec.flexes[0].elastic2d == 3
                    else f"all {kind}bending")
         lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, "
-                     f"{bending}), weft at {args.angle:g}° from x, implicit_drag {args.implicit_drag}, "
-                     f"implicit_share {args.implicit_share}")
+                     f"{bending}), weft at {args.angle:g}° from x, {args.membrane} membrane strains, "
+                     f"implicit_drag {args.implicit_drag}, implicit_share {args.implicit_share}")
     if not built.fallback and material.shell.nonlinear is not None and args.check is None:
         lines.append("  note            the strain-stiffening forces are explicit and can need a step below 1 ms "
                      "(plugins/README.md): check the scene with --check SECONDS, or export --linear")

@@ -16,6 +16,15 @@ INTEGRATORS = ("discrete", "euler", "rk4")
 # Measured (README, "Export to MuJoCo"): discrete keeps the built-in part implicit in position.
 DEFAULT_INTEGRATOR = "discrete"
 DEFAULT_TIMESTEP = 1e-3  # s
+# The cloth's mesh (scenes.grid_mesh): one diagonal per cell ("grid"), or both diagonals around a
+# centre vertex ("crisscross": no locking with triangle strains, twice the vertices).
+MESHES = ("grid", "crisscross")
+DEFAULT_MESH = "grid"
+# The plugin's membrane strains: smoothed over each vertex's third of its triangles ("node", no
+# locking on any triangulation; the default), or constant per triangle ("triangle", which locks on
+# one-diagonal and unstructured cells); plugins/README.md.
+MEMBRANES = ("node", "triangle")
+DEFAULT_MEMBRANE = "node"
 # MuJoCo's constraint solvers a scene may ask for, by MJCF name, lower case, and each scene's own.
 # CG where the cloth touches something: Newton factorises the implicit flex metric's Hessian every
 # iteration, CG does not. Measured (session 57, cotton twill, one run each, the export's defaults):

@@ -57,8 +57,8 @@ from ..material_file import MaterialFile
 from ..outputs import write_atomically
 from ..shell import ShellMaterial
 from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_IMPLICIT_SHARE, DEFAULT_INTEGRATOR,
-               DEFAULT_RESOLUTION, DEFAULT_SIZE, DEFAULT_SOLVER, DEFAULT_TIMESTEP, IMPLICIT_DRAGS, IMPLICIT_SHARES,
-               INTEGRATORS, SCENES, SOLVERS)
+               DEFAULT_MEMBRANE, DEFAULT_MESH, DEFAULT_RESOLUTION, DEFAULT_SIZE, DEFAULT_SOLVER, DEFAULT_TIMESTEP,
+               IMPLICIT_DRAGS, IMPLICIT_SHARES, INTEGRATORS, MEMBRANES, MESHES, SCENES, SOLVERS)
 from .plugin import PLUGIN_NAME
 from .split import DEFAULT_STIFFENING_BOUND, MJCF_DIGITS, anisotropic_share, builtin_elasticity, isotropic_fallback
 
@@ -101,12 +101,6 @@ DROP_GAP = 0.02
 # its target by about 1 % of the extension under load).
 CLAMP_MASS = 0.1
 SERVO_STIFFNESS_RATIO = 100.0
-MESHES = ("grid", "crisscross")
-# The plugin's membrane strains: smoothed over each vertex's third of its triangles ("node", no
-# locking on any triangulation; the default), or constant per triangle ("triangle", which locks on
-# one-diagonal and unstructured cells); plugins/README.md.
-MEMBRANES = ("node", "triangle")
-DEFAULT_MEMBRANE = "node"
 # MJCF elastic2d names to mjtElastic2D values (none, bend, stretch, both).
 ELASTIC2D = {"none": 0, "bend": 1, "stretch": 2, "both": 3}
 # Exported scenes (export_scene): the default class of the cloth's vertex bodies, and why the cloth
@@ -219,7 +213,7 @@ def build_scene(
     self_collision: bool = False,
     width: float = DEFAULT_STRIP_WIDTH,
     max_strain: float = DEFAULT_MAX_STRAIN,
-    mesh: str = "grid",
+    mesh: str = DEFAULT_MESH,
     implicit_bending: bool = True,
     stiffening_bound: float = DEFAULT_STIFFENING_BOUND,
     membrane: str = DEFAULT_MEMBRANE,
