@@ -50,6 +50,17 @@ def test_a_yarn_point_that_did_not_converge_is_named():
     assert "yarn solve not converged: warp at 5 %" in by_check(summary)["shell vs yarn swatch"].figure
 
 
+def test_the_shell_yarn_figure_gives_the_swatch_size():
+    # The worst direction's swatch, gauge × width between its jaws (mm); nothing when the summary
+    # has no size (hand-made or older summaries).
+    assert "swatch" not in by_check(SUMMARY)["shell vs yarn swatch"].figure
+    summary = copy.deepcopy(SUMMARY)
+    summary["scenes"]["yarn"] = {"directions": {"warp": {"gauge_m": 0.0033, "width_m": 0.00248, "points": []},
+                                                "weft": {"gauge_m": 0.0099, "width_m": 0.0075, "points": []}}}
+    figure = by_check(summary)["shell vs yarn swatch"].figure
+    assert "(warp at 2 %); a swatch 3.3 × 2.48 mm between its jaws" in figure
+
+
 def test_the_shell_yarn_criterion_is_its_tolerance():
     summary = copy.deepcopy(SUMMARY)
     summary["shell_vs_yarn"]["same_proportions"]["weft"]["force_relative_difference"][1] = -1.001 * SHELL_YARN_TOLERANCE
