@@ -33,10 +33,10 @@ DEFAULT_MEMBRANE = "node"
 # sphere 0.5945 against 0.5944 in drape coefficient (validate.drape, session 49). `bench.py mujoco`
 # (the test woven, 40 x 40, both solvers in one run): sphere 79.6 ms with Newton, 20.1 with CG;
 # hanging 11.1 against 12.3 (Newton ~10 % faster without contacts, CG kept there for a cloth that
-# meets something: a wall, a gripper, itself). Newton for the
-# FAB strip: there CG took 3.2 times as long (the twill's 8 x 5 weft strip pulled to 10 %: 34.3
-# against 10.7 s, the same forces to 3e-5 N/m) and MuJoCo warned that the clamped strip's flex
-# stiffness was too ill-conditioned for CG's effective-metric preconditioner.
+# meets something: a wall, a gripper, itself). Newton for the FAB strip: there CG took 3.2 times as
+# long (the twill's 8 x 5 weft strip pulled to 10 %: 34.3 against 10.7 s, the same forces to 3e-5
+# N/m) and MuJoCo warned that the clamped strip's flex stiffness was too ill-conditioned for CG's
+# effective-metric preconditioner.
 SOLVERS = ("newton", "cg")
 DEFAULT_SOLVER = {"cloth": "cg", "stretch": "newton", "sphere": "cg", "wall": "cg"}
 # Vertices per side (stretch: along the strip). 40 resolves a 0.5 m cloth at 12.8 mm; the strip's

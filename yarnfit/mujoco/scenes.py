@@ -257,8 +257,8 @@ def build_scene(
             MuJoCo's metric: the soft modes are not held back; plugins/README.md, Split).
 
     Raises:
-        ValueError: an unknown scene, integrator, solver or mesh, a non-positive resolution, size, timestep,
-            width or max_strain, a negative friction or damping.
+        ValueError: an unknown scene, integrator, solver or mesh, a non-positive resolution, size,
+            timestep, width or max_strain, a negative friction or damping.
     """
     if scene not in SCENES:
         raise ValueError(f"unknown scene {scene!r}; scenes: {', '.join(SCENES)}")
