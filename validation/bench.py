@@ -281,7 +281,7 @@ def bench_mujoco() -> None:
 
     import mujoco
 
-    from yarnfit.mujoco.scenes import ClothMaterial, build_scene
+    from yarnfit.mujoco.scenes import SOLVER_ENUM, ClothMaterial, build_scene
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from fabric_shell import FABRIC  # a realistic medium-weight woven
@@ -326,7 +326,7 @@ def bench_mujoco() -> None:
         report(f"{key}_plugin_compute_fraction", plugin_ms / ms_per_step["without"], "of the step without it")
         # The other solver on the same scene, in the same run (the scenes' DEFAULT_SOLVER: CG where
         # the cloth touches something).
-        other = "newton" if solver == "CG" else "cg"
+        other = next(name for name, value in SOLVER_ENUM.items() if value != models["with"].opt.solver)
         model = build_scene(material, scene, resolution=40, solver=other).spec.compile()
         data = mujoco.MjData(model)
         mujoco.mj_step(model, data, nstep=10)
