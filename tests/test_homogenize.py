@@ -896,7 +896,8 @@ def test_a_loading_path_that_leaves_its_tiles_ends_with_its_samples_unsolved(mon
         return solve(relaxed, form, *args, **kwargs)
 
     monkeypatch.setattr(loading_module, "_solve_from", leaving)
-    with pytest.warns(ConvergenceWarning, match="did not converge"):
+    # The warning says how far the path got: its 0.5 % steps converged to -1.5 %.
+    with pytest.warns(ConvergenceWarning, match="did not converge.*every step converged up to -0.015$"):
         samples = loading_path_samples(relaxed, Family.WEFT_STRETCH, [-0.01, -0.02, -0.03], 0.26)
     assert [s.spec.parameter for s in samples] == [-0.01, -0.02, -0.03]
     assert samples[0].converged and math.isfinite(samples[0].energy_density)

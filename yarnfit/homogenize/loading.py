@@ -95,7 +95,12 @@ def loading_path_samples(relaxed: RelaxedRepeat, family: Family, parameters: Seq
     # sample's (a step that did not converge or settle between two samples leaves the later one's
     # path off, though its own solves converged).
     by_magnitude, segment = {}, True
+    # How far the path got with every step converged: where a knit's compression jams (cotton
+    # jersey's weft at 7.1 %, docs/design.md §6), which says more than the failed step's residuals.
+    reached, unbroken = 0.0, True
     for magnitude, sample in zip(grid, samples):
+        unbroken &= sample.converged
+        reached = magnitude if unbroken else reached
         segment &= sample.converged
         if any(abs(magnitude - m) <= PARAMETER_MATCH for m in magnitudes):
             by_magnitude[magnitude] = replace(sample, converged=segment)
@@ -107,7 +112,8 @@ def loading_path_samples(relaxed: RelaxedRepeat, family: Family, parameters: Seq
         out.append(replace(sample, spec=SampleSpec(family, sample.spec.I, sample.spec.II, p)))
         if not sample.converged:
             warnings.warn(f"loading path {family} {p:+.3g} did not converge: a step since the last sample's did not "
-                          f"solve or settle its normal forces ({sample.residual})", ConvergenceWarning, stacklevel=2)
+                          f"solve or settle its normal forces ({sample.residual}); every step converged up to "
+                          f"{sign * reached:+.3g}", ConvergenceWarning, stacklevel=2)
     return out
 
 
