@@ -241,6 +241,20 @@ def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documente
     assert verify.returncode == 0, verify.stderr
 
 
+def test_a_fit_prints_each_samples_energy_but_not_where_an_unconverged_solve_stopped():
+    from dataclasses import replace
+
+    from yarnfit.cli import sample_progress
+    from yarnfit.engine import Residual
+    from yarnfit.samples import Family, SampleResult, SampleSpec
+
+    spec = SampleSpec.at(Family.WEFT_STRETCH, -0.1)
+    stopped = replace(SampleResult.unsolved(spec, 600, 1.0), energy_density=2.35e6)  # a jam's stopped solve
+    assert sample_progress(34, 93, stopped) == "samples 34/93: weft_stretch -0.1 → did not converge: excluded from the fit"
+    solved = replace(stopped, converged=True, energy_density=2.98, residual=Residual(1e-11, 1e-12, 0.0, 0.0))
+    assert sample_progress(35, 93, solved) == "samples 35/93: weft_stretch -0.1 → 2.98 J/m²"
+
+
 def test_a_strict_fit_that_asks_for_an_indefinite_shell_fails_naming_the_family(tmp_path):
     # Cotton jersey's biaxial energies ask for s01 > √(s00 s11) (its loops trade course for wale
     # length; the paper's solid yarn, the smallest design): by default the coupling ends on the

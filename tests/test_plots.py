@@ -22,7 +22,7 @@ from test_fit_nonlinear import LEVELS, RANGES, REST_ENERGY, RESIDUAL, samples_of
 from yarnfit.engine import Residual
 from yarnfit.fit import fit_shell
 from yarnfit.material_file import MaterialFile
-from yarnfit.plots import N_PER_M_IN_N_PER_CM, PERCENT, fit_figures, validation_figures
+from yarnfit.plots import N_PER_M_IN_N_PER_CM, PERCENT, energy_scale, fit_figures, validation_figures
 from yarnfit.samples import FAMILIES, SampleResult, SampleSpec, family_deformation, sample_design
 from yarnfit.shell import GF_CM2_PER_CM, membrane_strain
 from yarnfit.validate import DIRECTIONS, PULL_DIRECTIONS
@@ -162,6 +162,14 @@ def test_the_plotted_samples_are_the_files_and_the_shell_curve_is_the_fits_predi
     assert [(cell(r["lambda - 1 [%]"]), r["converged"]) for r in left_out] == [(15.0, "false"), (18.0, "false")]
     assert cell(left_out[0]["energy density as solved [J/m^2]"]) == 5.0
     assert left_out[1]["energy density [J/m^2]"] == "" and left_out[1]["energy density as solved [J/m^2]"] == ""
+
+
+def test_a_sample_left_out_does_not_set_the_energy_scale():
+    # A jammed sample's solve stopped at 2e6 J/m² beside fitted samples of a few J/m²: the axis
+    # spans the fitted ones and the shell's curve, 5 % either side.
+    assert energy_scale(np.array([0.0, 1.0, 3.0, np.nan])) == pytest.approx((-0.15, 3.15))
+    assert energy_scale(np.array([2.0])) == pytest.approx((1.9, 2.1))
+    assert energy_scale(np.array([np.nan])) is None
 
 
 def test_tension_table_is_the_shells_uniaxial_law_in_n_per_cm(tmp_path):

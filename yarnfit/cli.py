@@ -504,6 +504,15 @@ def cmd_relax(args: argparse.Namespace) -> int:
     return 0
 
 
+def sample_progress(done: int, total: int, result) -> str:
+    """The fit's progress line for its ``done``-th of ``total`` samples, a
+    :class:`~yarnfit.samples.SampleResult`: its energy, or that it was excluded. An unconverged
+    sample's energy is where its solve stopped (cotton jersey's jammed compression: 2e6 J/m²), not a
+    figure of the fabric, so it is not printed."""
+    outcome = f"{result.energy_density:.3g} J/m²" if result.converged else "did not converge: excluded from the fit"
+    return f"samples {done}/{total}: {result.spec.family} {result.spec.parameter:+.3g} → {outcome}"
+
+
 def cmd_fit(args: argparse.Namespace) -> int:
     from .fit import COUPLING_LIMIT
     from .samples import design_size
@@ -534,9 +543,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
     def on_sample(done, total, result):
         now = time.perf_counter()
         left = (now - sampling_started[0]) / done * (total - done)
-        excluded = "" if result.converged else " (did not converge: excluded from the fit)"
-        line.message(f"samples {done}/{total}: {result.spec.family} {result.spec.parameter:+.3g} → "
-                     f"{result.energy_density:.3g} J/m²{excluded}  [{now - line.start:.0f} s, ~{left:.0f} s left]",
+        line.message(f"{sample_progress(done, total, result)}  [{now - line.start:.0f} s, ~{left:.0f} s left]",
                      force=not result.converged or done == total)
 
     line.message(f"{fabric.name}: relaxing the repeat", force=True)

@@ -193,6 +193,24 @@ def fit_figures(material: str | os.PathLike | Mapping | MaterialFile, out_dir: s
     return written
 
 
+# Room left above and below the plotted energies, as a fraction of their span (matplotlib's own
+# default margin).
+ENERGY_MARGIN = 0.05
+
+
+def energy_scale(energies: np.ndarray) -> tuple[float, float] | None:
+    """The energy axis's limits (J/m²) for the fitted ``energies`` (the shell's curve and the
+    samples it was fitted to; non-finite ones ignored): their range and :data:`ENERGY_MARGIN` of it
+    either side (of their size for a single value), ``None`` if there are none."""
+    energies = np.asarray(energies, dtype=float)
+    energies = energies[np.isfinite(energies)]
+    if not energies.size:
+        return None
+    low, high = float(energies.min()), float(energies.max())
+    margin = ENERGY_MARGIN * ((high - low) if high > low else max(abs(high), 1.0))
+    return low - margin, high + margin
+
+
 def _family_figure(fabric: str, base: Path, family, samples: list[SampleResult], shell: ShellMaterial,
                    shell_part: np.ndarray, quality: Mapping | None, rest_state: bool) -> list[Path]:
     """One family's samples (``shell_part (n,)``: their Ū as the shell sees it, J/m²) against the
@@ -213,11 +231,21 @@ def _family_figure(fabric: str, base: Path, family, samples: list[SampleResult],
     ax.plot(scale * parameter[converged], shell_part[converged], "o", color=SAMPLE_COLOR / _RGB, ms=5,
             label="yarn level (fitted)", zorder=3)
     no_energy = int(np.sum(~converged & ~np.isfinite(shell_part)))
+    # A sample left out is where its solve stopped, which can be anything (cotton jersey's jammed
+    # weft compression: 2e6 J/m² beside samples of a few): it does not set the scale.
+    limits = energy_scale(np.concatenate([curve_w, shell_part[converged]]))
+    off_scale = np.zeros_like(left_out)
+    if limits is not None:
+        ax.set_ylim(*limits)
+        off_scale = left_out & ((shell_part < limits[0]) | (shell_part > limits[1]))
+    shown = left_out & ~off_scale
     if left_out.any() or no_energy:
         label = "yarn level, not converged (left out)"
+        if off_scale.any():
+            label += f"; {int(off_scale.sum())} off the scale"
         if no_energy:
             label += f"; {no_energy} without an energy"
-        ax.plot(scale * parameter[left_out], shell_part[left_out], "x", color=EXCLUDED_COLOR / _RGB, ms=7, mew=1.5,
+        ax.plot(scale * parameter[shown], shell_part[shown], "x", color=EXCLUDED_COLOR / _RGB, ms=7, mew=1.5,
                 label=label, zorder=4)
     ax.set_xlabel(f"{family.replace('_', ' ')}: {family.quantity} ({unit})")
     ax.set_ylabel("energy density (J/m²)")
