@@ -241,10 +241,10 @@ def test_fit_prints_the_constants_and_writes_the_material_file_and_the_documente
     assert verify.returncode == 0, verify.stderr
 
 
-def test_a_fit_prints_each_samples_energy_but_not_where_an_unconverged_solve_stopped():
+def test_a_fit_prints_each_samples_energy_not_where_an_unconverged_solve_stopped_and_names_samples_taken_short():
     from dataclasses import replace
 
-    from yarnfit.cli import sample_progress
+    from yarnfit.cli import sample_progress, short_sample_notes
     from yarnfit.engine import Residual
     from yarnfit.samples import Family, SampleResult, SampleSpec
 
@@ -253,6 +253,11 @@ def test_a_fit_prints_each_samples_energy_but_not_where_an_unconverged_solve_sto
     assert sample_progress(34, 93, stopped) == "samples 34/93: weft_stretch -0.1 → did not converge: excluded from the fit"
     solved = replace(stopped, converged=True, energy_density=2.98, residual=Residual(1e-11, 1e-12, 0.0, 0.0))
     assert sample_progress(35, 93, solved) == "samples 35/93: weft_stretch -0.1 → 2.98 J/m²"
+    # A sample its path took short of the design (a jam) is fitted, and the summary says so.
+    short = replace(solved, spec=SampleSpec.at(Family.WEFT_STRETCH, -0.07), design_parameter=-0.1)
+    assert short_sample_notes([solved, short]) == [
+        "weft_stretch sampled at -0.07 for the design's -0.1: its loading path converged no further "
+        "(the fabric does not bear more)"]
 
 
 def test_a_strict_fit_that_asks_for_an_indefinite_shell_fails_naming_the_family(tmp_path):

@@ -10,6 +10,7 @@ import dataclasses
 import functools
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +60,7 @@ from yarnfit.samples import (
     OTHER_BIAS_FAMILIES,
     Family,
     SampleRanges,
+    SampleResult,
     SampleSpec,
     design_size,
     family_deformation,
@@ -882,11 +884,13 @@ def test_knits_are_loaded_with_friction_and_shear_evenly_unless_told_and_wovens_
     assert len(fitted().samples) == design_size(1, both_biases=True)
 
 
-def test_a_loading_path_that_leaves_its_tiles_ends_with_its_samples_unsolved(monkeypatch):
+def test_a_loading_path_that_stops_samples_where_the_fabric_still_bore_it(monkeypatch):
     # A jam's yarns pushed past one another under compression carry a solve beyond the tiles mapped
     # (the cotton jersey pattern in another fibre, validate.paper's check c): the path ends there,
-    # that sample and the larger ones unsolved (not converged, energy NaN), the smaller ones as they
-    # were: not an error that stops the whole fit. Here every solve past -1.75 % weft leaves its tiles.
+    # not an error that stops the whole fit. Here every solve past -1.75 % weft leaves its tiles.
+    # The -2 % sample's own step failed, so the path stopped in its segment: it is taken at the
+    # segment's last step that converged (-1.5 %), saying what the design asked for; the -3 %
+    # sample's segment has no such step: unsolved (not converged, energy NaN), excluded.
     relaxed = fitted().relaxed
     solve = loading_module._solve_from
 
@@ -896,15 +900,24 @@ def test_a_loading_path_that_leaves_its_tiles_ends_with_its_samples_unsolved(mon
         return solve(relaxed, form, *args, **kwargs)
 
     monkeypatch.setattr(loading_module, "_solve_from", leaving)
-    # The warning says how far the path got: its 0.5 % steps converged to -1.5 %.
-    with pytest.warns(ConvergenceWarning, match="did not converge.*every step converged up to -0.015$"):
+    with pytest.warns(ConvergenceWarning) as caught:
         samples = loading_path_samples(relaxed, Family.WEFT_STRETCH, [-0.01, -0.02, -0.03], 0.26)
-    assert [s.spec.parameter for s in samples] == [-0.01, -0.02, -0.03]
-    assert samples[0].converged and math.isfinite(samples[0].energy_density)
-    assert all(not s.converged and math.isnan(s.energy_density) for s in samples[1:])
-    assert samples[1].spec.compressed and np.allclose(samples[1].spec.I, np.diag([0.98**2, 1.0]))
-    alone, = loading_path_samples(relaxed, Family.WEFT_STRETCH, [-0.01], 0.26)
-    assert alone.energy_density == samples[0].energy_density
+    messages = [str(w.message) for w in caught]
+    assert any(m.startswith("loading path weft_stretch -0.02 did not converge beyond -0.015: sampled there")
+               for m in messages), messages
+    # The excluded one says how far the path got.
+    assert any(re.search(r"-0.03 did not converge.*every step converged up to -0.015$", m) for m in messages), messages
+    assert [s.spec.parameter for s in samples] == [-0.01, -0.015, -0.03]
+    assert samples[0].converged and math.isnan(samples[0].design_parameter)
+    assert samples[1].converged and samples[1].design_parameter == -0.02
+    assert np.allclose(samples[1].spec.I, np.diag([0.985**2, 1.0]))
+    assert not samples[2].converged and math.isnan(samples[2].energy_density)
+    assert samples[2].spec.compressed and np.allclose(samples[2].spec.I, np.diag([0.97**2, 1.0]))
+    # The same path's steps: the samples it took are the ones a design of those strains gets.
+    alone = loading_path_samples(relaxed, Family.WEFT_STRETCH, [-0.01, -0.015], 0.26)
+    assert [s.energy_density for s in alone] == [s.energy_density for s in samples[:2]]
+    assert SampleResult.from_dict(samples[1].to_dict()).design_parameter == -0.02
+    assert math.isnan(SampleResult.from_dict(samples[0].to_dict()).design_parameter)
 
 
 def test_loading_samples_refuse_bad_input():

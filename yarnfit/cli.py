@@ -649,6 +649,14 @@ def export_summary(built, material, output, args) -> str:
     return "\n".join(lines)
 
 
+def short_sample_notes(samples) -> list[str]:
+    """One sentence per sample taken short of the design's parameter
+    (:attr:`~yarnfit.samples.SampleResult.design_parameter`): where and why."""
+    return [f"{s.family} sampled at {s.parameter:+.3g} for the design's {s.design_parameter:+.3g}: its loading "
+            f"path converged no further (the fabric does not bear more)"
+            for s in samples if math.isfinite(s.design_parameter)]
+
+
 def fit_summary(fitted, output, recording_path) -> str:
     from .shell import GF_CM2_PER_CM
 
@@ -701,6 +709,7 @@ def fit_summary(fitted, output, recording_path) -> str:
                      f"{fit.reference_energy:.3g} J/m² (bends, at zero membrane force: {fit.bending_reference:.3g}): "
                      f"left out of the shell")
     lines += [f"  note            {note}" for note in fit.notes]
+    lines += [f"  note            {note}" for note in short_sample_notes(fitted.samples)]
     lines.append("  samples         " + (f"membrane loaded from rest with friction μ {fitted.sample_friction:g} "
                                          "(--frictionless: the paper's minimisers); bends frictionless"
                                          if fitted.sample_friction > 0.0 else

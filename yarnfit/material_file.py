@@ -38,7 +38,8 @@
   ``pull_slope_n_per_m`` and ``across_slope_n_per_m`` (uniaxial samples: dŪ/dE along and across the
   pull at the width found; absent or null: unknown), ``free_membrane_strain`` (bends: the
   membrane Green strains ``[E00, E11, E01]`` they were solved at, zero membrane force; absent or
-  null: unknown) — including
+  null: unknown), ``design_parameter`` (a sample taken short of the design's parameter, given here,
+  where its loading path converged no further; absent or null: as designed) — including
   those that did not converge (excluded from the fit, never used);
 - ``relaxed_repeat``: ``pyp``, the relaxed repeat as ``.pyp`` text (:meth:`RelaxedRepeat.relaxed_pattern
   <yarnfit.relax.RelaxedRepeat.relaxed_pattern>`: relaxed positions, the rest lengths they balance

@@ -281,7 +281,9 @@ class SampleResult:
     ``free_membrane_strain``, bending samples only: ``(E00, E11, E01)`` the membrane Green strains
     the bend was solved at, where Ū is least (zero membrane force; the spec keeps ``I = Id``:
     :mod:`yarnfit.homogenize.bend`); NaN for other families and files written before bends were
-    solved so.
+    solved so. ``design_parameter``: the parameter the design asked for, when the sample was taken
+    short of it because its loading path converged no further (a jam: the fabric does not bear
+    that deformation, :func:`~yarnfit.homogenize.loading_path_samples`); NaN otherwise.
 
     Non-converged samples are reported and never fitted. ValueError names the field at fault."""
 
@@ -296,6 +298,7 @@ class SampleResult:
     pull_slope: float = math.nan
     across_slope: float = math.nan
     free_membrane_strain: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    design_parameter: float = math.nan
 
     def __post_init__(self) -> None:
         if not isinstance(self.spec, SampleSpec):
@@ -336,6 +339,10 @@ class SampleResult:
             raise ValueError(f"SampleResult.free_membrane_strain is only defined for a bending family, got "
                              f"{strain!r} for {self.spec.family}")
         object.__setattr__(self, "free_membrane_strain", strain)
+        design = real_number(self.design_parameter, "SampleResult.design_parameter")
+        if math.isinf(design):
+            raise ValueError(f"SampleResult.design_parameter must be finite or NaN, got {design!r}")
+        object.__setattr__(self, "design_parameter", design)
 
     @classmethod
     def unsolved(cls, spec: SampleSpec, iterations: int, seconds: float,
@@ -403,6 +410,7 @@ class SampleResult:
             "pull_slope_n_per_m": finite_or_none(self.pull_slope),
             "across_slope_n_per_m": finite_or_none(self.across_slope),
             "free_membrane_strain": [finite_or_none(e) for e in self.free_membrane_strain],
+            "design_parameter": finite_or_none(self.design_parameter),
         }
 
     @classmethod
@@ -432,7 +440,8 @@ class SampleResult:
                        stretch_share=number(data.get("stretch_share"), "stretch_share"),
                        pull_slope=number(data.get("pull_slope_n_per_m"), "pull_slope_n_per_m"),
                        across_slope=number(data.get("across_slope_n_per_m"), "across_slope_n_per_m"),
-                       free_membrane_strain=_free_membrane_strain(data.get("free_membrane_strain"), number))
+                       free_membrane_strain=_free_membrane_strain(data.get("free_membrane_strain"), number),
+                       design_parameter=number(data.get("design_parameter"), "design_parameter"))
         except (TypeError, ValueError) as exc:
             message = str(exc)
             raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None

@@ -93,22 +93,37 @@ def loading_path_samples(relaxed: RelaxedRepeat, family: Family, parameters: Seq
             samples = _fixed_path(relaxed, family, sign, grid, coefficient, options)
     # A sample carries the verdict of its own segment of the path: every step since the last
     # sample's (a step that did not converge or settle between two samples leaves the later one's
-    # path off, though its own solves converged).
-    by_magnitude, segment = {}, True
-    # How far the path got with every step converged: where a knit's compression jams (cotton
-    # jersey's weft at 7.1 %, docs/design.md §6), which says more than the failed step's residuals.
+    # path off, though its own solves converged). A path whose own step at a sample failed too has
+    # stopped: the fabric does not bear that deformation (cotton jersey's weft compression jams at
+    # 7.1 %, docs/design.md §6; "tension and compression where the fabric bears it", issue 14), so
+    # the sample is taken at the last step of its segment reached with every step converged, and
+    # says so (SampleResult.design_parameter).
+    by_magnitude, segment, borne = {}, True, None
+    # How far the path got with every step converged, which says more than a failed step's residuals.
     reached, unbroken = 0.0, True
     for magnitude, sample in zip(grid, samples):
         unbroken &= sample.converged
         reached = magnitude if unbroken else reached
         segment &= sample.converged
+        if segment:
+            borne = (magnitude, sample)
         if any(abs(magnitude - m) <= PARAMETER_MATCH for m in magnitudes):
-            by_magnitude[magnitude] = replace(sample, converged=segment)
-            segment = True
+            if not sample.converged and borne is not None and borne[0] < magnitude:
+                by_magnitude[magnitude] = borne
+            else:
+                by_magnitude[magnitude] = (magnitude, replace(sample, converged=segment))
+            segment, borne = True, None
     out = []
     for p in parameters:
         match = min(by_magnitude, key=lambda m: abs(m - abs(p)))
-        sample = by_magnitude[match]
+        magnitude, sample = by_magnitude[match]
+        if magnitude != match:
+            out.append(replace(sample, spec=SampleSpec(family, sample.spec.I, sample.spec.II, sign * magnitude),
+                               design_parameter=p))
+            warnings.warn(f"loading path {family} {p:+.3g} did not converge beyond {sign * magnitude:+.3g}: sampled "
+                          f"there, the largest {family} the fabric bore on its path", ConvergenceWarning,
+                          stacklevel=2)
+            continue
         out.append(replace(sample, spec=SampleSpec(family, sample.spec.I, sample.spec.II, p)))
         if not sample.converged:
             warnings.warn(f"loading path {family} {p:+.3g} did not converge: a step since the last sample's did not "
