@@ -920,6 +920,32 @@ def test_a_loading_path_that_stops_samples_where_the_fabric_still_bore_it(monkey
     assert math.isnan(SampleResult.from_dict(samples[0].to_dict()).design_parameter)
 
 
+# Two paths to the same strain through the same steps differ in their targets' last bits only
+# (0.5 (0.005 + 0.01) against the grid's 3 × 0.0025): round-off, a few ulps of the strains.
+SAME_STEPS_RTOL = 1e-9
+
+
+def test_a_step_that_does_not_settle_is_taken_in_halves(monkeypatch):
+    # Here a step longer than 0.3 % never settles (as polyester jersey's biaxial 0.5 % step at
+    # 31.5 % cycled for twenty passes): the path's 0.5 % steps are each taken as two 0.25 % ones,
+    # every sample converges, and it is the path a 0.25 % grid takes.
+    relaxed = fitted().relaxed
+    step = loading_module._frictional_step
+
+    def settling_only_short_steps(search, start, *args):
+        taken = step(search, start, *args)
+        stretch = math.sqrt(taken.trial.form[0, 0]) - math.sqrt(start.form[0, 0])
+        return dataclasses.replace(taken, settled=taken.settled and abs(stretch) < 0.003)
+
+    monkeypatch.setattr(loading_module, "_frictional_step", settling_only_short_steps)
+    halved = loading_path_samples(relaxed, Family.WEFT_STRETCH, [0.005, 0.01], 0.26)
+    fine = loading_path_samples(relaxed, Family.WEFT_STRETCH, [0.005, 0.01], 0.26, strain_step=0.0025)
+    assert all(s.converged for s in halved + fine)
+    assert [s.energy_density for s in halved] == pytest.approx([s.energy_density for s in fine], rel=SAME_STEPS_RTOL)
+    # The halved path also paid for the long steps it tried first.
+    assert all(h.iterations > f.iterations for h, f in zip(halved, fine))
+
+
 def test_loading_samples_refuse_bad_input():
     relaxed = straight_yarns()
     with pytest.raises(ValueError, match="membrane"):
