@@ -10,7 +10,7 @@ import pytest
 from yarnfit.engine import Loads, QuasiStaticOptions, QuasiStaticSolver, Rod, RodMaterial, RodModel, RodState
 from yarnfit.engine import _friction_kernels
 from yarnfit.engine.friction import FrictionAnchors, anchor_contacts
-from yarnfit.engine.lagged import lagged_solve
+from yarnfit.engine.lagged import in_halves, lagged_solve
 
 # Central differences of a smooth function at step 1e-7 of a 1e-4 m scale: truncation ~1e-10 and
 # round-off ~1e-9 relative to the largest entry.
@@ -245,3 +245,27 @@ def test_a_load_step_starts_from_the_last_multipliers_at_base_penalties():
     assert np.all(started[0].stiffening == 1.0) and np.array_equal(started[0].multiplier, rest.contacts.multiplier)
     assert np.all(stiffened.stiffening == 100.0)  # the caller's record is left alone
     assert all(later is before.contacts for later, before in zip(started[1:], reached))
+
+
+def test_a_load_step_that_fails_is_taken_in_halves_and_halves_again():
+    # A step is accepted when it spans at most a quarter: one from 0 to 1 is taken as four
+    # quarters after the whole and both halves failed; every step tried is returned for its cost.
+    def take(start, low, high):
+        return (start, low, high)
+
+    def accepted(step):
+        return step[2] - step[1] <= 0.25
+
+    path, tried = in_halves(take, accepted, lambda step: f"at {step[2]:g}", "rest", 0.0, 1.0, halvings=2)
+    assert [(low, high) for _, low, high in path] == [(0.0, 0.25), (0.25, 0.5), (0.5, 0.75), (0.75, 1.0)]
+    assert [start for start, _, _ in path] == ["rest", "at 0.25", "at 0.5", "at 0.75"]
+    assert [(low, high) for _, low, high in tried] == [(0.0, 1.0), (0.0, 0.5), (0.0, 0.25), (0.25, 0.5),
+                                                       (0.5, 1.0), (0.5, 0.75), (0.75, 1.0)]
+    # One halving fewer: the halves fail too, and the path is the whole step, not accepted.
+    path, tried = in_halves(take, accepted, lambda step: step[2], "rest", 0.0, 1.0, halvings=1)
+    assert path == [("rest", 0.0, 1.0)] and len(tried) == 2
+    # Accepted at once: one step.
+    assert in_halves(take, lambda step: True, lambda step: step[2], "rest", 0.0, 1.0) == ([("rest", 0.0, 1.0)],) * 2
+    # A second half that fails ends the path on it, after the first half that held.
+    path, _ = in_halves(take, lambda step: step[2] <= 0.5, lambda step: step[2], "rest", 0.0, 1.0, halvings=1)
+    assert path == [("rest", 0.0, 0.5), (0.5, 0.5, 1.0)]

@@ -3,6 +3,7 @@ yarns cut from a synthetic periodic repeat against the closed form, the jaw reac
 yarns' internal forces, a small real weave (global balance with contacts), and the recording read
 back with its documented paths."""
 
+import dataclasses
 import math
 import re
 
@@ -386,6 +387,43 @@ def test_a_frictional_pull_is_converged_in_its_load_step():
     for step in (0.0, -0.005, math.nan):
         with pytest.raises(ValueError, match="strain_step"):
             stretch_swatch(swatch, (0.02,), friction=cotton.friction, strain_step=step)
+
+
+def test_a_frictional_step_that_does_not_settle_is_taken_in_halves(monkeypatch):
+    # Here a step longer than 0.3 % never settles: each 0.5 % step is taken as two 0.25 % ones, the
+    # pull converges, its middle is read after each, and it is the pull a 0.25 % step takes.
+    from yarnfit.fabric import Fabric
+    from yarnfit.fibers import get_fiber
+    from yarnfit.relax import relax
+    from yarnfit.validate import swatch as swatch_module
+
+    cotton = get_fiber("cotton")
+    relaxed = relax(Fabric(name="plain", fiber=cotton, structure="plain", areal_density=0.2))
+    swatch = cut_swatch(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), direction="weft",
+                        gauge=1.5 * max(relaxed.repeat_size), width=max(relaxed.repeat_size),
+                        clamp=0.5 * max(relaxed.repeat_size))
+    step = swatch_module._swatch_step
+
+    def settling_only_short_steps(swatch, solver, start, low, high, friction):
+        taken = step(swatch, solver, start, low, high, friction)
+        if high - low < 0.003:
+            return taken
+        return dataclasses.replace(taken, lagged=dataclasses.replace(taken.lagged, settled=False))
+
+    monkeypatch.setattr(swatch_module, "_swatch_step", settling_only_short_steps)
+    halved = stretch_swatch(swatch, (0.01,), friction=cotton.friction)["points"][1]
+    fine = stretch_swatch(swatch, (0.01,), friction=cotton.friction, strain_step=0.0025)["points"][1]
+    assert halved["converged"] and fine["converged"]
+    assert halved["load_steps"] == fine["load_steps"] == 4 and len(halved["steps"]) == 4
+    assert [r["strain"] for r in halved["steps"]] == pytest.approx([0.0025, 0.005, 0.0075, 0.01], rel=SAME_STEPS_RTOL)
+    assert halved["force_n_per_m"] == pytest.approx(fine["force_n_per_m"], rel=SAME_STEPS_RTOL)
+    # It also paid for the two long steps it tried first.
+    assert halved["iterations"] > fine["iterations"] and halved["friction_passes"] > fine["friction_passes"]
+
+
+# Two pulls through the same load steps differ in their targets' last bits only (0.5 (0.005 +
+# 0.01) against 3 × 0.01 / 4): round-off, a few ulps of the strains and what follows from them.
+SAME_STEPS_RTOL = 1e-9
 
 
 def _power_law_curve(strains, steps: bool, exponent: float = 1.7, scale: float = 3e4):

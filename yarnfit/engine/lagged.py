@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable, TypeVar
 
 import numpy as np
 
@@ -15,7 +16,8 @@ from .friction import FrictionAnchors, anchor_contacts
 from .quasistatic import QuasiStaticResult, QuasiStaticSolver
 from .state import RodState
 
-__all__ = ["FRICTION_STRAIN_STEP", "LAG_TOLERANCE", "MAX_LAG_PASSES", "LaggedSolve", "lagged_solve", "load_step_count"]
+__all__ = ["FRICTION_STRAIN_STEP", "LAG_TOLERANCE", "MAX_LAG_PASSES", "STEP_HALVINGS", "LaggedSolve", "in_halves",
+           "lagged_solve", "load_step_count"]
 
 
 @dataclass(frozen=True)
@@ -104,6 +106,40 @@ def lagged_solve(solver: QuasiStaticSolver, guess: RodState, reference: np.ndarr
         if change < tolerance or passes >= max_passes or coefficient == 0.0:
             return LaggedSolve(result, anchors, change < tolerance, passes, iterations, change)
         anchors, guess, contacts = updated, result.state, result.contacts
+
+
+# A frictional load step that does not converge or settle is taken again in two halves, each
+# halved again, this many times at most (down to a quarter step: 0.125 % of FRICTION_STRAIN_STEP's
+# 0.5 %). A step charges its whole slip against normal forces taken from its end, and a long step's
+# passes can cycle between two sets of them (polyester jersey's biaxial loading path at 31.5 %:
+# anchored totals 4.756 and 4.866 N for twenty passes) or climb without settling (wool jersey's weft
+# compression at 1 %); shorter steps settle both (docs/design.md §5, "Passes that cycle"). A
+# quarter step that still fails is a jam (cotton jersey's compression beyond 7 %: no step
+# converges there even at 0.1 %).
+STEP_HALVINGS = 2
+
+Step = TypeVar("Step")
+
+
+def in_halves(take: Callable[[object, float, float], Step], accepted: Callable[[Step], bool],
+              end: Callable[[Step], object], start: object, low: float, high: float,
+              halvings: int = STEP_HALVINGS) -> tuple[list[Step], list[Step]]:
+    """A load step from ``start`` (the path's state at the load ``low``) to ``high``:
+    ``take(start, low, high)``, and when that step is not ``accepted``, two halves instead, each
+    taken the same way with one halving fewer (the second from ``end(first)``, the state the first
+    reached). Returns ``(path, tried)``: the steps that carry the path towards ``high``, each from
+    the last one's end (the full step alone when its first half failed too; ending on the failed
+    one when a later half failed), and every step taken, in order (their work is all spent)."""
+    step = take(start, low, high)
+    if accepted(step) or halvings <= 0:
+        return [step], [step]
+    middle = 0.5 * (low + high)
+    first, tried = in_halves(take, accepted, end, start, low, middle, halvings - 1)
+    tried = [step] + tried
+    if not accepted(first[-1]):
+        return [step], tried
+    second, more = in_halves(take, accepted, end, end(first[-1]), middle, high, halvings - 1)
+    return first + second, tried + more
 
 
 def load_step_count(start: float, end: float, largest: float) -> int:

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..engine import ConvergenceWarning, QuasiStaticOptions
 from ..engine.contact import TilingReachError
-from ..engine.lagged import FRICTION_STRAIN_STEP
+from ..engine.lagged import FRICTION_STRAIN_STEP, in_halves
 from ..relax import RelaxedRepeat
 from ..samples import OTHER_BIAS_FAMILIES, Family, Group, SampleResult, SampleSpec, stretch_share
 from .equilibrium import MAX_ITERATIONS, _solve_from
@@ -49,14 +49,6 @@ __all__ = ["loading_path_samples"]
 # Two magnitudes of a path count as the same sample when closer than this (a sample's parameter
 # is also a step's end; round-off of the grid).
 PARAMETER_MATCH = 1e-12
-# A fixed path's step that does not converge or settle is taken again in two halves, each halved
-# again, this many times at most (down to a quarter step, 0.125 %). Lagged friction charges a step's
-# whole slip against normal forces taken from its end, and a long step's passes can cycle between
-# two sets of them (polyester jersey's biaxial 0.5 % step at 31.5 %: totals 4.756 and 4.866 N for
-# twenty passes) or climb without settling (wool jersey's weft compression at 1 %); shorter steps
-# settle both, so their fits keep every sample (93 of 93, against 92). A quarter step that still
-# fails is a jam (cotton jersey's compression beyond 7 %: no step converges there at 0.1 %).
-STEP_HALVINGS = 2
 
 
 def _path_grid(magnitudes: Sequence[float], strain_step: float) -> list[float]:
@@ -144,8 +136,8 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
                 options: QuasiStaticOptions) -> list[SampleResult]:
     """One sample per step of ``grid`` (magnitudes) of a family without free strains: each a
     lagged frictional step at the family's form (:func:`_frictional_step`, one solve a pass), taken
-    in halves when it does not converge or settle (:data:`STEP_HALVINGS`), its work the yarns'
-    energy there plus the friction's dissipation so far. A step that fails even so ends the path:
+    in halves when it does not converge or settle (:func:`~yarnfit.engine.lagged.in_halves`), its
+    work the yarns' energy there plus the friction's dissipation so far. A step that fails even so ends the path:
     it is not converged and the larger ones are unsolved."""
     flat = np.zeros((2, 2))
     state = _rest(relaxed, options)
@@ -169,26 +161,13 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
     def dissipation(step) -> float:
         return step.trial.anchors.energy_gradient(step.trial.result.state.node_position)[0] / step.trial.tiled.area
 
-    def stepped(start: _Trial, low: float, high: float, halvings: int):
-        """The steps from ``start`` at ``low`` to ``high``: one, or (when it does not converge or
-        settle) two halves, each halved again up to ``halvings`` times. Returns the last step,
-        the dissipation of the steps before it and the Newton iterations of every step tried."""
-        step = lagged_step(start, high)
-        if (step.converged and step.settled) or halvings == 0:
-            return step, 0.0, step.iterations
-        middle = 0.5 * (low + high)
-        first, before, spent = stepped(start, low, middle, halvings - 1)
-        spent += step.iterations
-        if first.trial.result is None or not (first.converged and first.settled):
-            return step, 0.0, spent
-        second, more, extra = stepped(first.trial, middle, high, halvings - 1)
-        return second, before + dissipation(first) + more, spent + extra
-
     for reached, magnitude in enumerate(grid):
         clock = time.perf_counter()
         form = family.deformation(sign * magnitude)[0]
-        step, dissipated_before, iterations = stepped(state, previous, magnitude, STEP_HALVINGS)
-        previous = magnitude
+        path, tried = in_halves(lambda start, low, high: lagged_step(start, high),
+                                lambda step: step.trial.result is not None and step.converged and step.settled,
+                                lambda step: step.trial, state, previous, magnitude)
+        step, iterations, previous = path[-1], sum(s.iterations for s in tried), magnitude
         trial, result = step.trial, step.trial.result
         if result is None:
             # Its solves left the tiles mapped (a jam's yarns pushed past one another under
@@ -198,7 +177,7 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
                                                  time.perf_counter() - clock))
             samples += [SampleResult.unsolved(SampleSpec.at(family, sign * m), 0, 0.0) for m in grid[reached + 1:]]
             break
-        dissipated += dissipated_before + dissipation(step)
+        dissipated += sum(dissipation(s) for s in path)
         state = trial
         converged = bool(step.converged and step.settled)
         samples.append(SampleResult(

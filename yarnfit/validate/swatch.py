@@ -109,6 +109,7 @@ from ..checks import positive_number
 from ..engine import (
     ConvergenceWarning,
     QuasiStaticOptions,
+    QuasiStaticResult,
     QuasiStaticSolver,
     Rod,
     RodMaterial,
@@ -117,7 +118,8 @@ from ..engine import (
     RodState,
     energy_gradient,
 )
-from ..engine.lagged import FRICTION_STRAIN_STEP, lagged_solve, load_step_count
+from ..engine.contact_lagrangian import ContactSet
+from ..engine.lagged import FRICTION_STRAIN_STEP, STEP_HALVINGS, LaggedSolve, in_halves, lagged_solve, load_step_count
 from ..engine.rotations import as_frames, as_rotations, quaternion_between
 from ..engine.tiling import YarnPiece, cut_rectangle
 from ..jsonfile import finite_or_none
@@ -319,8 +321,9 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     quarter of the strip width) is the half-length of the mid-length slab the width is measured
     in (:func:`~yarnfit.validate.strip.extent_width`). ``friction`` μ > 0: Coulomb friction at the
     yarn contacts, each strain reached from the last in equal lagged frictional load steps of at most ``strain_step``
-    (:data:`FRICTION_STRAIN_STEP`; :func:`yarnfit.engine.lagged.lagged_solve`; a point's
-    ``load_steps`` says how many, its ``iterations``, ``friction_passes`` and ``seconds`` count
+    (:data:`FRICTION_STRAIN_STEP`; :func:`yarnfit.engine.lagged.lagged_solve`), a step that does not
+    converge or settle taken in halves (:func:`yarnfit.engine.lagged.in_halves`; a point's
+    ``load_steps`` says how many steps it took, the halves counted, its ``iterations``, ``friction_passes`` and ``seconds`` count
     all of them, ``slowest_step_seconds`` is the longest one's time, and it is converged only if
     every step converged and its normal forces settled). Returns a JSON-able dict (see the module
     docstring)."""
@@ -352,40 +355,38 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     for k, strain in enumerate(strains, start=1):
         start = time.perf_counter()
         steps = load_step_count(previous, strain, strain_step) if friction > 0.0 else 1
-        iterations, passes, settled, converged, reached, slowest = 0, 0, True, True, previous, 0.0
+        iterations, passes, settled, converged, slowest = 0, 0, True, True, 0.0
         step_readings = []
         for j in range(1, steps + 1):
             step_start = time.perf_counter()
+            low = previous + (strain - previous) * (j - 1) / steps
             target = strain if j == steps else previous + (strain - previous) * j / steps
-            guess = _stretched_guess(swatch, state, target, reached)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ConvergenceWarning)
-                if friction > 0.0:
-                    lagged = lagged_solve(solver, guess, state.node_position, friction,
-                                          anchors_from=None if contacts is None else (state.node_position, contacts))
-                    result = lagged.result
-                    passes += lagged.passes
-                    settled &= lagged.settled
-                    iterations += lagged.iterations
-                else:
-                    # One solve per strain, and a large one: it keeps the penalties the last strain
-                    # stiffened (ContactSet.with_base_penalties says why frictional steps do not).
-                    lagged, result = None, solver.solve(guess, contacts=contacts)
-                    iterations += result.iterations
-            converged &= bool(result.converged)
-            state, contacts, reached = result.state, result.contacts, target
+                # A frictional step that does not converge or settle is taken in halves (a
+                # frictionless strain is one solve, with no path to divide).
+                path, tried = in_halves(lambda begin, low, high: _swatch_step(swatch, solver, begin, low, high, friction),
+                                        _SwatchStep.accepted, _SwatchStep.end, (state, contacts), low, target,
+                                        STEP_HALVINGS if friction > 0.0 else 0)
+            iterations += sum(step.iterations for step in tried)
+            passes += sum(step.passes for step in tried)
+            for step in path:
+                result, lagged = step.result, step.lagged
+                converged &= bool(result.converged)
+                settled &= lagged is None or bool(lagged.settled)
+                state, contacts = result.state, result.contacts
+                # The middle's reading after every step; the level's point is its last step's.
+                cut = cut_forces(swatch, state, result.contacts, None if lagged is None else lagged.anchors)
+                width = mid_width(swatch, state.node_position)
+                step_readings.append({
+                    "strain": step.strain,
+                    "mid_strain": finite_or_none(mid_strain(swatch, state.node_position)),
+                    "middle_force_n_per_m": float(cut.middle.mean()) / (0.5 * swatch.width),
+                    "middle_compression_ratio": finite_or_none(middle_compression(swatch, state.node_position)),
+                    "compression_ratio": width / width0,
+                    "converged": step.accepted(),
+                })
             slowest = max(slowest, time.perf_counter() - step_start)
-            # The middle's reading after every step; the level's point is its last step's.
-            cut = cut_forces(swatch, state, result.contacts, None if lagged is None else lagged.anchors)
-            width = mid_width(swatch, state.node_position)
-            step_readings.append({
-                "strain": target,
-                "mid_strain": finite_or_none(mid_strain(swatch, state.node_position)),
-                "middle_force_n_per_m": float(cut.middle.mean()) / (0.5 * swatch.width),
-                "middle_compression_ratio": finite_or_none(middle_compression(swatch, state.node_position)),
-                "compression_ratio": width / width0,
-                "converged": bool(result.converged) and (lagged is None or bool(lagged.settled)),
-            })
         middle = step_readings[-1]
         _, rod_gradient, _ = energy_gradient(model, state)
         pull = float(result.reaction_force[swatch.moving, 0].sum())
@@ -411,7 +412,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "edge_draw_in_m": finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
             "converged": converged and settled,
             "iterations": int(iterations),
-            "load_steps": steps,
+            "load_steps": len(step_readings),
             "slowest_step_seconds": slowest,
             "friction_passes": None if lagged is None else passes,
             "friction_change": None if lagged is None else lagged.force_change,
@@ -431,11 +432,54 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                      f"{_ratio_text(point['middle_compression_ratio'])}), compression "
                      f"{point['compression_ratio']:.4f}, {'converged' if point['converged'] else 'NOT converged'} "
                      f"in {point['iterations']} iterations"
-                     f"{'' if lagged is None else f' over {steps} load steps and {passes} friction passes'} "
+                     f"{'' if lagged is None else f' over {len(step_readings)} load steps and {passes} friction passes'} "
                      f"({point['seconds']:.1f} s; {r})")
         if on_step is not None:
             on_step(k, strain, state.node_position, point)
     return swatch_curve(swatch, points)
+
+
+@dataclass(frozen=True)
+class _SwatchStep:
+    """One load step of a pull (:func:`stretch_swatch`): the strain it reached, its last solve's
+    result, its lagged solve (``None`` without friction)."""
+
+    strain: float
+    result: QuasiStaticResult
+    lagged: LaggedSolve | None
+
+    def accepted(self) -> bool:
+        """Converged, and with friction its normal forces settled."""
+        return bool(self.result.converged) and (self.lagged is None or bool(self.lagged.settled))
+
+    def end(self) -> tuple[RodState, ContactSet]:
+        """Where the next step starts: the state reached and its contacts."""
+        return self.result.state, self.result.contacts
+
+    @property
+    def iterations(self) -> int:
+        return self.result.iterations if self.lagged is None else self.lagged.iterations
+
+    @property
+    def passes(self) -> int:
+        return 0 if self.lagged is None else self.lagged.passes
+
+
+def _swatch_step(swatch: Swatch, solver: QuasiStaticSolver, start: tuple[RodState, ContactSet | None], low: float,
+                 high: float, friction: float) -> _SwatchStep:
+    """The pull's load step from ``start`` (its state and contacts at the strain ``low``; no
+    contacts at the unloaded rest) to ``high``: one lagged frictional solve with friction μ
+    ``friction`` anchored at the start (:func:`~yarnfit.engine.lagged.lagged_solve`), one solve
+    without."""
+    state, contacts = start
+    guess = _stretched_guess(swatch, state, high, low)
+    if friction > 0.0:
+        lagged = lagged_solve(solver, guess, state.node_position, friction,
+                              anchors_from=None if contacts is None else (state.node_position, contacts))
+        return _SwatchStep(high, lagged.result, lagged)
+    # One solve per strain, and a large one: it keeps the penalties the last strain stiffened
+    # (ContactSet.with_base_penalties says why frictional steps do not).
+    return _SwatchStep(high, solver.solve(guess, contacts=contacts), None)
 
 
 def swatch_curve(swatch: Swatch, points: Sequence[dict]) -> dict:
