@@ -137,8 +137,8 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
     """One sample per step of ``grid`` (magnitudes) of a family without free strains: each a
     lagged frictional step at the family's form (:func:`_frictional_step`, one solve a pass), taken
     in halves when it does not converge or settle (:func:`~yarnfit.engine.lagged.in_halves`), its
-    work the yarns' energy there plus the friction's dissipation so far. A step that fails even so ends the path:
-    it is not converged and the larger ones are unsolved."""
+    work the yarns' energy there plus the friction's dissipation so far. A step that fails even so
+    ends the path: it is not converged and the larger ones are unsolved."""
     flat = np.zeros((2, 2))
     state = _rest(relaxed, options)
     dissipated, samples, previous = 0.0, [], 0.0
