@@ -119,7 +119,8 @@ from ..engine import (
     energy_gradient,
 )
 from ..engine.contact_lagrangian import ContactSet
-from ..engine.lagged import FRICTION_STRAIN_STEP, STEP_HALVINGS, LaggedSolve, in_halves, lagged_solve, load_step_count
+from ..engine.lagged import (FRICTION_STRAIN_STEP, STEP_HALVINGS, LaggedSolve, in_halves, lagged_solve,
+                             load_step_count)
 from ..engine.rotations import as_frames, as_rotations, quaternion_between
 from ..engine.tiling import YarnPiece, cut_rectangle
 from ..jsonfile import finite_or_none
@@ -320,10 +321,11 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     each solve (k = 0 for the unstrained state, then 1, 2, ...). ``width_band`` (m, default a
     quarter of the strip width) is the half-length of the mid-length slab the width is measured
     in (:func:`~yarnfit.validate.strip.extent_width`). ``friction`` μ > 0: Coulomb friction at the
-    yarn contacts, each strain reached from the last in equal lagged frictional load steps of at most ``strain_step``
-    (:data:`FRICTION_STRAIN_STEP`; :func:`yarnfit.engine.lagged.lagged_solve`), a step that does not
-    converge or settle taken in halves (:func:`yarnfit.engine.lagged.in_halves`; a point's
-    ``load_steps`` says how many steps it took, the halves counted, its ``iterations``, ``friction_passes`` and ``seconds`` count
+    yarn contacts, each strain reached from the last in equal lagged frictional load steps of at
+    most ``strain_step`` (:data:`FRICTION_STRAIN_STEP`; :func:`yarnfit.engine.lagged.lagged_solve`),
+    a step that does not converge or settle taken in halves
+    (:func:`yarnfit.engine.lagged.in_halves`; a point's ``load_steps`` says how many steps it took,
+    the halves counted, its ``iterations``, ``friction_passes`` and ``seconds`` count
     all of them, ``slowest_step_seconds`` is the longest one's time, and it is converged only if
     every step converged and its normal forces settled). Returns a JSON-able dict (see the module
     docstring)."""
@@ -352,6 +354,10 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         on_step(0, 0.0, rest, points[0])
     previous = 0.0
     contacts = None
+
+    def take(begin, low, high):
+        return _swatch_step(swatch, solver, begin, low, high, friction)
+
     for k, strain in enumerate(strains, start=1):
         start = time.perf_counter()
         steps = load_step_count(previous, strain, strain_step) if friction > 0.0 else 1
@@ -365,8 +371,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                 warnings.simplefilter("ignore", ConvergenceWarning)
                 # A frictional step that does not converge or settle is taken in halves (a
                 # frictionless strain is one solve, with no path to divide).
-                path, tried = in_halves(lambda begin, low, high: _swatch_step(swatch, solver, begin, low, high, friction),
-                                        _SwatchStep.accepted, _SwatchStep.end, (state, contacts), low, target,
+                path, tried = in_halves(take, _SwatchStep.accepted, _SwatchStep.end, (state, contacts), low, target,
                                         STEP_HALVINGS if friction > 0.0 else 0)
             iterations += sum(step.iterations for step in tried)
             passes += sum(step.passes for step in tried)
