@@ -45,7 +45,7 @@ from ..engine import ConvergenceWarning, QuasiStaticOptions, QuasiStaticResult, 
 from ..engine.contact import TilingReachError
 from ..engine.contact_lagrangian import ContactSet
 from ..engine.friction import FrictionAnchors, anchor_contacts
-from ..engine.lagged import FRICTION_STRAIN_STEP, LAG_TOLERANCE, MAX_LAG_PASSES, load_step_count
+from ..engine.lagged import FRICTION_STRAIN_STEP, LAG_TOLERANCE, MAX_LAG_PASSES, in_halves, load_step_count
 from ..relax import RelaxedRepeat
 from .bias import BIAS_ANGLE, _search_bias
 from .equilibrium import MAX_ITERATIONS, _axis_change, _green_slope, _solve_from
@@ -189,6 +189,22 @@ class _Step:
     iterations: int
 
 
+@dataclass(frozen=True)
+class _PullStep:
+    """A load step of a periodic pull (:func:`_frictional_path`) and the strain it pulled to."""
+
+    step: _Step
+    strain: float
+
+    def accepted(self) -> bool:
+        """Its last pass's search converged and the normal forces settled."""
+        return self.step.converged and self.step.settled
+
+    def end(self) -> _Trial:
+        """Where the next step starts."""
+        return self.step.trial
+
+
 def _rest(relaxed: RelaxedRepeat, options: QuasiStaticOptions, free=0.0) -> _Trial:
     """The undeformed repeat solved frictionless, at free strains ``free`` (0): every frictional
     path's start. Its convergence is judged with the path's first sample."""
@@ -330,6 +346,20 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
     state = _rest(relaxed, options, free)
     rest = state.result
     pulls, reached, change, dissipated = [], 0.0, None, 0.0
+
+    def take(start: _Trial, low: float, high: float) -> _PullStep:
+        """A load step from ``start`` at the strain ``low`` to ``high``. The free strains change
+        per step about as they did in the last one taken; the first step tries the width it starts
+        at (where nothing holds the width, it stays) and probes a woven's Poisson ratio."""
+        nonlocal change
+        step_green = 0.5 * ((1.0 + high) ** 2 - (1.0 + low) ** 2)
+        predicted = 0.0 * np.asarray(free) if change is None else change * step_green
+        probe = max(FREE_STRAIN_PROBE, float(np.max(np.abs(predicted))), abs(FREE_STRAIN_GUESS * step_green))
+        step = _frictional_step(search(1.0 + high), start, coefficient, start.free + predicted, probe)
+        if step.converged and step.settled:
+            change = np.subtract(step.trial.free, start.free) / step_green
+        return _PullStep(step, high)
+
     for strain in strains:
         clock = time.perf_counter()
         if pulls and reached != pulls[-1].strain:
@@ -340,28 +370,26 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
         converged, iterations, begin = bool(rest.converged) if not pulls else True, 0, reached
         for j in range(1, steps + 1):
             target = strain if j == steps else begin + (strain - begin) * j / steps
-            step_green = 0.5 * ((1.0 + target) ** 2 - (1.0 + reached) ** 2)
-            # The free strains change per step about as they did in the last one; the first step
-            # tries the width it starts at (where nothing holds the width, it stays) and probes a
-            # woven's Poisson ratio.
-            predicted = 0.0 * np.asarray(free) if change is None else change * step_green
-            probe = max(FREE_STRAIN_PROBE, float(np.max(np.abs(predicted))), abs(FREE_STRAIN_GUESS * step_green))
-            step = _frictional_step(search(1.0 + target), state, coefficient, state.free + predicted, probe)
-            converged &= step.converged and step.settled
-            iterations += step.iterations
-            if step.trial.result is None or not step.trial.result.converged:
+            # A step that does not converge or settle is taken in halves (engine.lagged.in_halves).
+            path, tried = in_halves(take, _PullStep.accepted, _PullStep.end, state, reached, target)
+            iterations += sum(taken.step.iterations for taken in tried)
+            for taken in path:
+                step = taken.step
+                converged &= step.converged and step.settled
+                if step.trial.result is None or not step.trial.result.converged:
+                    break
+                state, reached = step.trial, taken.strain
+                # The step's friction potential at its end is the work its friction dissipated: each
+                # anchor beyond its slip length ε pulls μ N along a slip of |u| − ε/3 (a step's slip is
+                # a straight line from its start, as the anchors measure it).
+                dissipated += state.anchors.energy_gradient(state.result.state.node_position)[0] / state.tiled.area
+                if progress is not None:
+                    progress(f"{direction} {100 * reached:.2f} %: free strains {np.round(state.free, 5)}, "
+                             f"{step.passes} passes, {step.iterations} iterations, "
+                             f"{'settled' if step.settled else 'not settled'}")
+            if reached != target:
                 converged = False
                 break
-            change = np.subtract(step.trial.free, state.free) / step_green
-            state, reached = step.trial, target
-            # The step's friction potential at its end is the work its friction dissipated: each
-            # anchor beyond its slip length ε pulls μ N along a slip of |u| − ε/3 (a step's slip is
-            # a straight line from its start, as the anchors measure it).
-            dissipated += state.anchors.energy_gradient(state.result.state.node_position)[0] / state.tiled.area
-            if progress is not None:
-                progress(f"{direction} {100 * target:.2f} %: free strains {np.round(state.free, 5)}, "
-                         f"{step.passes} passes, {step.iterations} iterations, "
-                         f"{'settled' if step.settled else 'not settled'}")
         stretch = 1.0 + strain
         if reached != strain:
             force, width, form, energy = math.nan, math.nan, None, math.nan
