@@ -361,7 +361,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     for k, strain in enumerate(strains, start=1):
         start = time.perf_counter()
         steps = load_step_count(previous, strain, strain_step) if friction > 0.0 else 1
-        iterations, passes, settled, converged, slowest = 0, 0, True, True, 0.0
+        iterations, passes, converged, slowest = 0, 0, True, 0.0
         step_readings = []
         for j in range(1, steps + 1):
             step_start = time.perf_counter()
@@ -377,8 +377,8 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             passes += sum(step.passes for step in tried)
             for step in path:
                 result, lagged = step.result, step.lagged
-                converged &= bool(result.converged)
-                settled &= lagged is None or bool(lagged.settled)
+                accepted = step.accepted()
+                converged &= accepted
                 state, contacts = result.state, result.contacts
                 # The middle's reading after every step; the level's point is its last step's.
                 cut = cut_forces(swatch, state, result.contacts, None if lagged is None else lagged.anchors)
@@ -389,7 +389,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                     "middle_force_n_per_m": float(cut.middle.mean()) / (0.5 * swatch.width),
                     "middle_compression_ratio": finite_or_none(middle_compression(swatch, state.node_position)),
                     "compression_ratio": width / width0,
-                    "converged": step.accepted(),
+                    "converged": accepted,
                 })
             slowest = max(slowest, time.perf_counter() - step_start)
         middle = step_readings[-1]
@@ -415,7 +415,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
             "width_m": width,
             "edge_draw_in_m": finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
-            "converged": converged and settled,
+            "converged": converged,
             "iterations": int(iterations),
             "load_steps": len(step_readings),
             "slowest_step_seconds": slowest,
