@@ -188,6 +188,10 @@ class _Step:
     passes: int
     iterations: int
 
+    def accepted(self) -> bool:
+        """Its last pass's search converged (so it has a solution) and the normal forces settled."""
+        return self.converged and self.settled
+
 
 @dataclass(frozen=True)
 class _PullStep:
@@ -197,8 +201,7 @@ class _PullStep:
     strain: float
 
     def accepted(self) -> bool:
-        """Its last pass's search converged and the normal forces settled."""
-        return self.step.converged and self.step.settled
+        return self.step.accepted()
 
     def end(self) -> _Trial:
         """Where the next step starts."""
@@ -356,7 +359,7 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
         predicted = 0.0 * np.asarray(free) if change is None else change * step_green
         probe = max(FREE_STRAIN_PROBE, float(np.max(np.abs(predicted))), abs(FREE_STRAIN_GUESS * step_green))
         step = _frictional_step(search(1.0 + high), start, coefficient, start.free + predicted, probe)
-        if step.converged and step.settled:
+        if step.accepted():
             change = np.subtract(step.trial.free, start.free) / step_green
         return _PullStep(step, high)
 
@@ -375,7 +378,7 @@ def _frictional_path(relaxed: RelaxedRepeat, direction: str, strains: Sequence[f
             iterations += sum(taken.step.iterations for taken in tried)
             for taken in path:
                 step = taken.step
-                converged &= step.converged and step.settled
+                converged &= step.accepted()
                 if step.trial.result is None or not step.trial.result.converged:
                     break
                 state, reached = step.trial, taken.strain

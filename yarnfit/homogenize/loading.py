@@ -165,7 +165,7 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
         clock = time.perf_counter()
         form = family.deformation(sign * magnitude)[0]
         path, tried = in_halves(lambda start, low, high: lagged_step(start, high),
-                                lambda step: step.trial.result is not None and step.converged and step.settled,
+                                lambda step: step.accepted(),
                                 lambda step: step.trial, state, previous, magnitude)
         step, iterations, previous = path[-1], sum(s.iterations for s in tried), magnitude
         trial, result = step.trial, step.trial.result
@@ -179,7 +179,7 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
             break
         dissipated += sum(dissipation(s) for s in path)
         state = trial
-        converged = bool(step.converged and step.settled)
+        converged = step.accepted()
         samples.append(SampleResult(
             spec=SampleSpec(family, form, flat, sign * magnitude),
             energy_density=result.energy.internal / trial.tiled.area + dissipated,
