@@ -272,6 +272,26 @@ def _without_plugin(spec):
     return bare
 
 
+def _timed_steps(model, steps: int, keep_every: int, name: str) -> tuple[float, list]:
+    """Step ``model`` from its initial state, 10 steps untimed then ``steps`` timed one call each
+    (the same loop for every variant compared), keeping ``(qpos, qvel)`` every ``keep_every``
+    steps: ``(ms per step, states)``. Warns on stderr if MuJoCo flagged a bad acceleration."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    mujoco.mj_step(model, data, nstep=10)
+    states = []
+    start = time.perf_counter()
+    for step in range(steps):
+        mujoco.mj_step(model, data)
+        if step % keep_every == 0:
+            states.append((data.qpos.copy(), data.qvel.copy()))
+    seconds = time.perf_counter() - start
+    if data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+        print(f"warning: {name} became unstable", file=sys.stderr)
+    return 1e3 * seconds / steps, states
+
+
 def bench_mujoco() -> None:
     """A 40×40 cloth as ``yarnfit export --scene cloth`` and ``--scene sphere`` write it (their
     integrator, Δt and solver), with the plugin and without it (the same scene, plugin removed), the
@@ -281,7 +301,7 @@ def bench_mujoco() -> None:
 
     import mujoco
 
-    from yarnfit.mujoco.scenes import SOLVER_ENUM, ClothMaterial, build_scene
+    from yarnfit.mujoco.scenes import SOLVER_ENUM, SOLVER_LABEL, ClothMaterial, build_scene
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from fabric_shell import FABRIC  # a realistic medium-weight woven
@@ -293,16 +313,9 @@ def bench_mujoco() -> None:
         steps = round(MUJOCO_BENCH_SECONDS / models["with"].opt.timestep)
         ms_per_step, states = {}, []
         for variant, model in models.items():
-            data = mujoco.MjData(model)
-            mujoco.mj_step(model, data, nstep=10)
-            start = time.perf_counter()
-            for step in range(steps):
-                mujoco.mj_step(model, data)
-                if variant == "with" and step % (steps // 10) == 0:
-                    states.append((data.qpos.copy(), data.qvel.copy()))
-            ms_per_step[variant] = 1e3 * (time.perf_counter() - start) / steps
-            if data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
-                print(f"warning: {scene} {variant} the plugin became unstable", file=sys.stderr)
+            ms_per_step[variant], kept = _timed_steps(model, steps, keep_every=steps // 10, name=f"{scene} {variant}")
+            if variant == "with":
+                states = kept
         passive_ms = {}
         for variant, model in models.items():
             data = mujoco.MjData(model)
@@ -318,7 +331,7 @@ def bench_mujoco() -> None:
         plugin_ms = passive_ms["with"] - passive_ms["without"]
         key = f"mujoco_{scene}_40x40"
         integrator = mujoco.mjtIntegrator(models["with"].opt.integrator).name.removeprefix("mjINT_").lower()
-        solver = mujoco.mjtSolver(models["with"].opt.solver).name.removeprefix("mjSOL_")
+        solver = SOLVER_LABEL[models["with"].opt.solver]
         info = f"{models['with'].opt.timestep:g} s step, {integrator}, {solver}"
         report(f"{key}_ms_per_step_with_plugin", ms_per_step["with"], f"ms ({info})")
         report(f"{key}_ms_per_step_without_plugin", ms_per_step["without"], "ms")
@@ -328,11 +341,7 @@ def bench_mujoco() -> None:
         # the cloth touches something).
         other = next(name for name, value in SOLVER_ENUM.items() if value != models["with"].opt.solver)
         model = build_scene(material, scene, resolution=40, solver=other).spec.compile()
-        data = mujoco.MjData(model)
-        mujoco.mj_step(model, data, nstep=10)
-        start = time.perf_counter()
-        mujoco.mj_step(model, data, nstep=steps)
-        other_ms = 1e3 * (time.perf_counter() - start) / steps
+        other_ms, _ = _timed_steps(model, steps, keep_every=steps // 10, name=f"{scene} {other}")
         report(f"{key}_ms_per_step_with_plugin_{other}", other_ms,
                f"ms ({other_ms / ms_per_step['with']:.2f}× the default's)")
 

@@ -613,13 +613,13 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def export_summary(built, material, output, args) -> str:
-    import mujoco
+    from .mujoco.scenes import SOLVER_LABEL
 
     spec = built.spec
     lines = [f"{material.name}: {built.scene} scene{' (isotropic fallback, no plugin)' if built.fallback else ''}, "
              f"{spec.flexes[0].name} flex of {len(spec.flexes[0].vertbody)} vertices, "
              f"{material.areal_density_kg_m2 * 1e3:.4g} g/m², {args.integrator} Δt = {args.timestep:g} s, "
-             f"{'CG' if spec.option.solver == mujoco.mjtSolver.mjSOL_CG else 'Newton'} solver"]
+             f"{SOLVER_LABEL[spec.option.solver]} solver"]
     if built.fallback:
         part = "elastic2d both: stretch and bending"
     elif args.implicit_share == "anisotropic":

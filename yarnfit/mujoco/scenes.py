@@ -88,8 +88,19 @@ DEFAULT_MAX_STRAIN = 0.1  # the pull actuator's range: 10 % engineering strain
 # MJCF integrator names (``yarnfit.mujoco.INTEGRATORS``) to MuJoCo's enum.
 INTEGRATOR_ENUM = {"discrete": mujoco.mjtIntegrator.mjINT_DISCRETE, "euler": mujoco.mjtIntegrator.mjINT_EULER,
                    "rk4": mujoco.mjtIntegrator.mjINT_RK4}
-# MJCF solver names (``yarnfit.mujoco.SOLVERS``) to MuJoCo's enum.
+# MJCF solver names (``yarnfit.mujoco.SOLVERS``) to MuJoCo's enum, and each enum's name as a
+# summary prints it.
 SOLVER_ENUM = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG}
+SOLVER_LABEL = {mujoco.mjtSolver.mjSOL_NEWTON: "Newton", mujoco.mjtSolver.mjSOL_CG: "CG"}
+
+
+def solver_enum(solver: str) -> mujoco.mjtSolver:
+    """MuJoCo's enum of the constraint solver named ``solver`` (one of :data:`SOLVERS`,
+    case-insensitive); ``ValueError`` naming the choices otherwise."""
+    key = str(solver).lower()
+    if key not in SOLVER_ENUM:
+        raise ValueError(f"unknown solver {solver!r}; solvers: {', '.join(SOLVERS)}")
+    return SOLVER_ENUM[key]
 # Collision radius of the flex (m): a few cloth thicknesses, small against the grid spacing
 # (12.8 mm at the defaults) so the cloth does not float visibly above what it lies on.
 FLEX_RADIUS = 2e-3
@@ -275,15 +286,13 @@ def build_scene(
     key = integrator.lower()
     if key not in INTEGRATOR_ENUM:
         raise ValueError(f"unknown integrator {integrator!r}; integrators: {', '.join(INTEGRATORS)}")
-    solver_key = DEFAULT_SOLVER[scene] if solver is None else str(solver).lower()
-    if solver_key not in SOLVER_ENUM:
-        raise ValueError(f"unknown solver {solver!r}; solvers: {', '.join(SOLVERS)}")
+    solver_code = solver_enum(DEFAULT_SOLVER[scene] if solver is None else solver)
 
     spec = mujoco.MjSpec()
     spec.modelname = f"yarnfit {scene}: {material.name}" + (" (isotropic fallback)" if fallback else "")
     spec.option.timestep = timestep
     spec.option.integrator = INTEGRATOR_ENUM[key]
-    spec.option.solver = SOLVER_ENUM[solver_key]
+    spec.option.solver = solver_code
     spec.worldbody.add_light(pos=[0, 0, 3 * size + 1], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     if scene == "stretch":
         layout = _strip(spec, material.shell, resolution, size, width, max_strain, mesh == "crisscross")

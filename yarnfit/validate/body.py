@@ -64,7 +64,7 @@ import trimesh
 from ..engine.rotations import quaternion_between, xyzw
 from ..mujoco import DEFAULT_DAMPING, DEFAULT_FRICTION
 from ..mujoco.garment import Garment, Panel, Seam, sew, use_pattern_rest
-from ..mujoco.scenes import SOLVER_ENUM, ClothMaterial, add_cloth_flex, compile_quietly
+from ..mujoco.scenes import ClothMaterial, add_cloth_flex, compile_quietly, solver_enum
 from ..record import Recording, folded_panels, markdown_table
 from . import OPTIONAL, SceneResult
 
@@ -234,12 +234,11 @@ def build_body_scene(material_shirt: ClothMaterial, material_pants: ClothMateria
     waistband on the pelvis where it starts. Returns the spec and, per
     garment, its :class:`~yarnfit.mujoco.garment.Garment`, vertex, triangle and seam-vertex
     counts. Compile it with :func:`compile_body_scene`."""
-    if solver not in SOLVER_ENUM:
-        raise ValueError(f"unknown solver {solver!r}; solvers: {', '.join(SOLVER_ENUM)}")
+    solver_code = solver_enum(solver)
     spec = mujoco.MjSpec.from_file(str(HUMANOID))
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
-    spec.option.solver = SOLVER_ENUM[solver]
+    spec.option.solver = solver_code
     spec.option.tolerance = tolerance
     spec.worldbody.add_light(pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     garments = {}

@@ -68,8 +68,8 @@ import rerun.blueprint as rrb
 from scipy.signal import find_peaks
 
 from ..mujoco import DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_SOLVER, DEFAULT_TIMESTEP
-from ..mujoco.scenes import (FLEX_RADIUS, INTEGRATOR_ENUM, SOLVER_ENUM, ClothMaterial, add_cloth_flex,
-                             build_scene, compile_quietly, disc_mesh)
+from ..mujoco.scenes import (FLEX_RADIUS, INTEGRATOR_ENUM, ClothMaterial, add_cloth_flex, build_scene,
+                             compile_quietly, disc_mesh, solver_enum)
 from ..record import Recording, markdown_table
 from . import DRAPES, NOT_SUMMARISED, OPTIONAL, SceneResult
 
@@ -395,7 +395,7 @@ def cusick_spec(material: ClothMaterial, cell: float):
     spec.modelname = f"yarnfit cusick: {material.name}"
     spec.option.timestep = DEFAULT_TIMESTEP
     spec.option.integrator = INTEGRATOR_ENUM[DEFAULT_INTEGRATOR]
-    spec.option.solver = SOLVER_ENUM[DEFAULT_SOLVER["sphere"]]  # a drape on contact, as the sphere
+    spec.option.solver = solver_enum(DEFAULT_SOLVER["sphere"])  # a drape on contact, as the sphere
     spec.worldbody.add_light(pos=[0, 0, 3 * CUSICK_HEIGHT + 1], dir=[0, 0, -1],
                              type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     friction = [DEFAULT_FRICTION, 0.005, 0.0001]
