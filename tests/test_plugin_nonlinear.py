@@ -196,6 +196,9 @@ FORCE_CASES = {
     "shear ridge alone": ((RIDGES[5],), MATERIAL, 0.0),
     "semi-definite base": (RIDGES, SEMIDEFINITE, 0.4),
     "softening ridges": (SOFTENING, MATERIAL, 0.4),
+    # The plugin groups ridges by direction and sorts their knots: given out of order, two along
+    # one direction at the same knot, another direction in between.
+    "ridges out of knot order": ((SOFTENING[3], SOFTENING[1], RIDGES[0], SOFTENING[2], SOFTENING[0]), MATERIAL, 0.4),
 }
 
 

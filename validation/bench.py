@@ -292,6 +292,23 @@ def _timed_steps(model, steps: int, keep_every: int, name: str) -> tuple[float, 
     return 1e3 * seconds / steps, states
 
 
+def _passive_ms(model, states: list) -> float:
+    """Mean wall time (ms) of MuJoCo's passive forces (``mj_passive``, where the plugin computes) at
+    ``states`` (``(qpos, qvel)`` pairs), each after a forward pass, 20 calls a state."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    total = 0.0
+    for qpos, qvel in states:
+        data.qpos[:], data.qvel[:] = qpos, qvel
+        mujoco.mj_forward(model, data)
+        start = time.perf_counter()
+        for _ in range(20):
+            mujoco.mj_passive(model, data)
+        total += (time.perf_counter() - start) / 20
+    return 1e3 * total / len(states)
+
+
 def bench_mujoco() -> None:
     """A 40×40 cloth as ``yarnfit export --scene cloth`` and ``--scene sphere`` write it (their
     integrator, Δt and solver), with the plugin and without it (the same scene, plugin removed), the
@@ -316,19 +333,7 @@ def bench_mujoco() -> None:
             ms_per_step[variant], kept = _timed_steps(model, steps, keep_every=steps // 10, name=f"{scene} {variant}")
             if variant == "with":
                 states = kept
-        passive_ms = {}
-        for variant, model in models.items():
-            data = mujoco.MjData(model)
-            total = 0.0
-            for qpos, qvel in states:
-                data.qpos[:], data.qvel[:] = qpos, qvel
-                mujoco.mj_forward(model, data)
-                start = time.perf_counter()
-                for _ in range(20):
-                    mujoco.mj_passive(model, data)
-                total += (time.perf_counter() - start) / 20
-            passive_ms[variant] = 1e3 * total / len(states)
-        plugin_ms = passive_ms["with"] - passive_ms["without"]
+        plugin_ms = _passive_ms(models["with"], states) - _passive_ms(models["without"], states)
         key = f"mujoco_{scene}_40x40"
         integrator = mujoco.mjtIntegrator(models["with"].opt.integrator).name.removeprefix("mjINT_").lower()
         solver = SOLVER_LABEL[models["with"].opt.solver]
@@ -344,6 +349,55 @@ def bench_mujoco() -> None:
         other_ms, _ = _timed_steps(model, steps, keep_every=steps // 10, name=f"{scene} {other}")
         report(f"{key}_ms_per_step_with_plugin_{other}", other_ms,
                f"ms ({other_ms / ms_per_step['with']:.2f}× the default's)")
+
+
+# -- plugin_ridges -------------------------------------------------------------------------------
+
+# The splits the plugin's ridge cost is measured under: the export's default and the drapes'
+# (yarnfit.validate.drape: criss-cross cells, triangle strains, the anisotropic share, the drag
+# given back, whose returned metric follows the ridges engaged in each triangle).
+RIDGE_BENCH_SPLITS = {
+    "export": {},
+    "drapes": {"mesh": "crisscross", "membrane": "triangle", "implicit_share": "anisotropic",
+               "implicit_drag": "critical"},
+}
+
+
+def bench_plugin_ridges() -> None:
+    """What a fitted strain-stiffening membrane costs the plugin: the cotton twill fitted as
+    ``yarnfit fit`` fits it (its ridges, and the directions they lie along), hung as a 40 × 40 cloth
+    (``--scene cloth``) under the export's split and the drapes', stepped 0.5 s with the plugin and
+    without it; the plugin's own compute per step (mj_passive with it less without it, as section
+    ``mujoco``) with the fit's ridge membrane and with its linear membrane (``--linear``)."""
+    import tempfile
+    import warnings
+    from pathlib import Path
+
+    import numpy as np
+
+    from yarnfit.fabric import Fabric
+    from yarnfit.fabric_fit import fit_fabric
+    from yarnfit.mujoco.scenes import ClothMaterial, build_scene
+
+    with warnings.catch_warnings(), tempfile.TemporaryDirectory() as folder:
+        warnings.simplefilter("ignore")
+        fitted = fit_fabric(Fabric.preset("cotton-twill"))
+        path = Path(folder) / "cotton-twill.json"
+        fitted.write(path)
+        ridges = np.array(fitted.material.nonlinear.ridges, dtype=float).reshape(-1, 5)
+        report("plugin_ridges_cotton_twill_ridges", len(ridges), "ridges")
+        report("plugin_ridges_cotton_twill_directions", len(np.unique(ridges[:, :3], axis=0)), "directions")
+        for split_name, split in RIDGE_BENCH_SPLITS.items():
+            for membrane, linear in (("ridges", False), ("linear", True)):
+                material = ClothMaterial.from_file(path, None, linear=linear)
+                built = build_scene(material, "cloth", resolution=40, **split)
+                with_plugin, without = built.spec.compile(), _without_plugin(built.spec).compile()
+                steps = round(MUJOCO_BENCH_SECONDS / with_plugin.opt.timestep)
+                ms, states = _timed_steps(with_plugin, steps, keep_every=steps // 10, name=f"{split_name} {membrane}")
+                plugin_ms = _passive_ms(with_plugin, states) - _passive_ms(without, states)
+                key = f"plugin_ridges_{split_name}_split_{membrane}"
+                report(f"{key}_ms_per_step", ms, "ms (40 x 40 cloth, one core)")
+                report(f"{key}_plugin_compute_ms", plugin_ms, "ms per step")
 
 
 # -- plugin_nonlinear_stable_step -----------------------------------------------------------------
@@ -793,7 +847,7 @@ def bench_suite() -> None:
                total["side_by_side"] / total["one_after_another"], "x")
 
 
-SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco,
+SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco, "plugin_ridges": bench_plugin_ridges,
             "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step, "swatch": bench_swatch,
             "swatch_frictionless": lambda: bench_swatch(friction=False),
             "drape_stable_step": bench_drape_stable_step, "body": bench_body, "shell_strip": bench_shell_strip,
