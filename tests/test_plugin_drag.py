@@ -110,6 +110,26 @@ def test_the_returned_drag_is_its_formula(ridges):
         np.testing.assert_allclose(returned, expected, rtol=0, atol=ROUND_OFF_RTOL * np.abs(expected).max())
 
 
+def test_the_returned_drag_follows_strains_back_and_forth():
+    """One MjData taken through strained states and back (A, B, A, C, B, A): the plugin keeps each
+    triangle's returned metric while its engaged ridges stay the same and builds it anew when they
+    change (its signature of them, engaged_ridges); at every state the formula holds."""
+    full = mujoco.MjModel.from_xml_string(drag_scene(SOFT_SHEAR, drag="full", ridges=RIDGES))
+    critical = mujoco.MjModel.from_xml_string(drag_scene(SOFT_SHEAR, ridges=RIDGES))
+    rng = np.random.default_rng(13)
+    qvel = rng.standard_normal(full.nv)
+    states = [full.qpos0 + 0.005 * rng.standard_normal(full.nq) for _ in range(3)]
+    data = mujoco.MjData(critical)
+    for index in (0, 1, 0, 2, 1, 0):
+        a = forward(full, states[index], qvel)
+        data.qpos[:], data.qvel[:] = states[index], qvel
+        mujoco.mj_forward(critical, data)
+        returned = vertex_forces(critical, data.qfrc_passive - a.qfrc_passive)
+        velocity = vertex_forces(critical, qvel)
+        expected = returned_drag_reference(critical, SOFT_SHEAR, data.flexvert_xpos, velocity, RIDGES)
+        np.testing.assert_allclose(returned, expected, rtol=0, atol=ROUND_OFF_RTOL * np.abs(expected).max())
+
+
 def test_a_negligible_material_keeps_the_least_drag_of_mujocos():
     """Where the material is 1e-9 of the built-in share (2 sqrt(r) ~ 6e-5), every mode keeps the
     least share, 2 %, of MuJoCo's drag: the step's velocity term (its qacc with a velocity less at
