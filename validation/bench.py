@@ -1,7 +1,7 @@
 """Benchmarks of yarnfit, one section per stage.
 
-    python validation/bench.py [engine] [relax] [fit] [mujoco] [plugin_nonlinear_stable_step] [swatch]
-                               [swatch_frictionless] [drape_stable_step] [body] [shell_strip] [suite]
+    python validation/bench.py [engine] [relax] [fit] [mujoco] [plugin_ridges] [plugin_nonlinear_stable_step]
+                               [swatch] [swatch_frictionless] [drape_stable_step] [body] [shell_strip] [suite]
 
 prints one ``name: value unit`` line per figure. Numba kernels are compiled (or loaded from the
 on-disk cache) before anything is timed.
@@ -847,7 +847,8 @@ def bench_suite() -> None:
                total["side_by_side"] / total["one_after_another"], "x")
 
 
-SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco, "plugin_ridges": bench_plugin_ridges,
+SECTIONS = {"engine": bench_engine, "relax": bench_relax, "fit": bench_fit, "mujoco": bench_mujoco,
+            "plugin_ridges": bench_plugin_ridges,
             "plugin_nonlinear_stable_step": bench_plugin_nonlinear_stable_step, "swatch": bench_swatch,
             "swatch_frictionless": lambda: bench_swatch(friction=False),
             "drape_stable_step": bench_drape_stable_step, "body": bench_body, "shell_strip": bench_shell_strip,
