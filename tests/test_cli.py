@@ -383,21 +383,21 @@ def test_show_opens_each_kind_of_file_with_its_viewer(tmp_path, monkeypatch):
     assert cli.main(["show", str(tmp_path / "other.json")]) == 2
 
 
-def test_the_export_help_names_the_splits_validate_runs():
-    """cli.DRAPE_SPLIT and cli.STRIP_SPLIT are literals (the parser is built without MuJoCo): they
-    must say what the drapes and the strips run."""
+def test_the_export_writes_the_splits_validate_runs():
+    """yarnfit.mujoco's DRAPES_SPLIT and STRIPS_SPLIT (literals: the parser is built without
+    MuJoCo) are what the drapes and the strips run, and what each scene is exported with; the
+    export's help names them."""
     from yarnfit import cli
-    from yarnfit.mujoco import DEFAULT_IMPLICIT_SHARE
+    from yarnfit.mujoco import DEFAULT_IMPLICIT_SHARE, DRAPES_SPLIT, EXPORT_SPLIT, STRIPS_SPLIT
     from yarnfit.validate import drape, stretch
 
-    def options(split):
-        words = split.split()
-        return dict(zip(words[::2], words[1::2]))
-
-    assert options(cli.DRAPE_SPLIT) == {"--mesh": drape.MESH, "--membrane": drape.MEMBRANE,
-                                        "--implicit-share": drape.IMPLICIT_SHARE,
-                                        "--implicit-drag": drape.IMPLICIT_DRAG}
-    assert options(cli.STRIP_SPLIT) == {"--mesh": stretch.MESH, "--membrane": stretch.MEMBRANE,
-                                        "--implicit-drag": stretch.IMPLICIT_DRAG}
-    assert DEFAULT_IMPLICIT_SHARE == "isotropic"  # the strips' share, left out of STRIP_SPLIT
+    assert DRAPES_SPLIT == {"mesh": drape.MESH, "membrane": drape.MEMBRANE, "implicit_share": drape.IMPLICIT_SHARE,
+                            "implicit_drag": drape.IMPLICIT_DRAG}
+    # The strips pass no share: the library's default, the isotropic one.
+    assert STRIPS_SPLIT == {"mesh": stretch.MESH, "membrane": stretch.MEMBRANE,
+                            "implicit_share": DEFAULT_IMPLICIT_SHARE, "implicit_drag": stretch.IMPLICIT_DRAG}
+    assert EXPORT_SPLIT == {"cloth": DRAPES_SPLIT, "stretch": STRIPS_SPLIT, "sphere": DRAPES_SPLIT,
+                            "wall": DRAPES_SPLIT}
+    text = " ".join(cli.build_parser()._subparsers._group_actions[0].choices["export"].description.split())
+    assert cli.split_options(DRAPES_SPLIT) in text and cli.split_options(STRIPS_SPLIT) in text
     assert (drape.SIZE, drape.RESOLUTION[False]) == (0.3, 25)  # "--size 0.3 --resolution 25" in the help

@@ -20,7 +20,7 @@ from yarnfit.mujoco import DEFAULT_SIZE, SCENES
 from yarnfit.mujoco.plugin import LIBRARY, PLUGIN_NAME
 from yarnfit.mujoco.run import run_scene
 from yarnfit.mujoco.scenes import (DEFAULT_STRIP_WIDTH, FLEX_RADIUS, VERTEX_CLASS, ClothMaterial, build_scene,
-                                   compile_quietly, export_scene, strip_columns)
+                                   compile_quietly, export_options, export_scene, strip_columns)
 from yarnfit.mujoco.split import (MJCF_DIGITS, POISSON_LIMIT, builtin_elasticity, builtin_isotropic,
                                   isotropic_fallback, isotropic_stiffness)
 from yarnfit.shell import RidgeMembrane, ShellMaterial
@@ -364,7 +364,9 @@ def test_cli_export_writes_a_scene_that_loads(material_file, tmp_path):
     out = yarnfit("export", str(material_file), "--scene", "wall", "--resolution", "6", "-o", str(path),
                   "--check", "0.05")
     assert out.returncode == 0, out.stderr
-    assert "built-in" in out.stdout and "stable" in out.stdout and "implicit_drag full" in out.stdout
+    # The wall is exported with the drapes' split unless told (yarnfit.mujoco.EXPORT_SPLIT).
+    assert "built-in" in out.stdout and "stable" in out.stdout and "implicit_drag critical" in out.stdout
+    assert "implicit_share anisotropic" in out.stdout and "triangle membrane strains on crisscross cells" in out.stdout
     # A fresh interpreter with nothing but `import mujoco`: our entry point registers the plugin.
     plain = subprocess.run([sys.executable, "-c", "import sys, mujoco; "
                             "print(mujoco.MjModel.from_xml_path(sys.argv[1]).nplugin)", str(path)],
@@ -372,16 +374,16 @@ def test_cli_export_writes_a_scene_that_loads(material_file, tmp_path):
     assert plain.returncode == 0 and plain.stdout.strip() == "1", plain.stderr
 
 
-def test_cli_export_writes_the_validated_drapes_split(material_file, tmp_path):
-    """The split `yarnfit validate` drapes with (the export's help names it, cli.DRAPE_SPLIT) is one
-    command away: criss-cross cells, triangle strains, the anisotropic share and the critical drag
-    reach the file, and the scene is the drapes' own to the vertex."""
-    from yarnfit.cli import DRAPE_SPLIT
+@pytest.mark.parametrize("options", [(), ("--mesh", "crisscross", "--membrane", "triangle", "--implicit-share",
+                                           "anisotropic", "--implicit-drag", "critical")])
+def test_cli_export_writes_the_validated_drapes_split(material_file, tmp_path, options):
+    """The split `yarnfit validate` drapes with (yarnfit.mujoco.DRAPES_SPLIT) is the sphere's by
+    default, and as options: criss-cross cells, triangle strains, the anisotropic share and the
+    critical drag reach the file, and the scene is the drapes' own to the vertex."""
     from yarnfit.validate import drape
 
     path = tmp_path / "sphere.xml"
-    out = yarnfit("export", str(material_file), "--scene", "sphere", "--resolution", "6", "-o", str(path),
-                  *DRAPE_SPLIT.split())
+    out = yarnfit("export", str(material_file), "--scene", "sphere", "--resolution", "6", "-o", str(path), *options)
     assert out.returncode == 0, out.stderr
     assert "triangle membrane strains" in out.stdout and "CG solver" in out.stdout
     config = mujoco.MjSpec.from_file(str(path)).plugins[0].config
@@ -545,9 +547,23 @@ def test_cli_export_with_the_anisotropic_share(material_file, tmp_path):
                             "mujoco.MjData(m); numpy.save(sys.argv[2], m.flex_stiffness)", str(path),
                             str(tmp_path / "metric.npy")], capture_output=True, text=True, timeout=60)
     assert plain.returncode == 0, plain.stderr
-    built = build_scene(ClothMaterial.from_file(material_file), "cloth", resolution=6, implicit_share="anisotropic")
+    built = build_scene(ClothMaterial.from_file(material_file), "cloth",
+                        **export_options("cloth", resolution=6, implicit_share="anisotropic"))
     model = built.spec.compile()
     np.testing.assert_array_equal(np.load(tmp_path / "metric.npy"), model.flex_stiffness)
+
+
+def test_export_options_fill_in_the_scenes_split_and_keep_what_is_given():
+    """export_options: each scene's EXPORT_SPLIT and EXPORT_RESOLUTION where nothing (or None) is
+    given, what is given kept; an unknown scene refused."""
+    from yarnfit.mujoco import DRAPES_SPLIT, EXPORT_RESOLUTION, STRIPS_SPLIT
+
+    assert export_options("sphere") == {"resolution": EXPORT_RESOLUTION["sphere"], **DRAPES_SPLIT}
+    assert export_options("stretch", mesh=None) == {"resolution": EXPORT_RESOLUTION["stretch"], **STRIPS_SPLIT}
+    given = export_options("cloth", resolution=12, mesh="grid", membrane="node", size=0.3)
+    assert given == {**DRAPES_SPLIT, "resolution": 12, "mesh": "grid", "membrane": "node", "size": 0.3}
+    with pytest.raises(ValueError, match="unknown scene 'bed'"):
+        export_options("bed")
 
 
 def test_each_scene_has_its_solver_and_the_file_keeps_it(material_file, tmp_path):

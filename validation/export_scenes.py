@@ -22,7 +22,7 @@ from yarnfit.fabric import PRESETS, Fabric
 from yarnfit.fabric_fit import fit_fabric
 from yarnfit.mujoco import DEFAULT_INTEGRATOR, DEFAULT_TIMESTEP, INTEGRATORS, SCENES
 from yarnfit.mujoco.run import run_scene
-from yarnfit.mujoco.scenes import ClothMaterial, export_scene
+from yarnfit.mujoco.scenes import ClothMaterial, export_options, export_scene
 
 
 def material_file(preset: str, folder: Path) -> Path:
@@ -61,8 +61,9 @@ def main(argv: list[str] | None = None) -> int:
             for fallback in variants:
                 variant = "fallback" if fallback else "split"
                 path = scenes_folder / f"{preset}-{scene}{'-fallback' if fallback else ''}.xml"
-                export_scene(material, scene, path, resolution=args.resolution, timestep=args.timestep,
-                             integrator=args.integrator, fallback=fallback)
+                # As `yarnfit export` writes the scene (its split and resolution unless given).
+                export_scene(material, scene, path, **export_options(scene, resolution=args.resolution),
+                             timestep=args.timestep, integrator=args.integrator, fallback=fallback)
                 report = run_scene(path, args.seconds)
                 unstable += not report.stable
                 result = "stable" if report.stable else (

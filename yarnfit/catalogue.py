@@ -251,9 +251,10 @@ def export_task(material_data: dict) -> str:
     compile."""
     import mujoco
 
-    from .mujoco.scenes import ClothMaterial, build_scene, compile_quietly, scene_mjcf
+    from .mujoco.scenes import ClothMaterial, build_scene, compile_quietly, export_options, scene_mjcf
 
-    text = scene_mjcf(build_scene(ClothMaterial.from_file(MaterialFile(material_data)), "cloth"))
+    material = ClothMaterial.from_file(MaterialFile(material_data))
+    text = scene_mjcf(build_scene(material, "cloth", **export_options("cloth")))
     compile_quietly(mujoco.MjSpec.from_string(text))
     return text
 

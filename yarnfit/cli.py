@@ -27,12 +27,11 @@ EXIT_FAILED = 1
 EXIT_USAGE = 2
 # What a shell reports for a program ended by SIGINT (128 + 2), so scripts see an interrupt.
 EXIT_INTERRUPTED = 130
-# The splits `yarnfit validate` runs its MuJoCo scenes with, as `yarnfit export` options, for its
-# help: the drapes' (yarnfit.validate.drape) and the strips' (yarnfit.validate.stretch, whose
-# built-in share also covers the stiffening up to the largest strain pulled). Literals, checked
-# against those modules by tests/test_cli.py: importing them would load MuJoCo to build the parser.
-DRAPE_SPLIT = "--mesh crisscross --membrane triangle --implicit-share anisotropic --implicit-drag critical"
-STRIP_SPLIT = "--mesh crisscross --membrane triangle --implicit-drag critical"
+
+
+def split_options(split: dict) -> str:
+    """A split (:data:`yarnfit.mujoco.DRAPES_SPLIT`, ``STRIPS_SPLIT``) as `yarnfit export` options."""
+    return " ".join(f"--{key.replace('_', '-')} {value}" for key, value in split.items())
 
 
 class UsageError(Exception):
@@ -114,10 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--figures", metavar="DIR",
                      help="where the fit's figures (PNG, SVG) and their tables (CSV) go (default: logs/<name>)")
 
-    from .mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_IMPLICIT_SHARE,
-                         DEFAULT_INTEGRATOR, DEFAULT_MEMBRANE, DEFAULT_MESH, DEFAULT_RESOLUTION, DEFAULT_SIZE,
-                         DEFAULT_SOLVER, DEFAULT_TIMESTEP, IMPLICIT_DRAGS, IMPLICIT_SHARES, INTEGRATORS, MEMBRANES,
-                         MESHES, SCENES, SOLVERS)
+    from .mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_SIZE, DEFAULT_SOLVER,
+                         DEFAULT_TIMESTEP, DRAPES_SPLIT, EXPORT_RESOLUTION, EXPORT_SPLIT, IMPLICIT_DRAGS,
+                         IMPLICIT_SHARES, INTEGRATORS, MEMBRANES, MESHES, SCENES, SOLVERS, STRIPS_SPLIT)
     from .validate import SCENES as VALIDATION_SCENES
 
     export = commands.add_parser(
@@ -129,13 +127,14 @@ def build_parser() -> argparse.ArgumentParser:
             "sphere) or wall (dropped across a wall's top edge). The flex carries MuJoCo's built-in isotropic "
             "elasticity (integrated implicitly under the discrete integrator) at least half as stiff as the material "
             "in every direction, which keeps the step stable; the yarnfit.shell plugin removes its forces exactly and "
-            "carries the whole material (by default on node-smoothed strains: no locking on any triangulation), "
-            "with the material's strain-stiffening membrane (--linear: the linear StVK membrane fitted from the same "
-            "samples). --fallback writes a plugin-free scene with one isotropic material instead. The file opens "
-            "with a comment naming the plugin and how to get it, and spells the cloth out (one body per vertex, "
-            "every number exact): a <flexcomp> cannot hold its area-lumped vertex masses. `yarnfit validate` "
-            f"drapes its cloth with {DRAPE_SPLIT} (the sphere's at --size 0.3 --resolution 25) and pulls its "
-            f"strips with {STRIP_SPLIT}; the body's garments run the default split. Lengths in m, times in s."
+            "carries the whole material, with the material's strain-stiffening membrane (--linear: the linear StVK "
+            "membrane fitted from the same samples). --fallback writes a plugin-free scene with one isotropic "
+            "material instead. The file opens with a comment naming the plugin and how to get it, and spells the "
+            "cloth out (one body per vertex, every number exact): a <flexcomp> cannot hold its area-lumped vertex "
+            "masses. Each scene is written by default with the split `yarnfit validate` runs that kind of scene "
+            f"with: the cloth, sphere and wall with the drapes' ({split_options(DRAPES_SPLIT)}; the validated sphere "
+            f"at --size 0.3 --resolution 25), the stretch strip with the FAB strips' ({split_options(STRIPS_SPLIT)}). "
+            "Lengths in m, times in s."
         ),
     )
     export.add_argument("material", metavar="MATERIAL.json", help="a material file written by `yarnfit fit`")
@@ -143,8 +142,8 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("-o", "--output", metavar="SCENE.xml",
                         help="the scene file (default: <fabric>-<scene>.xml, <fabric>-<scene>-fallback.xml)")
     export.add_argument("--resolution", type=int, metavar="N",
-                        help=f"vertices per side (stretch: along the strip); default {DEFAULT_RESOLUTION['cloth']}, "
-                             f"stretch {DEFAULT_RESOLUTION['stretch']}")
+                        help="vertices per side (stretch: along the strip; criss-cross cells add a centre vertex "
+                             f"each); default {EXPORT_RESOLUTION['cloth']}, stretch {EXPORT_RESOLUTION['stretch']}")
     export.add_argument("--size", type=float, metavar="M", help="side length in m (stretch: strip length); "
                         f"default {DEFAULT_SIZE['cloth']:g}, stretch {DEFAULT_SIZE['stretch']:g}")
     export.add_argument("--width", type=float, metavar="M", help="strip width in m, stretch only (default 0.05)")
@@ -171,25 +170,33 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--fallback", action="store_true",
                         help="no plugin: MuJoCo's built-in isotropic elasticity alone (stretch and bending) with the "
                              "material's isotropic fallback")
-    export.add_argument("--implicit-drag", default=DEFAULT_IMPLICIT_DRAG, choices=IMPLICIT_DRAGS,
+    def scene_default(key: str) -> str:
+        """The export's default of a split option, per scene (EXPORT_SPLIT), for the help."""
+        values = {}
+        for scene in SCENES:
+            values.setdefault(EXPORT_SPLIT[scene][key], []).append(scene)
+        if len(values) == 1:
+            return f"{next(iter(values))} for every scene"
+        return "; ".join(f"{value} for {', '.join(scenes)}" for value, scenes in values.items())
+
+    export.add_argument("--implicit-drag", choices=IMPLICIT_DRAGS,
                         help="how much of the discrete step's drag through MuJoCo's isotropic share the cloth keeps: "
-                             "full (default) or critical (what damps each of the material's modes critically: a "
-                             "quasi-static pull such as the stretch strip comes to rest sooner; drapes on contact "
-                             "settle later)")
-    export.add_argument("--implicit-share", default=DEFAULT_IMPLICIT_SHARE, choices=IMPLICIT_SHARES,
-                        help="the membrane MuJoCo integrates implicitly: isotropic (default; its <elasticity>, stiff "
-                             "enough for the material's stiffest direction in every direction, which drags the soft "
-                             "modes) or anisotropic (half the material's tangent in each mode, written by the plugin "
-                             "over MuJoCo's metric: a woven's shear is no longer held back, and lightly damped modes "
-                             "swing longer)")
-    export.add_argument("--mesh", default=DEFAULT_MESH, choices=list(MESHES),
-                        help=f"the cloth's cells: grid (default {DEFAULT_MESH}: one diagonal per cell) or crisscross "
-                             "(both diagonals around a centre vertex: twice the vertices, no locking with triangle "
-                             "strains)")
-    export.add_argument("--membrane", default=DEFAULT_MEMBRANE, choices=list(MEMBRANES),
-                        help=f"the plugin's membrane strains: node (default {DEFAULT_MEMBRANE}: smoothed over each "
-                             "vertex's triangles, no locking on any mesh) or triangle (constant per triangle: locks on "
-                             "one-diagonal cells, use it with --mesh crisscross)")
+                             "full or critical (what damps each of the material's modes critically: a quasi-static "
+                             f"pull such as the stretch strip comes to rest sooner); default {scene_default('implicit_drag')}")
+    export.add_argument("--implicit-share", choices=IMPLICIT_SHARES,
+                        help="the membrane MuJoCo integrates implicitly: isotropic (its <elasticity>, stiff enough for "
+                             "the material's stiffest direction in every direction, which drags the soft modes) or "
+                             "anisotropic (half the material's tangent in each mode, written by the plugin over "
+                             "MuJoCo's metric: a woven's shear is no longer held back, and lightly damped modes swing "
+                             f"longer); default {scene_default('implicit_share')}")
+    export.add_argument("--mesh", choices=list(MESHES),
+                        help="the cloth's cells: grid (one diagonal per cell) or crisscross (both diagonals around a "
+                             "centre vertex: twice the vertices at the same --resolution, no locking with triangle "
+                             f"strains); default {scene_default('mesh')}")
+    export.add_argument("--membrane", choices=list(MEMBRANES),
+                        help="the plugin's membrane strains: node (smoothed over each vertex's triangles, no locking "
+                             "on any mesh) or triangle (constant per triangle: locks on one-diagonal cells, use it "
+                             f"with --mesh crisscross); default {scene_default('membrane')}")
     export.add_argument("--self-collision", action="store_true", help="let the cloth collide with itself (slower)")
     export.add_argument("--check", type=float, metavar="SECONDS",
                         help="then step the scene this long and report stability and ms/step (exit 1 if unstable)")
@@ -572,7 +579,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from .mujoco.scenes import ClothMaterial, export_scene
+    from .mujoco.scenes import ClothMaterial, export_options, export_scene
 
     if args.resolution is not None and args.resolution < 2:
         raise UsageError(f"--resolution must be at least 2 vertices per side, got {args.resolution}")
@@ -593,13 +600,14 @@ def cmd_export(args: argparse.Namespace) -> int:
     output = check_writable(Path(args.output) if args.output else Path(f"{material.name}-{args.scene}{suffix}.xml"),
                             "scene file")
     strip = {} if args.width is None else {"width": args.width}
-    built = export_scene(material, args.scene, output, resolution=args.resolution, size=args.size, **strip,
+    split = export_options(args.scene, resolution=args.resolution, implicit_drag=args.implicit_drag,
+                           implicit_share=args.implicit_share, mesh=args.mesh, membrane=args.membrane)
+    built = export_scene(material, args.scene, output, size=args.size, **strip, **split,
                          timestep=args.timestep, integrator=args.integrator, solver=args.solver,
                          friction=args.friction,
                          damping=args.damping, angle=math.radians(args.angle), fallback=args.fallback,
-                         self_collision=args.self_collision, implicit_drag=args.implicit_drag,
-                         implicit_share=args.implicit_share, mesh=args.mesh, membrane=args.membrane)
-    print(export_summary(built, material, output, args))
+                         self_collision=args.self_collision)
+    print(export_summary(built, material, output, args, split))
     if args.check is not None:
         from .mujoco.run import run_scene
 
@@ -612,7 +620,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def export_summary(built, material, output, args) -> str:
+def export_summary(built, material, output, args, split: dict) -> str:
+    """What `yarnfit export` wrote: ``split`` the scene's options as built (export_options)."""
     from .mujoco.scenes import SOLVER_LABEL
 
     spec = built.spec
@@ -622,7 +631,7 @@ def export_summary(built, material, output, args) -> str:
              f"{SOLVER_LABEL[spec.option.solver]} solver"]
     if built.fallback:
         part = "elastic2d both: stretch and bending"
-    elif args.implicit_share == "anisotropic":
+    elif split["implicit_share"] == "anisotropic":
         part = ("its bending share implicit under discrete; its membrane metric rewritten by the plugin with the "
                 "anisotropic share, half the material's tangent in each mode")
     elif spec.flexes[0].elastic2d == 3:
@@ -639,8 +648,9 @@ def export_summary(built, material, output, args) -> str:
         bending = (f"its own {kind}bending, the built-in hinge forces removed" if spec.flexes[0].elastic2d == 3
                    else f"all {kind}bending")
         lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, "
-                     f"{bending}), weft at {args.angle:g}° from x, {args.membrane} membrane strains, "
-                     f"implicit_drag {args.implicit_drag}, implicit_share {args.implicit_share}")
+                     f"{bending}), weft at {args.angle:g}° from x, {split['membrane']} membrane strains on "
+                     f"{split['mesh']} cells, implicit_drag {split['implicit_drag']}, "
+                     f"implicit_share {split['implicit_share']}")
     if not built.fallback and material.shell.nonlinear is not None and args.check is None:
         lines.append("  note            the strain-stiffening forces are explicit and can need a step below 1 ms "
                      "(plugins/README.md): check the scene with --check SECONDS, or export --linear")

@@ -66,3 +66,20 @@ DEFAULT_IMPLICIT_DRAG = "full"
 # split.anisotropic_share, plugins/README.md).
 IMPLICIT_SHARES = ("isotropic", "anisotropic")
 DEFAULT_IMPLICIT_SHARE = "isotropic"
+# What `yarnfit export` (and a catalogue's exported cloth) writes for each scene unless told: the
+# split `yarnfit validate` runs that kind of scene with, so that an exported scene is a validated
+# one. The drapes' (yarnfit.validate.drape: criss-cross cells, constant-strain triangles, the
+# anisotropic share, the drag of modes without a tangent given back) for the cloth, sphere and
+# wall; the FAB strips' (yarnfit.validate.stretch: the isotropic share) for the strip. Criss-cross
+# cells have a centre vertex each, so the drapes' scenes get 28 vertices a side: 1513 vertices and
+# 2916 triangles, about the 1600 and 3042 of a 40 x 40 one-diagonal grid, at the same cost a step
+# (the cotton twill dropped on the sphere: 17.7-17.8 ms against 16.9-18.4, session 59). Measured
+# there, same vertices: hanging, the twill is at its rest shape by ~6 s under the drapes' split and
+# still sinking at 12 s under the library's defaults; on the sphere it is down within 1 s against
+# sliding down for 12 s (the isotropic share's drag on its shear; docs/design.md section 7).
+DRAPES_SPLIT = {"mesh": "crisscross", "membrane": "triangle", "implicit_share": "anisotropic",
+                "implicit_drag": "critical"}
+STRIPS_SPLIT = {"mesh": "crisscross", "membrane": "triangle", "implicit_share": "isotropic",
+                "implicit_drag": "critical"}
+EXPORT_SPLIT = {"cloth": DRAPES_SPLIT, "stretch": STRIPS_SPLIT, "sphere": DRAPES_SPLIT, "wall": DRAPES_SPLIT}
+EXPORT_RESOLUTION = {"cloth": 28, "stretch": DEFAULT_RESOLUTION["stretch"], "sphere": 28, "wall": 28}

@@ -58,7 +58,8 @@ from ..outputs import write_atomically
 from ..shell import ShellMaterial
 from . import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_IMPLICIT_DRAG, DEFAULT_IMPLICIT_SHARE, DEFAULT_INTEGRATOR,
                DEFAULT_MEMBRANE, DEFAULT_MESH, DEFAULT_RESOLUTION, DEFAULT_SIZE, DEFAULT_SOLVER, DEFAULT_TIMESTEP,
-               IMPLICIT_DRAGS, IMPLICIT_SHARES, INTEGRATORS, MEMBRANES, MESHES, SCENES, SOLVERS)
+               EXPORT_RESOLUTION, EXPORT_SPLIT, IMPLICIT_DRAGS, IMPLICIT_SHARES, INTEGRATORS, MEMBRANES, MESHES,
+               SCENES, SOLVERS)
 from .plugin import PLUGIN_NAME
 from .split import DEFAULT_STIFFENING_BOUND, MJCF_DIGITS, anisotropic_share, builtin_elasticity, isotropic_fallback
 
@@ -71,6 +72,8 @@ __all__ = [
     "DEFAULT_SIZE",
     "DEFAULT_SOLVER",
     "DEFAULT_TIMESTEP",
+    "EXPORT_RESOLUTION",
+    "EXPORT_SPLIT",
     "IMPLICIT_DRAGS",
     "INTEGRATORS",
     "SCENES",
@@ -79,6 +82,7 @@ __all__ = [
     "ClothMaterial",
     "add_cloth_flex",
     "build_scene",
+    "export_options",
     "export_scene",
     "scene_mjcf",
 ]
@@ -307,6 +311,16 @@ def build_scene(
     flex.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_AUTO if self_collision else mujoco.mjtFlexSelf.mjFLEXSELF_NONE
     return BuiltScene(spec, scene, fallback, elasticity.young_pa, elasticity.poisson, elasticity.thickness_m,
                       elasticity.notes)
+
+
+def export_options(scene: str, **options) -> dict:
+    """:func:`build_scene`'s options for ``scene`` as ``yarnfit export`` writes it: ``options``, with
+    the scene's :data:`EXPORT_SPLIT` (mesh, membrane, implicit share and drag) and
+    :data:`EXPORT_RESOLUTION` wherever they leave them out or give ``None``."""
+    if scene not in SCENES:
+        raise ValueError(f"unknown scene {scene!r}; scenes: {', '.join(SCENES)}")
+    given = {key: value for key, value in options.items() if value is not None}
+    return {"resolution": EXPORT_RESOLUTION[scene], **EXPORT_SPLIT[scene], **given}
 
 
 def export_scene(material: ClothMaterial | str | os.PathLike, scene: str, output: str | os.PathLike,
