@@ -170,6 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--fallback", action="store_true",
                         help="no plugin: MuJoCo's built-in isotropic elasticity alone (stretch and bending) with the "
                              "material's isotropic fallback")
+
     def scene_default(key: str) -> str:
         """The export's default of a split option, per scene (EXPORT_SPLIT), for the help."""
         values = {}
