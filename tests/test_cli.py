@@ -384,18 +384,20 @@ def test_show_opens_each_kind_of_file_with_its_viewer(tmp_path, monkeypatch):
 
 
 def test_the_export_writes_the_splits_validate_runs():
-    """yarnfit.mujoco's DRAPES_SPLIT and STRIPS_SPLIT (literals: the parser is built without
-    MuJoCo) are what the drapes and the strips run, and what each scene is exported with; the
-    export's help names them."""
+    """yarnfit.mujoco's DRAPES_SPLIT and STRIPS_SPLIT (import-free, so the parser is built without
+    MuJoCo) are the splits the drapes and the strips run (validate.drape and validate.stretch take
+    their constants from them), each scene is exported with its kind's, and the export's help
+    names them."""
     from yarnfit import cli
-    from yarnfit.mujoco import DEFAULT_IMPLICIT_SHARE, DRAPES_SPLIT, EXPORT_SPLIT, STRIPS_SPLIT
+    from yarnfit.mujoco import DRAPES_SPLIT, EXPORT_SPLIT, STRIPS_SPLIT
     from yarnfit.validate import drape, stretch
 
-    assert DRAPES_SPLIT == {"mesh": drape.MESH, "membrane": drape.MEMBRANE, "implicit_share": drape.IMPLICIT_SHARE,
-                            "implicit_drag": drape.IMPLICIT_DRAG}
-    # The strips pass no share: the library's default, the isotropic one.
-    assert STRIPS_SPLIT == {"mesh": stretch.MESH, "membrane": stretch.MEMBRANE,
-                            "implicit_share": DEFAULT_IMPLICIT_SHARE, "implicit_drag": stretch.IMPLICIT_DRAG}
+    assert DRAPES_SPLIT == {"mesh": "crisscross", "membrane": "triangle", "implicit_share": "anisotropic",
+                            "implicit_drag": "critical"}
+    assert STRIPS_SPLIT == {"mesh": "crisscross", "membrane": "triangle", "implicit_share": "isotropic",
+                            "implicit_drag": "critical"}
+    assert (drape.MESH, drape.MEMBRANE, drape.IMPLICIT_SHARE, drape.IMPLICIT_DRAG) == tuple(DRAPES_SPLIT.values())
+    assert (stretch.MESH, stretch.MEMBRANE, stretch.IMPLICIT_SHARE, stretch.IMPLICIT_DRAG) == tuple(STRIPS_SPLIT.values())
     assert EXPORT_SPLIT == {"cloth": DRAPES_SPLIT, "stretch": STRIPS_SPLIT, "sphere": DRAPES_SPLIT,
                             "wall": DRAPES_SPLIT}
     text = " ".join(cli.build_parser()._subparsers._group_actions[0].choices["export"].description.split())

@@ -30,6 +30,7 @@ from yarnfit.engine import (
 from yarnfit.engine import _kernels
 from yarnfit.engine.contact import find_pairs
 from yarnfit.engine.xpbd import _color_constraints
+from yarnfit.mujoco import DRAPES_SPLIT
 from yarnfit.tasks import one_core
 
 # A polyester-like yarn: r = 0.1 mm, E = 3 GPa (docs/design.md §4 fibre table, mid-range).
@@ -310,10 +311,13 @@ def _passive_ms(model, states: list) -> float:
 
 
 def bench_mujoco() -> None:
-    """A 40×40 cloth as ``yarnfit export --scene cloth`` and ``--scene sphere`` write it (their
-    integrator, Δt and solver), with the plugin and without it (the same scene, plugin removed), the
-    plugin's own compute at the same states (mj_passive with the plugin minus without it), and the
-    scene with the plugin under the other constraint solver."""
+    """A 40×40 cloth of the ``cloth`` and ``sphere`` scenes under ``build_scene``'s library defaults
+    (one-diagonal grid, node strains, isotropic share, full drag: what ``yarnfit export`` wrote until
+    session 59, kept so the figures compare across sessions; section ``plugin_ridges`` times the
+    drapes' split it writes now) with the scene's integrator, Δt and solver, with the plugin and
+    without it (the same scene, plugin removed), the plugin's own compute at the same states
+    (mj_passive with the plugin minus without it), and the scene with the plugin under the other
+    constraint solver."""
     from pathlib import Path
 
     import mujoco
@@ -353,20 +357,18 @@ def bench_mujoco() -> None:
 
 # -- plugin_ridges -------------------------------------------------------------------------------
 
-# The splits the plugin's ridge cost is measured under: the export's default and the drapes'
-# (yarnfit.validate.drape: criss-cross cells, triangle strains, the anisotropic share, the drag
-# given back, whose returned metric follows the ridges engaged in each triangle).
-RIDGE_BENCH_SPLITS = {
-    "export": {},
-    "drapes": {"mesh": "crisscross", "membrane": "triangle", "implicit_share": "anisotropic",
-               "implicit_drag": "critical"},
-}
+# The splits the plugin's ridge cost is measured under: build_scene's library defaults (grid, node
+# strains, isotropic share, full drag: what yarnfit export wrote until session 59) and the drapes'
+# (yarnfit.mujoco.DRAPES_SPLIT, what it writes for the cloth now: criss-cross cells, triangle
+# strains, the anisotropic share, the drag given back, whose returned metric follows the ridges
+# engaged in each triangle). Both at 40 x 40, the drapes' with twice the vertices.
+RIDGE_BENCH_SPLITS = {"library": {}, "drapes": DRAPES_SPLIT}
 
 
 def bench_plugin_ridges() -> None:
     """What a fitted strain-stiffening membrane costs the plugin: the cotton twill fitted as
     ``yarnfit fit`` fits it (its ridges, and the directions they lie along), hung as a 40 × 40 cloth
-    (``--scene cloth``) under the export's split and the drapes', stepped 0.5 s with the plugin and
+    (``--scene cloth``) under the library's split and the drapes', stepped 0.5 s with the plugin and
     without it; the plugin's own compute per step (mj_passive with it less without it, as section
     ``mujoco``) with the fit's ridge membrane and with its linear membrane (``--linear``)."""
     import tempfile

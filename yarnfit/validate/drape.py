@@ -67,7 +67,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 from scipy.signal import find_peaks
 
-from ..mujoco import DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_SOLVER, DEFAULT_TIMESTEP
+from ..mujoco import (DEFAULT_DAMPING, DEFAULT_FRICTION, DEFAULT_INTEGRATOR, DEFAULT_SOLVER, DEFAULT_TIMESTEP,
+                      DRAPES_SPLIT)
 from ..mujoco.scenes import (FLEX_RADIUS, INTEGRATOR_ENUM, ClothMaterial, add_cloth_flex, build_scene,
                              compile_quietly, disc_mesh, solver_enum)
 from ..record import Recording, markdown_table
@@ -81,8 +82,9 @@ SIZE = 0.3  # m: the swatch's side
 # 1.88× the fine mesh's law; criss-cross at 1.25 cm: 1.07× and 1.08×, validation/plugin_acceptance.py).
 # Cotton twill on the sphere: drape coefficient 0.620 on the old 1.5 cm grid, 0.594 here.
 RESOLUTION = {False: 25, True: 13}
-MESH = "crisscross"
-# The split the drapes run (session 55, docs/design.md §8 "At rest"). Membrane strains per triangle:
+MESH = DRAPES_SPLIT["mesh"]
+# The split the drapes run (yarnfit.mujoco.DRAPES_SPLIT, which yarnfit export writes too; session
+# 55, docs/design.md §8 "At rest"). Membrane strains per triangle:
 # the node-smoothed membrane's hourglass modes (in-plane motions its smoothing does not see, held
 # by nothing) drift under gravity for as long as a drape runs (the cotton twill's quick Cusick with
 # the export's split: still moving 0.5–1.3 mm/s after 60 s, its coefficient falling 0.314 → 0.265
@@ -96,9 +98,9 @@ MESH = "crisscross"
 # only the drag of modes with no tangent (the ridge membrane's compression, which keeps the 2 %
 # floor), which otherwise flow slowly and ring: the same Cusick still creeping at 1.7 mm/s after
 # 15 s with the full drag, 0.23 mm/s with it given back.
-MEMBRANE = "triangle"
-IMPLICIT_SHARE = "anisotropic"
-IMPLICIT_DRAG = "critical"
+MEMBRANE = DRAPES_SPLIT["membrane"]
+IMPLICIT_SHARE = DRAPES_SPLIT["implicit_share"]
+IMPLICIT_DRAG = DRAPES_SPLIT["implicit_drag"]
 # Step and solver. The step stays the export's 1 ms: larger ones drag the soft modes through the
 # implicit share and friction keeps the dragged shape (cotton twill on the sphere, this mesh: drape
 # coefficient 0.594 / 0.607 / 0.623 at 1 / 2 / 4 ms). The solver is the exported sphere's

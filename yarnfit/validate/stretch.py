@@ -57,6 +57,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from ..mujoco import STRIPS_SPLIT
 from ..mujoco.scenes import ClothMaterial, build_scene, compile_quietly
 from ..mujoco.split import DEFAULT_STIFFENING_BOUND
 from ..record import Recording, markdown_table
@@ -77,15 +78,19 @@ STRAIN_LEVELS = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1)
 RESOLUTION = {"8x5": {False: 25, True: 9}, "2x5": {False: 17, True: 9}}
 # Criss-cross cells (scenes.grid_mesh): with one diagonal per cell a twill's bias strip reads 10
 # times its force on the quick mesh and 3.8 times on the full one, a jersey's strips twice and
-# 1.25 times (locking); criss-cross cells stay within 6 % on the quick mesh.
-MESH = "crisscross"
+# 1.25 times (locking); criss-cross cells stay within 6 % on the quick mesh. The strips' split is
+# yarnfit.mujoco.STRIPS_SPLIT, which yarnfit export writes its strip with too.
+MESH = STRIPS_SPLIT["mesh"]
 # The plugin's membrane strains in the strips, and the same smoothing in their clamped law:
 # constant-strain triangles, not the scenes' default node smoothing. Criss-cross cells do not lock
 # with triangles, and the strips must come to rest at every level: node-smoothed strains leave
 # hourglass modes that neither their energy nor their Kelvin–Voigt damping sees, and on the full
 # cotton twill suite four of six strips never settled (2x5 weft, warp, bias; 8x5 bias) and the
 # strips took 386 s against 150 s with triangles.
-MEMBRANE = "triangle"
+MEMBRANE = STRIPS_SPLIT["membrane"]
+# The isotropic implicit share: under the anisotropic one the polyester satin's 8 x 5 bias strip
+# settled no better (docs/design.md §7, "The stretch strips keep the isotropic share").
+IMPLICIT_SHARE = STRIPS_SPLIT["implicit_share"]
 # The plugin's implicit_drag in the strips: the split's drag given back where the material's modes
 # do not need it to be damped critically (plugins/README.md, Split), so that a soft mode (a woven's
 # shear, a knit's) rests in ~sqrt(k_b / k_t) steps rather than k_b / k_t; the levels are read at
@@ -95,7 +100,7 @@ MEMBRANE = "triangle"
 # 1128 s; its unsettled 8 x 5 bias at 0.2 / 0.5 % read 0.85 / 0.91 of the quasi-static reference,
 # 0.994 / 1.005 now), polyester satin 4/6 -> 4/6 (its 2 x 5 bias unsettled at four levels, against
 # one; 830 -> 1537 s); every level within 0.75 % of the full drag's where both settled.
-IMPLICIT_DRAG = "critical"
+IMPLICIT_DRAG = STRIPS_SPLIT["implicit_drag"]
 # Seconds over which the clamp moves from one level to the next: slow against the strip's and the
 # servo's time constants (ms), so the pull is quasi-static.
 RAMP_SECONDS = 0.05
@@ -231,7 +236,8 @@ def pull_strip(material: ClothMaterial, strip: str, direction: str, *, quick: bo
         raise ValueError(f"max_strain must be at least {STRAIN_LEVELS[0]}, got {max_strain!r}")
     resolution = resolution or RESOLUTION.get(strip, RESOLUTION["8x5"])[quick]
     built = build_scene(material, "stretch", resolution=resolution, size=length, width=width, angle=weft_angle,
-                        max_strain=levels[-1], mesh=MESH, membrane=MEMBRANE, implicit_drag=IMPLICIT_DRAG,
+                        max_strain=levels[-1], mesh=MESH, membrane=MEMBRANE, implicit_share=IMPLICIT_SHARE,
+                        implicit_drag=IMPLICIT_DRAG,
                         stiffening_bound=max(DEFAULT_STIFFENING_BOUND, levels[-1]))
     model = compile_quietly(built.spec)
     data = mujoco.MjData(model)
