@@ -313,16 +313,17 @@ def _passive_ms(model, states: list) -> float:
 def bench_mujoco() -> None:
     """A 40×40 cloth of the ``cloth`` and ``sphere`` scenes under ``build_scene``'s library defaults
     (one-diagonal grid, node strains, isotropic share, full drag: what ``yarnfit export`` wrote until
-    session 59, kept so the figures compare across sessions; section ``plugin_ridges`` times the
-    drapes' split it writes now) with the scene's integrator, Δt and solver, with the plugin and
-    without it (the same scene, plugin removed), the plugin's own compute at the same states
-    (mj_passive with the plugin minus without it), and the scene with the plugin under the other
-    constraint solver."""
+    session 59, kept so the figures compare across sessions) with the scene's integrator, Δt and
+    solver, with the plugin and without it (the same scene, plugin removed), the plugin's own
+    compute at the same states (mj_passive with the plugin minus without it), and the scene with
+    the plugin under the other constraint solver; then each scene as ``yarnfit export`` writes it
+    (:func:`yarnfit.mujoco.scenes.export_options`: the drapes' split at 28 criss-cross vertices a
+    side, about the grid's vertex count) in the same run, with its cost over the library defaults'."""
     from pathlib import Path
 
     import mujoco
 
-    from yarnfit.mujoco.scenes import SOLVER_ENUM, SOLVER_LABEL, ClothMaterial, build_scene
+    from yarnfit.mujoco.scenes import SOLVER_ENUM, SOLVER_LABEL, ClothMaterial, build_scene, export_options
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from fabric_shell import FABRIC  # a realistic medium-weight woven
@@ -353,6 +354,12 @@ def bench_mujoco() -> None:
         other_ms, _ = _timed_steps(model, steps, keep_every=steps // 10, name=f"{scene} {other}")
         report(f"{key}_ms_per_step_with_plugin_{other}", other_ms,
                f"ms ({other_ms / ms_per_step['with']:.2f}× the default's)")
+        options = export_options(scene)
+        exported = build_scene(material, scene, **options).spec.compile()
+        export_ms, _ = _timed_steps(exported, steps, keep_every=steps // 10, name=f"{scene} exported")
+        report(f"mujoco_{scene}_exported_ms_per_step", export_ms,
+               f"ms ({options['resolution']} x {options['resolution']} {options['mesh']}, {exported.nflexvert} "
+               f"vertices; {export_ms / ms_per_step['with']:.2f}× the library defaults' at 40 x 40)")
 
 
 # -- plugin_ridges -------------------------------------------------------------------------------
