@@ -47,18 +47,23 @@ representative test of the material there (a woven's bias strip shorter than abo
 width, whose middle the jaws hold: a bias extension test's gauge is 2-3 widths), and its cells are
 counted apart.
 ``--from-json`` reads curves written by earlier runs instead of solving (runs of several sizes or
-directions made in parallel).
+directions made in parallel). The largest strips take hours a level, so their curves are kept in
+``validation/strips/`` (each with the command and commit that solved it) and read against every
+later fit: ``--from-json validation/strips/polyester-satin_weft_8x6.json,...``.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
+import subprocess
 import sys
 import time
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
 
 from yarnfit.material_file import MaterialFile
@@ -148,12 +153,13 @@ def solve_curves(file: MaterialFile, sizes: Callable[[str], list], directions, s
                 if json_path and 0 < k < len(STRAINS):
                     write_curves(json_path, relaxed.name,
                                  {**curves, label: {**swatch_curve(swatch, points), "repeats": list(size),
-                                                    "unfinished": True}})
+                                                    "written_by": provenance(), "unfinished": True}})
 
             start = time.perf_counter()
             curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, friction=coefficient, on_step=keep,
                                    progress=lambda text: print("   ", text, flush=True))
             curve["repeats"] = [gauge, width]
+            curve["written_by"] = provenance()
             curves[label] = curve
             print(convergence_row(curve), f"({time.perf_counter() - start:.0f} s)", flush=True)
             if json_path:
@@ -162,9 +168,23 @@ def solve_curves(file: MaterialFile, sizes: Callable[[str], list], directions, s
 
 
 def write_curves(path: str, name: str, curves: dict) -> None:
-    """The curves as ``--from-json`` reads them."""
+    """The curves as ``--from-json`` reads them (each with what solved it: :func:`provenance`)."""
     with open(path, "w") as out:
         json.dump({"material": name, "curves": curves}, out, indent=1)
+
+
+@functools.cache
+def provenance() -> dict:
+    """The command that solved the curves and the yarnfit commit it ran (``None`` outside a git
+    checkout): a strip takes hours, so its curve is kept (``validation/strips/``) and read again
+    against later fits, and it is only as good as the yarn model that solved it."""
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).resolve().parent,
+                                capture_output=True, text=True, timeout=10, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        commit = None
+    return {"command": " ".join(["python validation/swatch_convergence.py", *sys.argv[1:]]), "commit": commit,
+            "date": time.strftime("%Y-%m-%d")}
 
 
 def convergence_row(curve: dict) -> str:
