@@ -197,6 +197,8 @@ typedef struct {
   double* drag_basis;            // (ntri x 27) K_b^(1/2), K_b^(-1/2) (row-major) and g_0 g_1 g_2
   double* drag_returned;         // (ntri x 6) upper triangle of the returned metric K_r, or NULL
   uint64_t* drag_active;         // (ntri) signature of the ridges K_r was built with engaged
+  uint64_t* tri_engaged;         // (ntri) with membrane="triangle": the signature of the ridges engaged
+                                 // at each triangle's strain, as membrane_forces found them this step
   double* drag_rate;             // (nedge) scratch: d(l^2)/dt per edge
   double membrane[4];   // the plugin's membrane stiffness h S - t_b S_iso: c00 c01 c11 c22 (N/m)
   double bending[4];    // h^3 B: d00 d01 d11 d22 (N m)
@@ -581,6 +583,7 @@ static void shell_free(Shell* s) {
   free(s->drag_basis);
   free(s->drag_returned);
   free(s->drag_active);
+  free(s->tri_engaged);
   free(s->drag_rate);
   free(s->corner_domain);
   free(s->domain_area);
@@ -1093,16 +1096,20 @@ static int last_engaged(const Shell* s, int d, double x) {
   return k > s->dir_start[d] ? k - 1 : -1;
 }
 
-// The signature of the ridges engaged at strain eps (3, Voigt; last_engaged): FNV-1a over each
-// direction's last engaged ridge (0 for none). A collision only keeps a K_r built for other ridges,
-// still between 0 and K_b.
+// The signature of the ridges engaged at a strain: FNV-1a over each direction's last engaged ridge
+// (last_engaged; the last engaged names the prefix), 0 for none. signature_add takes in the next
+// direction that has one. A collision only keeps a K_r built for other ridges, still between 0 and K_b.
+static uint64_t signature_add(uint64_t hash, int last) {
+  if (!hash) hash = 1469598103934665603ULL;
+  return (hash ^ (uint64_t)last) * 1099511628211ULL;
+}
+
+// The signature of the ridges engaged at strain eps (3, Voigt).
 static uint64_t engaged_ridges(const Shell* s, const double eps[3]) {
   uint64_t hash = 0;
   for (int d = 0; d < s->ndir; d++) {
     int last = last_engaged(s, d, mju_dot3(s->dir + 3 * d, eps));
-    if (last < 0) continue;
-    if (!hash) hash = 1469598103934665603ULL;
-    hash = (hash ^ (uint64_t)last) * 1099511628211ULL;  // the last engaged names the prefix
+    if (last >= 0) hash = signature_add(hash, last);
   }
   return hash;
 }
@@ -1174,6 +1181,10 @@ static int build_drag_return(const mjModel* m, Shell* s, const int* tri_edge_loc
   s->drag_active = malloc(sizeof(uint64_t) * s->ntri);
   s->drag_rate = malloc(sizeof(double) * (s->nedge > 0 ? s->nedge : 1));
   if (!s->drag_basis || !s->drag_returned || !s->drag_active || !s->drag_rate) return -1;
+  if (!s->node_membrane && s->nridge > 0) {  // membrane_forces finds each triangle's ridges for return_drag
+    s->tri_engaged = calloc(s->ntri > 0 ? s->ntri : 1, sizeof(uint64_t));
+    if (!s->tri_engaged) return -1;
+  }
   const mjtNum* stiffness = m->flex_stiffness + m->flex_stiffnessadr[f];
   const double rest[3] = {0, 0, 0};
   for (int t = 0; t < s->ntri; t++) {
@@ -1399,18 +1410,23 @@ static void shell_destroy(mjData* d, int instance) {
 
 // Stress (N/m, Voigt) of the ridges at elastic strain eps and strain rate rate:
 // h sum_j c_j [n_j . eps > t_j] (n_j . eps - t_j + damping n_j . rate) n_j, i.e. the ridges' stress
-// plus their tangent times damping * rate.
-static void ridge_stress(const Shell* s, const double eps[3], const double rate[3], double stress[3]) {
+// plus their tangent times damping * rate. With `engaged`, also the signature of the ridges engaged
+// at eps (engaged_ridges), found on the way.
+static void ridge_stress(const Shell* s, const double eps[3], const double rate[3], double stress[3],
+                         uint64_t* engaged) {
   mju_zero3(stress);
+  uint64_t hash = 0;
   for (int d = 0; d < s->ndir; d++) {
     const double* n = s->dir + 3 * d;
     double x = mju_dot3(n, eps);
     int last = last_engaged(s, d, x);
     if (last < 0) continue;
+    if (engaged) hash = signature_add(hash, last);
     // sum over the engaged j of c_j (x - t_j + damping n . rate)
     double sum = s->knot_c[last] * (x + s->damping * mju_dot3(n, rate)) - s->knot_ct[last];
     mju_addToScl3(stress, n, s->thickness * sum);
   }
+  if (engaged) *engaged = hash;
 }
 
 // Deformation gradient of one triangle from its rest inverse Dinv and vertex positions x (3 x 3):
@@ -1443,8 +1459,9 @@ static void green_strain(const double F[12], int damped, double eps[6]) {
 // Membrane stress of a reference area `area` (m^2) at strain eps (6, with its rate): sig (3) =
 // area dW/deps for W = (1/2) eps^T C eps (plus the ridges h sum_j (1/2) c_j max(n_j . eps - t_j, 0)^2),
 // with the damping stress of the rate added: C times it (so the quadratic part's stress is
-// evaluated at eps + damping * rate) and the ridges' tangent times it.
-static void membrane_stress(const Shell* s, double area, const double eps[6], double sig[3]) {
+// evaluated at eps + damping * rate) and the ridges' tangent times it. With `engaged`, also the
+// signature of the ridges engaged at eps (ridge_stress).
+static void membrane_stress(const Shell* s, double area, const double eps[6], double sig[3], uint64_t* engaged) {
   const double* c = s->membrane;
   // The quadratic part with its damping, as StVK: C (eps + damping * rate).
   double eps0 = eps[0] + s->damping * eps[3], eps1 = eps[1] + s->damping * eps[4];
@@ -1454,7 +1471,7 @@ static void membrane_stress(const Shell* s, double area, const double eps[6], do
   sig[2] = area * c[3] * eps2;
   if (s->nridge > 0) {  // skipped without ridges: the membrane is then StVK to the last bit
     double extra[3];
-    ridge_stress(s, eps, eps + 3, extra);
+    ridge_stress(s, eps, eps + 3, extra, engaged);
     mju_addToScl3(sig, extra, area);
   }
 }
@@ -1497,7 +1514,7 @@ static void membrane_forces(Shell* s, const double* x, const double* xdot) {
     triangle_deformation(s->rest_inv + 4 * t, xt, xdot ? vt : NULL, Ft);
     green_strain(Ft, damped, s->node_membrane ? s->tri_eps + 6 * t : eps);
     if (s->node_membrane) continue;
-    membrane_stress(s, s->area[t], eps, sig);
+    membrane_stress(s, s->area[t], eps, sig, s->tri_engaged ? s->tri_engaged + t : NULL);
     stress_gradient(F, sig, G);
     scatter_gradient(s->rest_inv + 4 * t, G, gt);
     for (int k = 0; k < 3; k++) mju_addTo3(s->grad + 3 * v[k], gt + 3 * k);
@@ -1510,7 +1527,9 @@ static void membrane_forces(Shell* s, const double* x, const double* xdot) {
       mju_addToScl(s->domain_eps + 6 * d, s->tri_eps + 6 * t, s->area[t] / (3 * s->domain_area[d]), 6);
     }
   }
-  for (int d = 0; d < s->ndomain; d++) membrane_stress(s, s->domain_area[d], s->domain_eps + 6 * d, s->domain_sig + 3 * d);
+  for (int d = 0; d < s->ndomain; d++) {
+    membrane_stress(s, s->domain_area[d], s->domain_eps + 6 * d, s->domain_sig + 3 * d, NULL);
+  }
   for (int t = 0; t < s->ntri; t++) {
     const int* v = s->tri + 3 * t;
     double G[6], gt[9] = {0}, sig[3] = {0, 0, 0};
@@ -1699,6 +1718,15 @@ static void bending_forces(Shell* s, const double* x, const double* xdot) {
   }
 }
 
+// Triangle t's Green strain (Voigt, its rate zero: eps 6) at vertex positions x.
+static void triangle_strain(const Shell* s, const double* x, int t, double eps[6]) {
+  const int* v = s->tri + 3 * t;
+  double xt[9], F[12];
+  for (int k = 0; k < 3; k++) mju_copy3(xt + 3 * k, x + 3 * v[k]);
+  triangle_deformation(s->rest_inv + 4 * t, xt, NULL, F);
+  green_strain(F, 0, eps);
+}
+
 // implicit_drag="critical": give back the part K_r of MuJoCo's step drag -h K v that the material's
 // soft modes do not need (build_drag_return; a triangle's K_r rebuilt first when the ridges engaged
 // at its strain changed): per triangle the force h (1/2) J^T K_r dDelta/dt, dDelta_b/dt = 2 (x_q -
@@ -1718,13 +1746,20 @@ static void return_drag(const mjModel* m, Shell* s, const double* x, const doubl
   }
   for (int t = 0; t < s->ntri; t++) {
     if (s->nridge > 0) {
-      const int* v = s->tri + 3 * t;
-      double xt[9], F[12], eps[6];
-      for (int k = 0; k < 3; k++) mju_copy3(xt + 3 * k, x + 3 * v[k]);
-      triangle_deformation(s->rest_inv + 4 * t, xt, NULL, F);
-      green_strain(F, 0, eps);
-      uint64_t engaged = engaged_ridges(s, eps);
-      if (engaged != s->drag_active[t]) update_returned_drag(s, t, eps, engaged);
+      // The ridges engaged at the triangle's own strain: membrane_forces found them with constant-
+      // strain triangles (tri_engaged), its strain is needed again only where they changed.
+      double eps[6];
+      uint64_t engaged;
+      if (s->tri_engaged) {
+        engaged = s->tri_engaged[t];
+      } else {
+        triangle_strain(s, x, t, eps);
+        engaged = engaged_ridges(s, eps);
+      }
+      if (engaged != s->drag_active[t]) {
+        if (s->tri_engaged) triangle_strain(s, x, t, eps);
+        update_returned_drag(s, t, eps, engaged);
+      }
     }
     add_edge_metric_force(s->grad, x, edge, s->drag_elemedge + 3 * t, s->drag_returned + 6 * t, s->drag_rate, h);
   }
