@@ -577,3 +577,29 @@ def test_the_suite_runs_the_yarn_scene_per_direction_and_merges_it(tmp_path):
     assert yarn["seconds"] >= sum(c["seconds"] for c in yarn["directions"].values())  # and the cutting
     with pytest.raises(ValueError, match="no yarn"):
         merge_yarn_summaries([])
+
+
+def test_the_kept_strip_curves_are_read_back_and_say_what_solved_them(monkeypatch):
+    # validation/strips/ keeps the largest strips' curves (hours a level) for --from-json: each is
+    # read as swatch_convergence.py reads it (its levels a start of the swatch's strains) and says
+    # which command and commit solved it, without which a stale curve could not be told.
+    import importlib.util
+    import json
+    import sys
+    from pathlib import Path
+
+    folder = Path(__file__).parent.parent / "validation"
+    spec = importlib.util.spec_from_file_location("swatch_convergence", folder / "swatch_convergence.py")
+    script = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, script)  # its dataclasses look their module up
+    spec.loader.exec_module(script)
+    paths = sorted((folder / "strips").glob("*.json"))
+    assert paths, "validation/strips/ holds no curve"
+    for path in paths:
+        for label, curve in json.loads(path.read_text())["curves"].items():
+            reached = [point for point in script.level_points(curve) if point is not None]
+            assert reached, f"{path.name}: {label} reached no strain"
+            assert curve["direction"] == label.split()[0]
+            assert re.fullmatch(r"[0-9a-f]{40}", curve["written_by"]["commit"]), f"{path.name}: {label}"
+            assert curve["written_by"]["command"].startswith("python validation/swatch_convergence.py")
+            assert path.name in (folder / "strips" / "README.md").read_text()
