@@ -379,11 +379,18 @@ def test_a_frictional_pull_is_converged_in_its_load_step():
     swatch = cut_swatch(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), direction="bias",
                         gauge=1.5 * max(relaxed.repeat_size), width=max(relaxed.repeat_size),
                         clamp=0.5 * max(relaxed.repeat_size))
-    default = stretch_swatch(swatch, (0.02, 0.05), friction=cotton.friction)
+    lines = []
+    default = stretch_swatch(swatch, (0.02, 0.05), friction=cotton.friction, step_progress=lines.append)
     finer = stretch_swatch(swatch, (0.02, 0.05), friction=cotton.friction, strain_step=0.5 * FRICTION_STRAIN_STEP)
     for a, b in zip(default["points"][1:], finer["points"][1:]):
         assert a["converged"] and b["converged"] and b["load_steps"] == 2 * a["load_steps"]
         assert a["force_n_per_m"] == pytest.approx(b["force_n_per_m"], rel=LOAD_STEP_RTOL)
+    # A line per load step (a large strip's level takes hours), each with the middle's pull then.
+    steps = [step for point in default["points"][1:] for step in point["steps"]]
+    assert len(lines) == len(steps) == 10
+    assert lines[0].startswith("bias 0.5 % (load step 1 of 4 towards 2 %): middle half ")
+    for line, step in zip(lines, steps):
+        assert f"{step['middle_force_n_per_m']:.5g} N/m" in line and "converged" in line
     for step in (0.0, -0.005, math.nan):
         with pytest.raises(ValueError, match="strain_step"):
             stretch_swatch(swatch, (0.02,), friction=cotton.friction, strain_step=step)

@@ -157,7 +157,8 @@ def solve_curves(file: MaterialFile, sizes: Callable[[str], list], directions, s
 
             start = time.perf_counter()
             curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, friction=coefficient, on_step=keep,
-                                   progress=lambda text: print("   ", text, flush=True))
+                                   progress=lambda text: print("   ", text, flush=True),
+                                   step_progress=lambda text: print("     ", text, flush=True))
             curve["repeats"] = [gauge, width]
             curve["written_by"] = provenance()
             curves[label] = curve

@@ -315,7 +315,8 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                    options: QuasiStaticOptions | None = None, width_band: float | None = None,
                    on_step: Callable[[int, float, np.ndarray, dict], None] | None = None,
                    progress: Callable[[str], None] | None = None, friction: float = 0.0,
-                   strain_step: float = FRICTION_STRAIN_STEP) -> dict:
+                   strain_step: float = FRICTION_STRAIN_STEP,
+                   step_progress: Callable[[str], None] | None = None) -> dict:
     """Pull ``swatch`` to each of ``strains`` (ascending, > 0) in turn, each a converged solve
     warm-started from the previous one. ``on_step(k, strain, position, point)`` is called after
     each solve (k = 0 for the unstrained state, then 1, 2, ...). ``width_band`` (m, default a
@@ -327,8 +328,9 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     (:func:`yarnfit.engine.lagged.in_halves`; a point's ``load_steps`` says how many steps it took,
     the halves counted, its ``iterations``, ``friction_passes`` and ``seconds`` count
     all of them, ``slowest_step_seconds`` is the longest one's time, and it is converged only if
-    every step converged and its normal forces settled). Returns a JSON-able dict (see the module
-    docstring)."""
+    every step converged and its normal forces settled). ``progress`` gets a line per strain,
+    ``step_progress`` one per load step of a strain reached in several (a large strip's level takes
+    hours). Returns a JSON-able dict (see the module docstring)."""
     strains = [float(e) for e in strains]
     if not strains or any(not (math.isfinite(e) and e > 0) for e in strains) or strains != sorted(strains):
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
@@ -392,6 +394,15 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                     "converged": accepted,
                 })
             slowest = max(slowest, time.perf_counter() - step_start)
+            if step_progress is not None and steps > 1:
+                reading = step_readings[-1]
+                step_progress(f"{swatch.direction} {100 * target:.4g} % (load step {j} of {steps} towards "
+                              f"{100 * strain:g} %): middle half {reading['middle_force_n_per_m']:.5g} N/m at "
+                              f"{_strain_text(reading['mid_strain'])}, "
+                              f"{'converged' if all(step.accepted() for step in path) else 'NOT converged'}, "
+                              f"{sum(step.iterations for step in tried)} iterations, "
+                              f"{sum(step.passes for step in tried)} friction passes, {len(tried)} step(s) tried "
+                              f"({time.perf_counter() - step_start:.0f} s)")
         middle = step_readings[-1]
         _, rod_gradient, _ = energy_gradient(model, state)
         pull = float(result.reaction_force[swatch.moving, 0].sum())
