@@ -375,12 +375,15 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                 # frictionless strain is one solve, with no path to divide).
                 path, tried = in_halves(take, _SwatchStep.accepted, _SwatchStep.end, (state, contacts), low, target,
                                         STEP_HALVINGS if friction > 0.0 else 0)
-            iterations += sum(step.iterations for step in tried)
-            passes += sum(step.passes for step in tried)
+            step_iterations = sum(step.iterations for step in tried)
+            step_passes = sum(step.passes for step in tried)
+            iterations += step_iterations
+            passes += step_passes
+            step_converged = True
             for step in path:
                 result, lagged = step.result, step.lagged
                 accepted = step.accepted()
-                converged &= accepted
+                step_converged &= accepted
                 state, contacts = result.state, result.contacts
                 # The middle's reading after every step; the level's point is its last step's.
                 cut = cut_forces(swatch, state, result.contacts, None if lagged is None else lagged.anchors)
@@ -393,16 +396,16 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                     "compression_ratio": width / width0,
                     "converged": accepted,
                 })
-            slowest = max(slowest, time.perf_counter() - step_start)
+            converged &= step_converged
+            step_seconds = time.perf_counter() - step_start
+            slowest = max(slowest, step_seconds)
             if step_progress is not None and steps > 1:
                 reading = step_readings[-1]
                 step_progress(f"{swatch.direction} {100 * target:.4g} % (load step {j} of {steps} towards "
                               f"{100 * strain:g} %): middle half {reading['middle_force_n_per_m']:.5g} N/m at "
                               f"{_strain_text(reading['mid_strain'])}, "
-                              f"{'converged' if all(step.accepted() for step in path) else 'NOT converged'}, "
-                              f"{sum(step.iterations for step in tried)} iterations, "
-                              f"{sum(step.passes for step in tried)} friction passes, {len(tried)} step(s) tried "
-                              f"({time.perf_counter() - step_start:.0f} s)")
+                              f"{'converged' if step_converged else 'NOT converged'}, {step_iterations} iterations, "
+                              f"{step_passes} friction passes, {len(tried)} step(s) tried ({step_seconds:.0f} s)")
         middle = step_readings[-1]
         _, rod_gradient, _ = energy_gradient(model, state)
         pull = float(result.reaction_force[swatch.moving, 0].sum())
