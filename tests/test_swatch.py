@@ -602,11 +602,12 @@ def test_the_kept_strip_curves_are_read_back_and_say_what_solved_them(monkeypatc
     spec.loader.exec_module(script)
     paths = sorted((folder / "strips").glob("*.json"))
     assert paths, "validation/strips/ holds no curve"
+    listed = (folder / "strips" / "README.md").read_text()
     for path in paths:
+        assert path.name in listed
         for label, curve in json.loads(path.read_text())["curves"].items():
             reached = [point for point in script.level_points(curve) if point is not None]
             assert reached, f"{path.name}: {label} reached no strain"
             assert curve["direction"] == label.split()[0]
             assert re.fullmatch(r"[0-9a-f]{40}", curve["written_by"]["commit"]), f"{path.name}: {label}"
             assert curve["written_by"]["command"].startswith("python validation/swatch_convergence.py")
-            assert path.name in (folder / "strips" / "README.md").read_text()
