@@ -15,7 +15,8 @@ import pytest
 import scipy.optimize
 
 from yarnfit.engine import Residual
-from yarnfit.fit import fit_shell, ridge_candidates
+from yarnfit.fit import fit_shell
+from yarnfit.ridge_fit import ridge_candidates
 from yarnfit.samples import SampleRanges, SampleResult, sample_design
 from yarnfit.shell import RidgeMembrane, bending_strain, membrane_strain
 
@@ -190,13 +191,13 @@ def stress_residuals(membrane: RidgeMembrane, sample, energy: float) -> list[flo
 
 
 def objective(membrane: RidgeMembrane, samples, fit) -> float:
-    """The strain-stiffening fit's objective (fit._fit_ridge_membrane), written out here on a
+    """The strain-stiffening fit's objective (ridge_fit.fit_ridge_membrane), written out here on a
     :class:`RidgeMembrane`: each membrane sample's relative energy error (no sample here is
     slack), each uniaxial sample's transverse stress, and its stress along the pull against its
     ``pull_slope`` (where known), times the pull's strain ``|ε|`` over its energy, and
     RIDGE_SMOOTHING times each ray's tangent jumps and each opposite pair's knot-0 difference,
     in the linear fit's stiffest tangent."""
-    from yarnfit.fit import RIDGE_SMOOTHING
+    from yarnfit.ridge_fit import RIDGE_SMOOTHING
 
     rows = [s for s in samples if s.is_membrane and not np.all(s.I == np.eye(2))]
     material = dataclasses.replace(FABRIC, nonlinear=membrane)
@@ -502,7 +503,7 @@ def test_no_feasible_membrane_fits_better_than_the_fit():
     candidates' segment tangents (a ray with a shear part and its mirror in the shear, the same
     knots, share one: the fit's membrane is even in the shear), finds no lower
     cost."""
-    from yarnfit.fit import RIDGE_SMOOTHING
+    from yarnfit.ridge_fit import RIDGE_SMOOTHING
 
     samples = samples_of(TRUE, noise=0.05)
     fit = fit_shell(samples, H)

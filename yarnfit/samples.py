@@ -500,7 +500,7 @@ SAMPLES_PER_LEVEL = 16
 # 5.5 / 6 / 7.5 % (validation/periodic_pulls.py; 11 of 44 points beyond 20 % at 11 strains along
 # weft, warp and both biases; over the five presets 42 of 220). With the 6.8 % sample alone (and
 # ten knots per ray) the twill 3 of 44, but cotton jersey's warp at 3 % +73 % (−25 % before), 27
-# of 220; with both and twelve knots (fit.RIDGE_KNOTS) 19, ten of them the knits' −45° pulls,
+# of 220; with both and twelve knots (ridge_fit.RIDGE_KNOTS) 19, ten of them the knits' −45° pulls,
 # which their designs do not sample. Cost (validation/bench.py fit, paired): the satin's fit +12 %,
 # the twill's +17 %, the stockinette's mean per sample +7 % (docs/design.md §3).
 UNIAXIAL_LEVELS = 7
