@@ -601,14 +601,14 @@ def cmd_export(args: argparse.Namespace) -> int:
     output = check_writable(Path(args.output) if args.output else Path(f"{material.name}-{args.scene}{suffix}.xml"),
                             "scene file")
     strip = {} if args.width is None else {"width": args.width}
-    split = export_options(args.scene, resolution=args.resolution, implicit_drag=args.implicit_drag,
+    scene_options = export_options(args.scene, resolution=args.resolution, implicit_drag=args.implicit_drag,
                            implicit_share=args.implicit_share, mesh=args.mesh, membrane=args.membrane)
-    built = export_scene(material, args.scene, output, size=args.size, **strip, **split,
+    built = export_scene(material, args.scene, output, size=args.size, **strip, **scene_options,
                          timestep=args.timestep, integrator=args.integrator, solver=args.solver,
                          friction=args.friction,
                          damping=args.damping, angle=math.radians(args.angle), fallback=args.fallback,
                          self_collision=args.self_collision)
-    print(export_summary(built, material, output, args, split))
+    print(export_summary(built, material, output, args, scene_options))
     if args.check is not None:
         from .mujoco.run import run_scene
 
@@ -621,8 +621,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def export_summary(built, material, output, args, split: dict) -> str:
-    """What `yarnfit export` wrote: ``split`` the scene's options as built (export_options)."""
+def export_summary(built, material, output, args, scene_options: dict) -> str:
+    """What `yarnfit export` wrote: ``scene_options`` the scene's options as built (export_options:
+    its split and resolution)."""
     from .mujoco.scenes import SOLVER_LABEL
 
     spec = built.spec
@@ -632,7 +633,7 @@ def export_summary(built, material, output, args, split: dict) -> str:
              f"{SOLVER_LABEL[spec.option.solver]} solver"]
     if built.fallback:
         part = "elastic2d both: stretch and bending"
-    elif split["implicit_share"] == "anisotropic":
+    elif scene_options["implicit_share"] == "anisotropic":
         part = ("its bending share implicit under discrete; its membrane metric rewritten by the plugin with the "
                 "anisotropic share, half the material's tangent in each mode")
     elif spec.flexes[0].elastic2d == 3:
@@ -649,9 +650,9 @@ def export_summary(built, material, output, args, split: dict) -> str:
         bending = (f"its own {kind}bending, the built-in hinge forces removed" if spec.flexes[0].elastic2d == 3
                    else f"all {kind}bending")
         lines.append(f"  plugin          yarnfit.shell: the full material (orthotropic rest, {membrane}, "
-                     f"{bending}), weft at {args.angle:g}° from x, {split['membrane']} membrane strains on "
-                     f"{split['mesh']} cells, implicit_drag {split['implicit_drag']}, "
-                     f"implicit_share {split['implicit_share']}")
+                     f"{bending}), weft at {args.angle:g}° from x, {scene_options['membrane']} membrane strains on "
+                     f"{scene_options['mesh']} cells, implicit_drag {scene_options['implicit_drag']}, "
+                     f"implicit_share {scene_options['implicit_share']}")
     if not built.fallback and material.shell.nonlinear is not None and args.check is None:
         lines.append("  note            the strain-stiffening forces are explicit and can need a step below 1 ms "
                      "(plugins/README.md): check the scene with --check SECONDS, or export --linear")
