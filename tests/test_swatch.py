@@ -586,20 +586,28 @@ def test_the_suite_runs_the_yarn_scene_per_direction_and_merges_it(tmp_path):
         merge_yarn_summaries([])
 
 
-def test_the_kept_strip_curves_are_read_back_and_say_what_solved_them(monkeypatch):
-    # validation/strips/ keeps the largest strips' curves (hours a level) for --from-json: each is
-    # read as swatch_convergence.py reads it (its levels a start of the swatch's strains) and says
-    # which command and commit solved it, without which a stale curve could not be told.
+def _swatch_convergence_script(monkeypatch):
+    """validation/swatch_convergence.py, imported as a module."""
     import importlib.util
-    import json
     import sys
     from pathlib import Path
 
-    folder = Path(__file__).parent.parent / "validation"
-    spec = importlib.util.spec_from_file_location("swatch_convergence", folder / "swatch_convergence.py")
+    spec = importlib.util.spec_from_file_location(
+        "swatch_convergence", Path(__file__).parent.parent / "validation" / "swatch_convergence.py")
     script = importlib.util.module_from_spec(spec)
     monkeypatch.setitem(sys.modules, spec.name, script)  # its dataclasses look their module up
     spec.loader.exec_module(script)
+    return script
+
+
+def test_the_kept_strip_curves_are_read_back_and_say_what_solved_them(monkeypatch):
+    # validation/strips/ keeps the largest strips' curves (hours a level) for --kept: each is read
+    # as swatch_convergence.py reads it (its levels a start of the swatch's strains) and says which
+    # command and commit solved it, without which a stale curve could not be told.
+    import json
+
+    script = _swatch_convergence_script(monkeypatch)
+    folder = script.KEPT_STRIPS.parent
     paths = sorted((folder / "strips").glob("*.json"))
     assert paths, "validation/strips/ holds no curve"
     listed = (folder / "strips" / "README.md").read_text()
@@ -611,3 +619,23 @@ def test_the_kept_strip_curves_are_read_back_and_say_what_solved_them(monkeypatc
             assert curve["direction"] == label.split()[0]
             assert re.fullmatch(r"[0-9a-f]{40}", curve["written_by"]["commit"]), f"{path.name}: {label}"
             assert curve["written_by"]["command"].startswith("python validation/swatch_convergence.py")
+
+
+def test_kept_curves_are_found_by_their_fabric_and_another_fabrics_are_refused(monkeypatch):
+    # --kept reads the curves of the material's own fabric; a curve of another fabric, named with
+    # --from-json, would judge the shell against someone else's yarns, so it is refused by name.
+    import json
+
+    script = _swatch_convergence_script(monkeypatch)
+    kept = script.kept_curves("polyester-satin")
+    assert {p.rsplit("/", 1)[1] for p in kept} >= {"polyester-satin_weft_8x6.json", "polyester-satin_warp_8x6.json"}
+    for path in kept:
+        with open(path) as source:
+            assert json.load(source)["material"] == "polyester-satin"
+    curves = script.read_curves(kept, "polyester-satin")
+    assert {"weft 8x6", "warp 8x6"} <= set(curves) and curves["weft 8x6"]["repeats"] == [8, 6]
+    with pytest.raises(ValueError, match="keeps no strip curve of 'no-such-fabric'"):
+        script.kept_curves("no-such-fabric")
+    with pytest.raises(ValueError, match=r"polyester-satin_\w+\.json: its curves are of 'polyester-satin', "
+                                         "not of the material 'cotton-twill'"):
+        script.read_curves(kept, "cotton-twill")

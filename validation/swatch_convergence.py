@@ -13,7 +13,7 @@ node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what say
 has to be.
 
     python validation/swatch_convergence.py MATERIAL.json [--sizes 2x1.5,4x3,8x6 (bias: 3x1,6x2,12x4)] \\
-        [--directions weft,warp,bias,other bias] [--selvedge] [--frictionless] [--json OUT.json] [--from-json A.json,B.json]
+        [--directions weft,warp,bias,other bias] [--selvedge] [--frictionless] [--json OUT.json] [--from-json A.json,B.json] [--kept]
 
 The force and width measured at mid-length converge as the cut loops at the long sides and the
 jaws' constraint become a smaller part of the strip; the table shows how fast. Its edge draw-in
@@ -49,7 +49,8 @@ counted apart.
 ``--from-json`` reads curves written by earlier runs instead of solving (runs of several sizes or
 directions made in parallel). The largest strips take hours a level, so their curves are kept in
 ``validation/strips/`` (each with the command and commit that solved it) and read against every
-later fit: ``--from-json validation/strips/polyester-satin_weft_8x6.json,...``.
+later fit: ``--kept`` reads every one of the material's (``--from-json`` names files; a curve of
+another fabric is refused).
 """
 
 from __future__ import annotations
@@ -103,6 +104,8 @@ SHELL_STRIP_REACH = 0.2
 # reach (above).
 DEFAULT_SIZES = "2x1.5,4x3,8x6"
 DEFAULT_BIAS_SIZES = "3x1,6x2,12x4"
+# The largest strips' curves, kept in the repository (its README lists them).
+KEPT_STRIPS = Path(__file__).parent / "strips"
 
 
 def default_sizes(direction: str) -> list[tuple[float, float]]:
@@ -166,6 +169,36 @@ def solve_curves(file: MaterialFile, sizes: Callable[[str], list], directions, s
             if json_path:
                 write_curves(json_path, relaxed.name, curves)
     return relaxed, curves
+
+
+def read_curves(paths: list[str], name: str) -> dict:
+    """The curves in the files ``paths`` (as :func:`write_curves` writes them), by label, each of
+    which must be of the material ``name``: a curve of another fabric read against this shell
+    would judge it against someone else's yarns. Raises ``ValueError`` naming the file."""
+    curves = {}
+    for path in paths:
+        with open(path) as source:
+            data = json.load(source)
+        if data.get("material") != name:
+            raise ValueError(f"{path}: its curves are of {data.get('material')!r}, not of the material {name!r}")
+        for label, curve in data["curves"].items():
+            # Labels are "DIRECTION GAUGExWIDTH" (curves written before "repeats" was kept).
+            curve.setdefault("repeats", parse_sizes(label.split()[1])[0])
+            curves[label] = curve
+    return curves
+
+
+def kept_curves(name: str) -> list[str]:
+    """The curve files kept in :data:`KEPT_STRIPS` for the material ``name`` (by the file's
+    ``material``), sorted. Raises ``ValueError`` when it keeps none."""
+    paths = []
+    for path in sorted(KEPT_STRIPS.glob("*.json")):
+        with open(path) as source:
+            if json.load(source).get("material") == name:
+                paths.append(str(path))
+    if not paths:
+        raise ValueError(f"{KEPT_STRIPS} keeps no strip curve of {name!r}")
+    return paths
 
 
 def write_curves(path: str, name: str, curves: dict) -> None:
@@ -519,18 +552,20 @@ def main(argv: list[str] | None = None) -> int:
                         help="no friction at the yarn contacts (default: the fibre's coefficient, as the suite)")
     parser.add_argument("--json", help="also write the curves to this file")
     parser.add_argument("--from-json", help="comma-separated curve files of earlier runs: compare, do not solve")
+    parser.add_argument("--kept", action="store_true",
+                        help=f"compare against every curve of this material kept in {KEPT_STRIPS.parent.name}/"
+                             f"{KEPT_STRIPS.name}/ (with --from-json: those too); do not solve")
     args = parser.parse_args(argv)
     with one_core():  # as the bench figures
         file = MaterialFile.read(args.material)
-        if args.from_json:
-            curves = {}
-            for path in args.from_json.split(","):
-                with open(path) as source:
-                    for label, curve in json.load(source)["curves"].items():
-                        # Labels are "DIRECTION GAUGExWIDTH" (curves written before "repeats" was kept).
-                        curve.setdefault("repeats", parse_sizes(label.split()[1])[0])
-                        curves[label] = curve
+        if args.from_json or args.kept:
             name = file.fabric().name
+            paths = args.from_json.split(",") if args.from_json else []
+            try:
+                curves = read_curves(paths + (kept_curves(name) if args.kept else []), name)
+            except ValueError as exc:
+                print(f"swatch_convergence.py: {exc}", file=sys.stderr)
+                return 2
             relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
             if args.json:  # the curves read, together in one file
                 write_curves(args.json, name, curves)
