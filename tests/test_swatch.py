@@ -396,6 +396,62 @@ def test_a_frictional_pull_is_converged_in_its_load_step():
             stretch_swatch(swatch, (0.02,), friction=cotton.friction, strain_step=step)
 
 
+def test_an_interrupted_pull_resumes_from_its_checkpoint_where_it_would_have_gone(tmp_path):
+    # A largest strip takes hours a level: stopped after any load step and run again with the same
+    # checkpoint file, the pull lands exactly where an uninterrupted one does (the next step starts
+    # from the same rods, contacts and strain), and it hands on_step the levels it had finished.
+    import json
+
+    from yarnfit.fabric import Fabric
+    from yarnfit.fibers import get_fiber
+    from yarnfit.relax import relax
+
+    cotton = get_fiber("cotton")
+    relaxed = relax(Fabric(name="plain", fiber=cotton, structure="plain", areal_density=0.2))
+    swatch = cut_swatch(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), direction="bias",
+                        gauge=1.5 * max(relaxed.repeat_size), width=max(relaxed.repeat_size),
+                        clamp=0.5 * max(relaxed.repeat_size))
+    strains = (0.01, 0.02)
+    whole = stretch_swatch(swatch, strains, friction=cotton.friction)
+
+    class Stop(Exception):
+        pass
+
+    def stop_at(kind: str, count: int):
+        """step_progress / on_step callbacks that stop the pull at their ``count``-th call."""
+        calls = []
+
+        def callback(*args):
+            calls.append(args)
+            if len(calls) == count:
+                raise Stop
+
+        return {kind: callback}
+
+    # Stopped after the first level's first step, after the first level (on_step: 0, then 1), and
+    # after the second level's first step: the checkpoint holds (level, step) (1, 1), (2, 0), (2, 1).
+    for where, (stop, stands) in enumerate([(stop_at("step_progress", 1), (1, 1)), (stop_at("on_step", 2), (2, 0)),
+                                            (stop_at("step_progress", 3), (2, 1))]):
+        path = tmp_path / f"pull-{where}.npz"
+        with pytest.raises(Stop):
+            stretch_swatch(swatch, strains, friction=cotton.friction, checkpoint=path, **stop)
+        with np.load(path) as data:
+            meta = json.loads(str(data["meta"]))
+        assert (meta["level"], meta["step"]) == stands
+        seen = []
+        resumed = stretch_swatch(swatch, strains, friction=cotton.friction, checkpoint=path,
+                                 on_step=lambda k, strain, position, point: seen.append((k, strain)))
+        assert seen == [(0, 0.0), (1, 0.01), (2, 0.02)]
+        timings = ("seconds", "slowest_step_seconds")
+        for a, b in zip(whole["points"], resumed["points"], strict=True):
+            assert {k: v for k, v in a.items() if k not in timings} == {k: v for k, v in b.items() if k not in timings}
+        # Finished, the checkpoint hands the whole curve back without solving.
+        again = stretch_swatch(swatch, strains, friction=cotton.friction, checkpoint=path)
+        assert again["points"] == resumed["points"]
+    with pytest.raises(ValueError, match="the checkpoint of another pull"):
+        stretch_swatch(swatch, (0.01, 0.03), friction=cotton.friction, checkpoint=tmp_path / "pull-1.npz")
+
+
 def test_a_frictional_step_that_does_not_settle_is_taken_in_halves(monkeypatch):
     # Here a step longer than 0.3 % never settles: each 0.5 % step is taken as two 0.25 % ones, the
     # pull converges, its middle is read after each, and it is the pull a 0.25 % step takes.

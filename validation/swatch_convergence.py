@@ -13,7 +13,8 @@ node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what say
 has to be.
 
     python validation/swatch_convergence.py MATERIAL.json [--sizes 2x1.5,4x3,8x6 (bias: 3x1,6x2,12x4)] \\
-        [--directions weft,warp,bias,other bias] [--selvedge] [--frictionless] [--json OUT.json] [--from-json A.json,B.json] [--kept]
+        [--directions weft,warp,bias,other bias] [--selvedge] [--frictionless] [--json OUT.json] [--checkpoints DIR] \\
+        [--from-json A.json,B.json] [--kept]
 
 The force and width measured at mid-length converge as the cut loops at the long sides and the
 jaws' constraint become a smaller part of the strip; the table shows how fast. Its edge draw-in
@@ -129,14 +130,18 @@ def parse_sizes(text: str) -> list[tuple[float, float]]:
 
 
 def solve_curves(file: MaterialFile, sizes: Callable[[str], list], directions, selvedge: bool = False,
-                 friction: bool = True, json_path: str | None = None) -> tuple[object, dict]:
+                 friction: bool = True, json_path: str | None = None,
+                 checkpoints: Path | None = None) -> tuple[object, dict]:
     """``(relaxed repeat, {label: curve})``: each direction's strips at each of ``sizes(direction)`` (with
     ``selvedge``, the yarns running across a strip joined at its long sides:
     :func:`yarnfit.validate.swatch.join_selvedges`; with ``friction``, the fibre's friction at the
     contacts), pulled to STRAINS on one core; prints each strip's row as it finishes and, with
     ``json_path``, writes the curves there after every strain a strip reaches (a strip takes up to
     hours: a run stopped part way keeps the strains it reached, the strip being pulled marked
-    ``"unfinished"``, for ``--from-json``)."""
+    ``"unfinished"``, for ``--from-json``). With ``checkpoints`` (a folder), each strip's pull
+    writes where it stands there after every load step and resumes from it when run again
+    (:class:`yarnfit.validate.checkpoint.PullCheckpoint`): a level of hours can be solved over
+    several runs."""
     relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
     repeat = float(max(relaxed.repeat_size))
     section = relaxed.yarn.section()
@@ -159,9 +164,14 @@ def solve_curves(file: MaterialFile, sizes: Callable[[str], list], directions, s
                                                     "written_by": provenance(), "unfinished": True}})
 
             start = time.perf_counter()
+            checkpoint = None if checkpoints is None else \
+                checkpoints / f"{relaxed.name}_{direction.replace(' ', '-')}_{gauge:g}x{width:g}.npz"
+            if checkpoint is not None and checkpoint.exists():
+                print(f"    resuming from {checkpoint}", flush=True)
             curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, friction=coefficient, on_step=keep,
                                    progress=lambda text: print("   ", text, flush=True),
-                                   step_progress=lambda text: print("     ", text, flush=True))
+                                   step_progress=lambda text: print("     ", text, flush=True),
+                                   checkpoint=checkpoint)
             curve["repeats"] = [gauge, width]
             curve["written_by"] = provenance()
             curves[label] = curve
@@ -551,6 +561,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frictionless", action="store_true",
                         help="no friction at the yarn contacts (default: the fibre's coefficient, as the suite)")
     parser.add_argument("--json", help="also write the curves to this file")
+    parser.add_argument("--checkpoints", help="a folder where each strip's pull is saved after every load step and "
+                                              "resumed from when the same command runs again")
     parser.add_argument("--from-json", help="comma-separated curve files of earlier runs: compare, do not solve")
     parser.add_argument("--kept", action="store_true",
                         help=f"compare against every curve of this material kept in {KEPT_STRIPS.parent.name}/"
@@ -572,7 +584,8 @@ def main(argv: list[str] | None = None) -> int:
         else:
             sizes = default_sizes if args.sizes is None else (lambda direction, given=parse_sizes(args.sizes): given)
             relaxed, curves = solve_curves(file, sizes, args.directions.split(","), args.selvedge,
-                                           not args.frictionless, args.json)
+                                           not args.frictionless, args.json,
+                                           None if args.checkpoints is None else Path(args.checkpoints))
             name = relaxed.name
             print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
         strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)

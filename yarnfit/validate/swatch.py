@@ -94,6 +94,7 @@ the pull, y across, z the fabric normal):
 from __future__ import annotations
 
 import math
+import os
 import time
 import warnings
 from dataclasses import dataclass, replace
@@ -127,6 +128,7 @@ from ..jsonfile import finite_or_none
 from ..material_file import MaterialFile
 from ..record import Recording, folded_panels, markdown_table
 from . import PULL_DIRECTIONS, SceneResult
+from .checkpoint import PullCheckpoint, pull_fingerprint
 from .strip import (Swatch, cut_forces, edge_draw_in, extent_width, free_side_ends, mid_strain, mid_width,
                     middle_compression)
 
@@ -316,7 +318,8 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                    on_step: Callable[[int, float, np.ndarray, dict], None] | None = None,
                    progress: Callable[[str], None] | None = None, friction: float = 0.0,
                    strain_step: float = FRICTION_STRAIN_STEP,
-                   step_progress: Callable[[str], None] | None = None) -> dict:
+                   step_progress: Callable[[str], None] | None = None,
+                   checkpoint: str | os.PathLike | None = None) -> dict:
     """Pull ``swatch`` to each of ``strains`` (ascending, > 0) in turn, each a converged solve
     warm-started from the previous one. ``on_step(k, strain, position, point)`` is called after
     each solve (k = 0 for the unstrained state, then 1, 2, ...). ``width_band`` (m, default a
@@ -330,7 +333,10 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     all of them, ``slowest_step_seconds`` is the longest one's time, and it is converged only if
     every step converged and its normal forces settled). ``progress`` gets a line per strain,
     ``step_progress`` one per load step of a strain reached in several (a large strip's level takes
-    hours). Returns a JSON-able dict (see the module docstring)."""
+    hours). ``checkpoint``: a file the pull writes where it stands after every load step
+    (:class:`~yarnfit.validate.checkpoint.PullCheckpoint`); if it exists, the pull resumes from it
+    (``ValueError`` if it is another pull's), calling ``on_step`` again for the levels it had
+    finished. Returns a JSON-able dict (see the module docstring)."""
     strains = [float(e) for e in strains]
     if not strains or any(not (math.isfinite(e) and e > 0) for e in strains) or strains != sorted(strains):
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
@@ -344,6 +350,10 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     rest = swatch.position
     width0 = mid_width(swatch, rest)
     extent0 = extent_width(swatch, rest, band)
+    fingerprint = None if checkpoint is None else pull_fingerprint(swatch, strains, options, band, friction,
+                                                                   strain_step)
+    resumed = PullCheckpoint.read(checkpoint, fingerprint) if checkpoint is not None and Path(checkpoint).exists() \
+        else None
     state = RodState.from_model(model)
     points = [{"strain": 0.0, "force_n_per_m": 0.0, "fixed_force_n_per_m": 0.0, "rod_force_n_per_m": 0.0,
                "cut_force_n_per_m": 0.0, "middle_force_n_per_m": 0.0, "middle_force_range_n_per_m": [0.0, 0.0],
@@ -352,20 +362,37 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                "width_m": width0,
                "edge_draw_in_m": 0.0 if len(free_side_ends(swatch)) else None, "converged": True, "iterations": 0,
                "seconds": 0.0, "residual": None}]
+    previous, contacts, level_positions = 0.0, None, []
+    if resumed is not None:
+        points, previous, state, contacts = resumed.points, resumed.previous, resumed.state, resumed.contacts
+        level_positions = list(resumed.level_positions)
     if on_step is not None:
         on_step(0, 0.0, rest, points[0])
-    previous = 0.0
-    contacts = None
+        for k, position in enumerate(level_positions, start=1):
+            on_step(k, strains[k - 1], position, points[k])
 
     def take(begin, low, high):
         return _swatch_step(swatch, solver, begin, low, high, friction)
 
+    def save(level: int, step: int, totals: dict) -> None:
+        """Where the pull stands, in the checkpoint file (if any)."""
+        if checkpoint is not None:
+            finished = np.array(level_positions).reshape(-1, model.n_nodes, 3)
+            PullCheckpoint(fingerprint, level, step, previous, points, finished, totals, state, contacts).write(checkpoint)
+
     for k, strain in enumerate(strains, start=1):
-        start = time.perf_counter()
+        if k <= len(level_positions):
+            continue  # finished before the pull was resumed
         steps = load_step_count(previous, strain, strain_step) if friction > 0.0 else 1
-        iterations, passes, converged, slowest = 0, 0, True, 0.0
-        step_readings = []
-        for j in range(1, steps + 1):
+        totals = {"iterations": 0, "passes": 0, "converged": True, "slowest": 0.0, "seconds": 0.0, "readings": []}
+        done = 0
+        if resumed is not None and k == resumed.level and resumed.step > 0:  # within the level
+            totals, done = resumed.totals, resumed.step
+        start = time.perf_counter() - totals["seconds"]
+        iterations, passes, converged, slowest = totals["iterations"], totals["passes"], totals["converged"], \
+            totals["slowest"]
+        step_readings = list(totals["readings"])
+        for j in range(done + 1, steps + 1):
             step_start = time.perf_counter()
             low = previous + (strain - previous) * (j - 1) / steps
             target = strain if j == steps else previous + (strain - previous) * j / steps
@@ -399,6 +426,9 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             converged &= step_converged
             step_seconds = time.perf_counter() - step_start
             slowest = max(slowest, step_seconds)
+            if j < steps:  # the level's last step is saved with its point
+                save(k, j, {"iterations": iterations, "passes": passes, "converged": converged, "slowest": slowest,
+                            "seconds": time.perf_counter() - start, "readings": step_readings})
             if step_progress is not None and steps > 1:
                 reading = step_readings[-1]
                 step_progress(f"{swatch.direction} {100 * target:.4g} % (load step {j} of {steps} towards "
@@ -444,7 +474,9 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "steps": step_readings,
         }
         points.append(point)
+        level_positions.append(state.node_position.copy())
         previous = strain
+        save(k + 1, 0, {})
         if progress is not None:
             progress(f"{swatch.direction} {100 * strain:g} %: {point['force_n_per_m']:.5g} N/m (middle half "
                      f"{point['middle_force_n_per_m']:.5g} N/m at {_strain_text(point['mid_strain'])}, width ratio "
