@@ -142,6 +142,7 @@ def solve_curves(file: MaterialFile, sizes: Callable[[str], list], directions, s
     writes where it stands there after every load step and resumes from it when run again
     (:class:`yarnfit.validate.checkpoint.PullCheckpoint`): a level of hours can be solved over
     several runs."""
+    provenance()  # the commit the run starts at (the code it runs), not whatever HEAD is an hour later
     relaxed = file.relaxed_or_relaxed_again(lambda text: print(text, flush=True))
     repeat = float(max(relaxed.repeat_size))
     section = relaxed.yarn.section()
