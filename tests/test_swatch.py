@@ -405,6 +405,7 @@ def test_an_interrupted_pull_resumes_from_its_checkpoint_where_it_would_have_gon
     from yarnfit.fabric import Fabric
     from yarnfit.fibers import get_fiber
     from yarnfit.relax import relax
+    from yarnfit.validate.checkpoint import CheckpointError
 
     cotton = get_fiber("cotton")
     relaxed = relax(Fabric(name="plain", fiber=cotton, structure="plain", areal_density=0.2))
@@ -438,17 +439,19 @@ def test_an_interrupted_pull_resumes_from_its_checkpoint_where_it_would_have_gon
         with np.load(path) as data:
             meta = json.loads(str(data["meta"]))
         assert (meta["level"], meta["step"]) == stands
-        seen = []
-        resumed = stretch_swatch(swatch, strains, friction=cotton.friction, checkpoint=path,
+        seen, said = [], []
+        resumed = stretch_swatch(swatch, strains, friction=cotton.friction, checkpoint=path, progress=said.append,
                                  on_step=lambda k, strain, position, point: seen.append((k, strain)))
         assert seen == [(0, 0.0), (1, 0.01), (2, 0.02)]
+        assert said[0] == f"bias: resumed from {path} after " + {(1, 1): "load step 1 towards 1 %", (2, 0): "1 %",
+                                                                  (2, 1): "load step 1 towards 2 %"}[stands]
         timings = ("seconds", "slowest_step_seconds")
         for a, b in zip(whole["points"], resumed["points"], strict=True):
             assert {k: v for k, v in a.items() if k not in timings} == {k: v for k, v in b.items() if k not in timings}
         # Finished, the checkpoint hands the whole curve back without solving.
         again = stretch_swatch(swatch, strains, friction=cotton.friction, checkpoint=path)
         assert again["points"] == resumed["points"]
-    with pytest.raises(ValueError, match="the checkpoint of another pull"):
+    with pytest.raises(CheckpointError, match="the checkpoint of another pull"):
         stretch_swatch(swatch, (0.01, 0.03), friction=cotton.friction, checkpoint=tmp_path / "pull-1.npz")
 
 

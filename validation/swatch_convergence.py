@@ -71,6 +71,7 @@ from typing import Callable
 from yarnfit.material_file import MaterialFile
 from yarnfit.engine import QuasiStaticOptions
 from yarnfit.homogenize import periodic_pulls_along
+from yarnfit.validate.checkpoint import CheckpointError
 from yarnfit.validate.shell_strip import ShellStripCurve, shell_strip_limit
 from yarnfit.validate import PULL_DIRECTIONS
 from yarnfit.validate.swatch import STRAINS, SWATCH_OPTIONS, cut_swatch, read_uniform, stretch_swatch, swatch_curve
@@ -167,8 +168,6 @@ def solve_curves(file: MaterialFile, sizes: Callable[[str], list], directions, s
             start = time.perf_counter()
             checkpoint = None if checkpoints is None else \
                 checkpoints / f"{relaxed.name}_{direction.replace(' ', '-')}_{gauge:g}x{width:g}.npz"
-            if checkpoint is not None and checkpoint.exists():
-                print(f"    resuming from {checkpoint}", flush=True)
             curve = stretch_swatch(swatch, STRAINS, options=OPTIONS, friction=coefficient, on_step=keep,
                                    progress=lambda text: print("   ", text, flush=True),
                                    step_progress=lambda text: print("     ", text, flush=True),
@@ -584,9 +583,13 @@ def main(argv: list[str] | None = None) -> int:
                 write_curves(args.json, name, curves)
         else:
             sizes = default_sizes if args.sizes is None else (lambda direction, given=parse_sizes(args.sizes): given)
-            relaxed, curves = solve_curves(file, sizes, args.directions.split(","), args.selvedge,
-                                           not args.frictionless, args.json,
-                                           None if args.checkpoints is None else Path(args.checkpoints))
+            try:
+                relaxed, curves = solve_curves(file, sizes, args.directions.split(","), args.selvedge,
+                                               not args.frictionless, args.json,
+                                               None if args.checkpoints is None else Path(args.checkpoints))
+            except CheckpointError as exc:
+                print(f"swatch_convergence.py: {exc}", file=sys.stderr)
+                return 2
             name = relaxed.name
             print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
         strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)

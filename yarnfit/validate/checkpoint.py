@@ -41,7 +41,11 @@ from .strip import Swatch
 # The file's format; a file of another format is refused.
 CHECKPOINT_FORMAT = "yarnfit-pull-checkpoint/1"
 
-__all__ = ["CHECKPOINT_FORMAT", "PullCheckpoint", "pull_fingerprint"]
+__all__ = ["CHECKPOINT_FORMAT", "CheckpointError", "PullCheckpoint", "pull_fingerprint"]
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file that cannot be resumed from (another pull's, another format's, not one)."""
 
 
 def pull_fingerprint(swatch: Swatch, strains: list[float], options: QuasiStaticOptions, width_band: float,
@@ -105,17 +109,17 @@ class PullCheckpoint:
     @classmethod
     def read(cls, path: str | os.PathLike, fingerprint: str) -> "PullCheckpoint":
         """The checkpoint in ``path``, which must be of the pull whose :func:`pull_fingerprint` is
-        ``fingerprint``. Raises ``ValueError`` naming the file otherwise."""
+        ``fingerprint``. Raises :class:`CheckpointError` naming the file otherwise."""
         with np.load(path, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}
         try:
             meta = json.loads(str(arrays.pop("meta")))
         except (KeyError, ValueError) as exc:
-            raise ValueError(f"{path}: not a pull checkpoint ({exc})") from None
+            raise CheckpointError(f"{path}: not a pull checkpoint ({exc})") from None
         if meta.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"{path}: a checkpoint of format {meta.get('format')!r}, not {CHECKPOINT_FORMAT!r}")
+            raise CheckpointError(f"{path}: a checkpoint of format {meta.get('format')!r}, not {CHECKPOINT_FORMAT!r}")
         if meta["fingerprint"] != fingerprint:
-            raise ValueError(f"{path}: the checkpoint of another pull (its strip, strains, friction, load step or "
+            raise CheckpointError(f"{path}: the checkpoint of another pull (its strip, strains, friction, load step or "
                              "solver options differ): remove it, or give this pull another checkpoint file")
         state = RodState(**{f.name: arrays[f"state.{f.name}"] for f in dataclasses.fields(RodState)})
         contacts = None

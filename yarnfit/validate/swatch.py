@@ -335,7 +335,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     ``step_progress`` one per load step of a strain reached in several (a large strip's level takes
     hours). ``checkpoint``: a file the pull writes where it stands after every load step
     (:class:`~yarnfit.validate.checkpoint.PullCheckpoint`); if it exists, the pull resumes from it
-    (``ValueError`` if it is another pull's), calling ``on_step`` again for the levels it had
+    (:class:`~yarnfit.validate.checkpoint.CheckpointError` if it is another pull's), calling ``on_step`` again for the levels it had
     finished. Returns a JSON-able dict (see the module docstring)."""
     strains = [float(e) for e in strains]
     if not strains or any(not (math.isfinite(e) and e > 0) for e in strains) or strains != sorted(strains):
@@ -366,6 +366,10 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     if resumed is not None:
         points, previous, state, contacts = resumed.points, resumed.previous, resumed.state, resumed.contacts
         level_positions = list(resumed.level_positions)
+        if progress is not None:
+            where = (f"load step {resumed.step} towards {100 * strains[resumed.level - 1]:g} %"
+                     if resumed.level <= len(strains) and resumed.step > 0 else f"{100 * previous:g} %")
+            progress(f"{swatch.direction}: resumed from {checkpoint} after {where}")
     if on_step is not None:
         on_step(0, 0.0, rest, points[0])
         for k, position in enumerate(level_positions, start=1):
