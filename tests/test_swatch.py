@@ -369,16 +369,22 @@ def test_friction_holds_a_small_weave_stiffer_and_balanced():
 LOAD_STEP_RTOL = 0.03
 
 
-def test_a_frictional_pull_is_converged_in_its_load_step():
+def _plain_weave_strip(direction: str):
+    """``(cotton, strip)``: a 200 g/m² cotton plain weave's strip along ``direction``, 1.5 × 1
+    repeats between jaws of half a repeat (a frictional pull of it takes seconds)."""
     from yarnfit.fabric import Fabric
     from yarnfit.fibers import get_fiber
     from yarnfit.relax import relax
 
     cotton = get_fiber("cotton")
     relaxed = relax(Fabric(name="plain", fiber=cotton, structure="plain", areal_density=0.2))
-    swatch = cut_swatch(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), direction="bias",
-                        gauge=1.5 * max(relaxed.repeat_size), width=max(relaxed.repeat_size),
-                        clamp=0.5 * max(relaxed.repeat_size))
+    repeat = max(relaxed.repeat_size)
+    return cotton, cut_swatch(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), direction=direction,
+                              gauge=1.5 * repeat, width=repeat, clamp=0.5 * repeat)
+
+
+def test_a_frictional_pull_is_converged_in_its_load_step():
+    cotton, swatch = _plain_weave_strip("bias")
     lines = []
     default = stretch_swatch(swatch, (0.02, 0.05), friction=cotton.friction, step_progress=lines.append)
     finer = stretch_swatch(swatch, (0.02, 0.05), friction=cotton.friction, strain_step=0.5 * FRICTION_STRAIN_STEP)
@@ -402,16 +408,9 @@ def test_an_interrupted_pull_resumes_from_its_checkpoint_where_it_would_have_gon
     # from the same rods, contacts and strain), and it hands on_step the levels it had finished.
     import json
 
-    from yarnfit.fabric import Fabric
-    from yarnfit.fibers import get_fiber
-    from yarnfit.relax import relax
     from yarnfit.validate.checkpoint import CheckpointError
 
-    cotton = get_fiber("cotton")
-    relaxed = relax(Fabric(name="plain", fiber=cotton, structure="plain", areal_density=0.2))
-    swatch = cut_swatch(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), direction="bias",
-                        gauge=1.5 * max(relaxed.repeat_size), width=max(relaxed.repeat_size),
-                        clamp=0.5 * max(relaxed.repeat_size))
+    cotton, swatch = _plain_weave_strip("bias")
     strains = (0.01, 0.02)
     whole = stretch_swatch(swatch, strains, friction=cotton.friction)
 
@@ -458,16 +457,9 @@ def test_an_interrupted_pull_resumes_from_its_checkpoint_where_it_would_have_gon
 def test_a_frictional_step_that_does_not_settle_is_taken_in_halves(monkeypatch):
     # Here a step longer than 0.3 % never settles: each 0.5 % step is taken as two 0.25 % ones, the
     # pull converges, its middle is read after each, and it is the pull a 0.25 % step takes.
-    from yarnfit.fabric import Fabric
-    from yarnfit.fibers import get_fiber
-    from yarnfit.relax import relax
     from yarnfit.validate import swatch as swatch_module
 
-    cotton = get_fiber("cotton")
-    relaxed = relax(Fabric(name="plain", fiber=cotton, structure="plain", areal_density=0.2))
-    swatch = cut_swatch(relaxed.model, relaxed.state.node_position, relaxed.yarn.section(), direction="weft",
-                        gauge=1.5 * max(relaxed.repeat_size), width=max(relaxed.repeat_size),
-                        clamp=0.5 * max(relaxed.repeat_size))
+    cotton, swatch = _plain_weave_strip("weft")
     step = swatch_module._swatch_step
 
     def settling_only_short_steps(swatch, solver, start, low, high, friction):
