@@ -685,6 +685,17 @@ def test_kept_curves_are_found_by_their_fabric_and_another_fabrics_are_refused(m
             assert json.load(source)["material"] == "polyester-satin"
     curves = script.read_curves(kept, "polyester-satin")
     assert {"weft 8x6", "warp 8x6"} <= set(curves) and curves["weft 8x6"]["repeats"] == [8, 6]
+    # The acceptance cells (weft, warp, bias at 2, 5, 10 %) that no direction's largest strip has
+    # reached: a smaller strip's levels do not count, nor does the other bias.
+    rest = {"strain": 0.0}
+
+    def curve(direction, nodes, strains):
+        return {"direction": direction, "nodes": nodes, "points": [rest] + [{"strain": e} for e in strains]}
+
+    some = {"weft 8x6": curve("weft", 900, (0.02,)), "weft 4x3": curve("weft", 200, (0.02, 0.05, 0.1)),
+            "bias 12x4": curve("bias", 500, (0.02, 0.05, 0.1)), "other bias 12x4": curve("other bias", 500, (0.02,))}
+    assert script.unreached_cells(some) == ["weft 5 %", "weft 10 %", "warp 2 %", "warp 5 %", "warp 10 %"]
+    assert len(script.unreached_cells({})) == 9
     with pytest.raises(ValueError, match="keeps no strip curve of 'no-such-fabric'"):
         script.kept_curves("no-such-fabric")
     with pytest.raises(ValueError, match=r"polyester-satin_\w+\.json: its curves are of 'polyester-satin', "

@@ -106,6 +106,8 @@ SHELL_STRIP_REACH = 0.2
 # reach (above).
 DEFAULT_SIZES = "2x1.5,4x3,8x6"
 DEFAULT_BIAS_SIZES = "3x1,6x2,12x4"
+# The directions issue 14's acceptance measures at 2, 5 and 10 % (the other bias is optional).
+ACCEPTANCE_DIRECTIONS = ("weft", "warp", "bias")
 # The largest strips' curves, kept in the repository (its README lists them).
 KEPT_STRIPS = Path(__file__).parent / "strips"
 
@@ -412,6 +414,17 @@ def largest_strips(curves: dict) -> dict:
     return largest
 
 
+def unreached_cells(curves: dict) -> list[str]:
+    """Issue 14's cells (weft, warp and bias at each of STRAINS) that the largest strip of their
+    direction has not reached, or that no strip measures: ``"DIRECTION LEVEL %"`` each."""
+    largest = largest_strips(curves)
+    cells = []
+    for direction in ACCEPTANCE_DIRECTIONS:
+        points = level_points(largest[direction]) if direction in largest else [None] * len(STRAINS)
+        cells += [f"{direction} {100 * e:g} %" for e, point in zip(STRAINS, points) if point is None]
+    return cells
+
+
 def shell_strips(file: MaterialFile, curves: dict) -> dict[str, ShellStripCurve]:
     """``{direction: curve}``: the nonlinear shell pulled between the jaws of the largest strip of
     each direction, its gauge and width, to STRAINS and on to SHELL_STRIP_REACH
@@ -652,6 +665,9 @@ def main(argv: list[str] | None = None) -> int:
             if tally.rubbed:
                 print(f"periodic pull with friction vs largest swatch, {reading.name}: "
                       f"within at {tally.rubbed_within} of {tally.rubbed} converged points")
+        unreached = unreached_cells(curves)
+        print(f"cells ({', '.join(ACCEPTANCE_DIRECTIONS)} at {', '.join(f'{100 * e:g} %' for e in STRAINS)}) no strip "
+              f"here has reached: {', '.join(unreached) if unreached else 'none'}")
         return 0
 
 
