@@ -26,7 +26,7 @@ import hashlib
 import io
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +41,7 @@ from .strip import Swatch
 # The file's format; a file of another format is refused.
 CHECKPOINT_FORMAT = "yarnfit-pull-checkpoint/1"
 
-__all__ = ["CHECKPOINT_FORMAT", "CheckpointError", "PullCheckpoint", "pull_fingerprint"]
+__all__ = ["CHECKPOINT_FORMAT", "CheckpointError", "LevelTotals", "PullCheckpoint", "pull_fingerprint"]
 
 
 class CheckpointError(ValueError):
@@ -67,6 +67,20 @@ def pull_fingerprint(swatch: Swatch, strains: list[float], options: QuasiStaticO
 
 
 @dataclass
+class LevelTotals:
+    """The strain level being pulled, so far: Newton iterations and lagged friction passes over its
+    load steps, whether every step converged and settled, the slowest step's and the level's wall
+    time (s), and each step's middle reading (as the point's ``steps`` holds them)."""
+
+    iterations: int = 0
+    passes: int = 0
+    converged: bool = True
+    slowest: float = 0.0
+    seconds: float = 0.0
+    readings: list[dict] = field(default_factory=list)
+
+
+@dataclass
 class PullCheckpoint:
     """A pull after a load step.
 
@@ -78,8 +92,7 @@ class PullCheckpoint:
         previous: the strain the level starts from.
         points: the finished points (the rest's first), as the curve holds them.
         level_positions: ``(levels finished, N, 3)`` node positions at each finished level (m).
-        totals: the level in progress so far: ``iterations``, ``passes``, ``converged``,
-            ``slowest`` (s), ``seconds`` (s) and ``readings`` (its steps' middle readings).
+        totals: the level in progress so far (empty at its start).
         state: the rods where the next step starts.
         contacts: their contact set (``None`` before the first solve).
     """
@@ -90,14 +103,14 @@ class PullCheckpoint:
     previous: float
     points: list[dict]
     level_positions: np.ndarray
-    totals: dict
+    totals: LevelTotals
     state: RodState
     contacts: ContactSet | None
 
     def write(self, path: str | os.PathLike) -> Path:
         """Write the checkpoint to ``path`` whole or not at all."""
         meta = {"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint, "level": self.level, "step": self.step,
-                "previous": self.previous, "points": self.points, "totals": self.totals}
+                "previous": self.previous, "points": self.points, "totals": dataclasses.asdict(self.totals)}
         arrays = {"meta": np.array(json.dumps(meta)), "level_positions": np.asarray(self.level_positions)}
         arrays.update(_fields("state", self.state))
         if self.contacts is not None:
@@ -119,8 +132,9 @@ class PullCheckpoint:
         if meta.get("format") != CHECKPOINT_FORMAT:
             raise CheckpointError(f"{path}: a checkpoint of format {meta.get('format')!r}, not {CHECKPOINT_FORMAT!r}")
         if meta["fingerprint"] != fingerprint:
-            raise CheckpointError(f"{path}: the checkpoint of another pull (its strip, strains, friction, load step or "
-                             "solver options differ): remove it, or give this pull another checkpoint file")
+            raise CheckpointError(f"{path}: the checkpoint of another pull (its strip, strains, friction, load step, "
+                                  "solver options or yarnfit version differ): remove it, or give this pull another "
+                                  "checkpoint file")
         state = RodState(**{f.name: arrays[f"state.{f.name}"] for f in dataclasses.fields(RodState)})
         contacts = None
         if "contacts.start" in arrays:
@@ -128,7 +142,7 @@ class PullCheckpoint:
             contacts = ContactSet(pairs=pairs, **{f.name: arrays[f"contacts.{f.name}"]
                                                   for f in dataclasses.fields(ContactSet) if f.name != "pairs"})
         return cls(meta["fingerprint"], meta["level"], meta["step"], meta["previous"], meta["points"],
-                   arrays["level_positions"], meta["totals"], state, contacts)
+                   arrays["level_positions"], LevelTotals(**meta["totals"]), state, contacts)
 
 
 def _fields(prefix: str, value) -> dict[str, np.ndarray]:

@@ -128,7 +128,7 @@ from ..jsonfile import finite_or_none
 from ..material_file import MaterialFile
 from ..record import Recording, folded_panels, markdown_table
 from . import PULL_DIRECTIONS, SceneResult
-from .checkpoint import PullCheckpoint, pull_fingerprint
+from .checkpoint import LevelTotals, PullCheckpoint, pull_fingerprint
 from .strip import (Swatch, cut_forces, edge_draw_in, extent_width, free_side_ends, mid_strain, mid_width,
                     middle_compression)
 
@@ -335,8 +335,8 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     ``step_progress`` one per load step of a strain reached in several (a large strip's level takes
     hours). ``checkpoint``: a file the pull writes where it stands after every load step
     (:class:`~yarnfit.validate.checkpoint.PullCheckpoint`); if it exists, the pull resumes from it
-    (:class:`~yarnfit.validate.checkpoint.CheckpointError` if it is another pull's), calling ``on_step`` again for the levels it had
-    finished. Returns a JSON-able dict (see the module docstring)."""
+    (:class:`~yarnfit.validate.checkpoint.CheckpointError` if it is another pull's), calling
+    ``on_step`` again for the levels it had finished. Returns a JSON-able dict (see the module docstring)."""
     strains = [float(e) for e in strains]
     if not strains or any(not (math.isfinite(e) and e > 0) for e in strains) or strains != sorted(strains):
         raise ValueError(f"strains must be positive and ascending, got {strains!r}")
@@ -378,7 +378,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
     def take(begin, low, high):
         return _swatch_step(swatch, solver, begin, low, high, friction)
 
-    def save(level: int, step: int, totals: dict) -> None:
+    def save(level: int, step: int, totals: LevelTotals) -> None:
         """Where the pull stands, in the checkpoint file (if any)."""
         if checkpoint is not None:
             finished = np.array(level_positions).reshape(-1, model.n_nodes, 3)
@@ -388,14 +388,11 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         if k <= len(level_positions):
             continue  # finished before the pull was resumed
         steps = load_step_count(previous, strain, strain_step) if friction > 0.0 else 1
-        totals = {"iterations": 0, "passes": 0, "converged": True, "slowest": 0.0, "seconds": 0.0, "readings": []}
-        done = 0
+        totals, done = LevelTotals(), 0
         if resumed is not None and k == resumed.level and resumed.step > 0:  # within the level
             totals, done = resumed.totals, resumed.step
-        start = time.perf_counter() - totals["seconds"]
-        iterations, passes, converged, slowest = totals["iterations"], totals["passes"], totals["converged"], \
-            totals["slowest"]
-        step_readings = list(totals["readings"])
+        start = time.perf_counter() - totals.seconds
+        step_readings = totals.readings
         for j in range(done + 1, steps + 1):
             step_start = time.perf_counter()
             low = previous + (strain - previous) * (j - 1) / steps
@@ -408,8 +405,8 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                                         STEP_HALVINGS if friction > 0.0 else 0)
             step_iterations = sum(step.iterations for step in tried)
             step_passes = sum(step.passes for step in tried)
-            iterations += step_iterations
-            passes += step_passes
+            totals.iterations += step_iterations
+            totals.passes += step_passes
             step_converged = True
             for step in path:
                 result, lagged = step.result, step.lagged
@@ -427,12 +424,12 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                     "compression_ratio": width / width0,
                     "converged": accepted,
                 })
-            converged &= step_converged
+            totals.converged &= step_converged
             step_seconds = time.perf_counter() - step_start
-            slowest = max(slowest, step_seconds)
+            totals.slowest = max(totals.slowest, step_seconds)
             if j < steps:  # the level's last step is saved with its point
-                save(k, j, {"iterations": iterations, "passes": passes, "converged": converged, "slowest": slowest,
-                            "seconds": time.perf_counter() - start, "readings": step_readings})
+                totals.seconds = time.perf_counter() - start
+                save(k, j, totals)
             if step_progress is not None and steps > 1:
                 reading = step_readings[-1]
                 step_progress(f"{swatch.direction} {100 * target:.4g} % (load step {j} of {steps} towards "
@@ -463,11 +460,11 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "extent_ratio": extent_width(swatch, state.node_position, band) / extent0,
             "width_m": width,
             "edge_draw_in_m": finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
-            "converged": converged,
-            "iterations": int(iterations),
+            "converged": totals.converged,
+            "iterations": int(totals.iterations),
             "load_steps": len(step_readings),
-            "slowest_step_seconds": slowest,
-            "friction_passes": None if lagged is None else passes,
+            "slowest_step_seconds": totals.slowest,
+            "friction_passes": None if lagged is None else totals.passes,
             "friction_change": None if lagged is None else lagged.force_change,
             "seconds": time.perf_counter() - start,
             "residual": {"force": float(r.force), "torque": float(r.torque), "energy_change": float(r.energy_change),
@@ -480,14 +477,14 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         points.append(point)
         level_positions.append(state.node_position.copy())
         previous = strain
-        save(k + 1, 0, {})
+        save(k + 1, 0, LevelTotals())
         if progress is not None:
             progress(f"{swatch.direction} {100 * strain:g} %: {point['force_n_per_m']:.5g} N/m (middle half "
                      f"{point['middle_force_n_per_m']:.5g} N/m at {_strain_text(point['mid_strain'])}, width ratio "
                      f"{_ratio_text(point['middle_compression_ratio'])}), compression "
                      f"{point['compression_ratio']:.4f}, {'converged' if point['converged'] else 'NOT converged'} "
                      f"in {point['iterations']} iterations"
-                     f"{'' if lagged is None else f' over {len(step_readings)} load steps and {passes} friction passes'} "
+                     f"{'' if lagged is None else f' over {len(step_readings)} load steps and {totals.passes} friction passes'} "
                      f"({point['seconds']:.1f} s; {r})")
         if on_step is not None:
             on_step(k, strain, state.node_position, point)
