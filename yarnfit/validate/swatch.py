@@ -392,7 +392,6 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
         if resumed is not None and k == resumed.level and resumed.step > 0:  # within the level
             totals, done = resumed.totals, resumed.step
         start = time.perf_counter() - totals.seconds
-        step_readings = totals.readings
         for j in range(done + 1, steps + 1):
             step_start = time.perf_counter()
             low = previous + (strain - previous) * (j - 1) / steps
@@ -416,7 +415,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                 # The middle's reading after every step; the level's point is its last step's.
                 cut = cut_forces(swatch, state, result.contacts, None if lagged is None else lagged.anchors)
                 width = mid_width(swatch, state.node_position)
-                step_readings.append({
+                totals.readings.append({
                     "strain": step.strain,
                     "mid_strain": finite_or_none(mid_strain(swatch, state.node_position)),
                     "middle_force_n_per_m": float(cut.middle.mean()) / (0.5 * swatch.width),
@@ -431,13 +430,13 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                 totals.seconds = time.perf_counter() - start
                 save(k, j, totals)
             if step_progress is not None and steps > 1:
-                reading = step_readings[-1]
+                reading = totals.readings[-1]
                 step_progress(f"{swatch.direction} {100 * target:.4g} % (load step {j} of {steps} towards "
                               f"{100 * strain:g} %): middle half {reading['middle_force_n_per_m']:.5g} N/m at "
                               f"{_strain_text(reading['mid_strain'])}, "
                               f"{'converged' if step_converged else 'NOT converged'}, {step_iterations} iterations, "
                               f"{step_passes} friction passes, {len(tried)} step(s) tried ({step_seconds:.0f} s)")
-        middle = step_readings[-1]
+        middle = totals.readings[-1]
         _, rod_gradient, _ = energy_gradient(model, state)
         pull = float(result.reaction_force[swatch.moving, 0].sum())
         back = float(result.reaction_force[swatch.fixed, 0].sum())
@@ -462,7 +461,7 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
             "edge_draw_in_m": finite_or_none(edge_draw_in(swatch, state.node_position, width / width0)),
             "converged": totals.converged,
             "iterations": int(totals.iterations),
-            "load_steps": len(step_readings),
+            "load_steps": len(totals.readings),
             "slowest_step_seconds": totals.slowest,
             "friction_passes": None if lagged is None else totals.passes,
             "friction_change": None if lagged is None else lagged.force_change,
@@ -472,19 +471,21 @@ def stretch_swatch(swatch: Swatch, strains: Sequence[float] = STRAINS, *,
                          "torque_floor": float(r.torque_floor)},
             "energy_j": result.energy.internal,
             "contact_pairs": int(len(result.contact_pairs)),
-            "steps": step_readings,
+            "steps": totals.readings,
         }
         points.append(point)
         level_positions.append(state.node_position.copy())
         previous = strain
         save(k + 1, 0, LevelTotals())
         if progress is not None:
+            stepped = "" if lagged is None else \
+                f" over {point['load_steps']} load steps and {point['friction_passes']} friction passes"
             progress(f"{swatch.direction} {100 * strain:g} %: {point['force_n_per_m']:.5g} N/m (middle half "
                      f"{point['middle_force_n_per_m']:.5g} N/m at {_strain_text(point['mid_strain'])}, width ratio "
                      f"{_ratio_text(point['middle_compression_ratio'])}), compression "
                      f"{point['compression_ratio']:.4f}, {'converged' if point['converged'] else 'NOT converged'} "
                      f"in {point['iterations']} iterations"
-                     f"{'' if lagged is None else f' over {len(step_readings)} load steps and {totals.passes} friction passes'} "
+                     f"{stepped} "
                      f"({point['seconds']:.1f} s; {r})")
         if on_step is not None:
             on_step(k, strain, state.node_position, point)
