@@ -192,6 +192,10 @@ class _Step:
         """Its last pass's search converged (so it has a solution) and the normal forces settled."""
         return self.converged and self.settled
 
+    def end(self) -> _Trial:
+        """Where the next step starts."""
+        return self.trial
+
 
 @dataclass(frozen=True)
 class _PullStep:
@@ -205,7 +209,7 @@ class _PullStep:
 
     def end(self) -> _Trial:
         """Where the next step starts."""
-        return self.step.trial
+        return self.step.end()
 
 
 def _rest(relaxed: RelaxedRepeat, options: QuasiStaticOptions, free=0.0) -> _Trial:

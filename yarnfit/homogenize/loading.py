@@ -40,7 +40,7 @@ from ..engine.lagged import FRICTION_STRAIN_STEP, in_halves
 from ..relax import RelaxedRepeat
 from ..samples import OTHER_BIAS_FAMILIES, Family, Group, SampleResult, SampleSpec, stretch_share
 from .equilibrium import MAX_ITERATIONS, _solve_from
-from .frictional import (_frictional_step, _Pass, _rest, _Trial, frictional_periodic_bias_pull,
+from .frictional import (_frictional_step, _Pass, _rest, _Step, _Trial, frictional_periodic_bias_pull,
                          frictional_periodic_pull)
 from .surface import _form_map
 
@@ -143,7 +143,8 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
     state = _rest(relaxed, options)
     dissipated, samples, previous = 0.0, [], 0.0
 
-    def lagged_step(start: _Trial, magnitude: float):
+    def lagged_step(start: _Trial, low: float, magnitude: float) -> _Step:
+        """The lagged step from ``start`` (the path's state at ``low``) to the load ``magnitude``."""
         form = family.deformation(sign * magnitude)[0]
 
         def solve_pass(anchors, anchor_form, warm, contacts, guess, probe) -> _Pass:
@@ -164,9 +165,7 @@ def _fixed_path(relaxed: RelaxedRepeat, family: Family, sign: float, grid: Seque
     for reached, magnitude in enumerate(grid):
         clock = time.perf_counter()
         form = family.deformation(sign * magnitude)[0]
-        path, tried = in_halves(lambda start, low, high: lagged_step(start, high),
-                                lambda step: step.accepted(),
-                                lambda step: step.trial, state, previous, magnitude)
+        path, tried = in_halves(lagged_step, _Step.accepted, _Step.end, state, previous, magnitude)
         step, iterations, previous = path[-1], sum(s.iterations for s in tried), magnitude
         trial, result = step.trial, step.trial.result
         if result is None:
