@@ -701,3 +701,27 @@ def test_kept_curves_are_found_by_their_fabric_and_another_fabrics_are_refused(m
     with pytest.raises(ValueError, match=r"polyester-satin_\w+\.json: its curves are of 'polyester-satin', "
                                          "not of the material 'cotton-twill'"):
         script.read_curves(kept, "cotton-twill")
+
+
+def test_the_convergence_table_reads_every_strip_where_it_is_uniform(monkeypatch):
+    # Each strip's row carries the reading the verdicts use (the middle half's pull and width at
+    # its middle's own 2 / 5 / 10 %), so the table shows that reading converging as the strip
+    # grows; its cells line up with the header's.
+    script = _swatch_convergence_script(monkeypatch)
+    curves = script.read_curves(script.kept_curves("polyester-satin"), "polyester-satin")
+    header = script.convergence_header()
+    columns = sum(len(cell.split(" | ")) for cell in header)
+    n = len(script.STRAINS)
+    for label, curve in curves.items():
+        cells = [cell.strip() for cell in script.convergence_row(curve).strip().strip("|").split("|")]
+        assert len(cells) == columns, label
+        readings = read_uniform(curve, script.STRAINS)
+        forces, widths = cells[3 + 2 * n:3 + 3 * n], cells[3 + 3 * n:3 + 4 * n]
+        for force, width, reading in zip(forces, widths, readings):
+            if reading is None:
+                assert (force, width) == ("—", "—"), label
+            else:  # printed to 4 and 3 significant digits
+                assert float(force.split()[0]) == pytest.approx(reading.force_n_per_m, rel=5e-4), label
+                assert float(width) == pytest.approx(reading.compression_ratio, abs=5e-4), label
+    # The satin's weft strip reached 2 % (at least): its uniform cell there is a number.
+    assert read_uniform(curves["weft 8x6"], script.STRAINS)[0] is not None

@@ -5,8 +5,9 @@ the larger repeat side; each jaw band half a repeat) along each direction, pull 
 10 % (:func:`yarnfit.validate.swatch.stretch_swatch`, converged solves warm-started one from the
 next) and print, per direction and size: nodes, force per width (N/m) on the jaws and carried by
 the strip's middle half of the width across its middle half of the gauge (where it is furthest
-from its cut sides and jaws: :func:`yarnfit.validate.strip.cut_forces`), compression ratio at each
-strain, the strain of the strip's middle half read between two marks as an extensometer reads it
+from its cut sides and jaws: :func:`yarnfit.validate.strip.cut_forces`), the same middle half's
+pull and width read at its own 2, 5 and 10 % (the reading the verdicts below use:
+:func:`yarnfit.validate.swatch.read_uniform`), compression ratio at each strain, the strain of the strip's middle half read between two marks as an extensometer reads it
 (:func:`yarnfit.validate.strip.mid_strain`: where it differs from the nominal strain, the jaws
 constrain the strip), and the slowest strain's solve time (one core). The sizes are not shrunk to the suite's
 node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what says how large a strip
@@ -233,8 +234,20 @@ def provenance() -> dict:
             "date": time.strftime("%Y-%m-%d")}
 
 
+def convergence_header() -> list[str]:
+    """The convergence table's header cells, one per :func:`convergence_row` cell group (a group
+    over STRAINS is one cell whose strains are joined by ``" | "``)."""
+    strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
+    return ["direction", "repeats (gauge × width)", "nodes", f"N/m (jaws) at {strains}",
+            f"N/m (middle half) at {strains}", f"N/m where uniform (the middle half's, at its own {strains})",
+            f"its width ratio at {strains}", f"compression at {strains}", f"middle half's compression at {strains}",
+            f"middle's strain (%) at {strains}", f"edge draw-in (µm) at {strains}",
+            f"N/m per quarter of the width at {100 * STRAINS[-1]:g} %", "slowest strain (s)", "converged"]
+
+
 def convergence_row(curve: dict) -> str:
-    """The strip's row of the convergence table; '—' at the strains a stopped run did not reach."""
+    """The strip's row of the convergence table; '—' at the strains a stopped run did not reach (and,
+    where uniform, those its middle did not reach)."""
     points = level_points(curve)
     reached = [p for p in points if p is not None]
     gauge, width = curve["repeats"]
@@ -242,11 +255,16 @@ def convergence_row(curve: dict) -> str:
     def cells(text: Callable[[dict], str]) -> str:
         return " | ".join("—" if p is None else text(p) for p in points)
 
-    last = points[-1]
+    def uniform_cells(text: Callable[[ReadPoint], str]) -> str:
+        return " | ".join("—" if r is None else text(r) for r in uniform)
+
+    last, uniform = points[-1], _uniform(curve)
     converged = "unfinished" if curve.get("unfinished") else "yes" if curve["converged"] else "NO"
     return (f"| {curve['direction']} | {gauge:g} × {width:g} | {curve['nodes']} | "
             + cells(lambda p: f"{p['force_n_per_m']:.4g}") + " | "
             + cells(lambda p: _force(p.get("middle_force_n_per_m"))) + " | "
+            + uniform_cells(lambda r: f"{r.force:.4g}{r.note}") + " | "
+            + uniform_cells(lambda r: f"{r.compression:.3f}") + " | "
             + cells(lambda p: f"{p['compression_ratio']:.3f}") + " | "
             + cells(lambda p: _ratio(p.get("middle_compression_ratio"))) + " | "
             + cells(lambda p: _percent(p.get("mid_strain"))) + " | "
@@ -605,15 +623,10 @@ def main(argv: list[str] | None = None) -> int:
                 return 2
             name = relaxed.name
             print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
-        strains = " | ".join(f"{100 * e:g} %" for e in STRAINS)
         order = sorted(curves.values(), key=lambda c: (c["direction"], c["nodes"]))
-        print_table("", ["direction", "repeats (gauge × width)", "nodes", f"N/m (jaws) at {strains}",
-                         f"N/m (middle half) at {strains}", f"compression at {strains}",
-                         f"middle half's compression at {strains}",
-                         f"middle's strain (%) at {strains}", f"edge draw-in (µm) at {strains}",
-                         f"N/m per quarter of the width at {100 * STRAINS[-1]:g} %", "slowest strain (s)",
-                         "converged"],
-                    [convergence_row(curve) for curve in order], columns=6 + 6 * len(STRAINS))
+        header = convergence_header()
+        print_table("", header, [convergence_row(curve) for curve in order],
+                    columns=sum(len(cell.split(" | ")) for cell in header))
         pulls = periodic_pulls(relaxed, sorted({curve["direction"] for curve in curves.values()}))
 
         def periodic(direction: str, strain: float):
