@@ -709,8 +709,7 @@ def test_the_convergence_table_reads_every_strip_where_it_is_uniform(monkeypatch
     # grows; its cells line up with the header's.
     script = _swatch_convergence_script(monkeypatch)
     curves = script.read_curves(script.kept_curves("polyester-satin"), "polyester-satin")
-    header = script.convergence_header()
-    columns = sum(len(cell.split(" | ")) for cell in header)
+    columns = script.table_columns(script.convergence_header())
     n = len(script.STRAINS)
     for label, curve in curves.items():
         cells = [cell.strip() for cell in script.convergence_row(curve).strip().strip("|").split("|")]

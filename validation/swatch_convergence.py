@@ -7,7 +7,8 @@ next) and print, per direction and size: nodes, force per width (N/m) on the jaw
 the strip's middle half of the width across its middle half of the gauge (where it is furthest
 from its cut sides and jaws: :func:`yarnfit.validate.strip.cut_forces`), the same middle half's
 pull and width read at its own 2, 5 and 10 % (the reading the verdicts below use:
-:func:`yarnfit.validate.swatch.read_uniform`), compression ratio at each strain, the strain of the strip's middle half read between two marks as an extensometer reads it
+:func:`yarnfit.validate.swatch.read_uniform`), compression ratio at each strain, the strain of
+the strip's middle half read between two marks as an extensometer reads it
 (:func:`yarnfit.validate.strip.mid_strain`: where it differs from the nominal strain, the jaws
 constrain the strip), and the slowest strain's solve time (one core). The sizes are not shrunk to the suite's
 node budget (:data:`yarnfit.validate.swatch.MAX_NODES`): this script is what says how large a strip
@@ -571,12 +572,17 @@ def fit_rows(file: MaterialFile, curves: dict, pulls: dict) -> list[str]:
     return rows
 
 
-def print_table(title: str, header: list[str], rows: list[str], columns: int | None = None) -> None:
+def table_columns(header: list[str]) -> int:
+    """The columns ``header`` spans: a cell over STRAINS joins its strains with ``" | "``."""
+    return sum(len(cell.split(" | ")) for cell in header)
+
+
+def print_table(title: str, header: list[str], rows: list[str]) -> None:
     """A Markdown table after a blank line and its ``title`` (none if empty): ``header`` cells,
-    the separator over ``columns`` (default one per header cell) and the ``rows`` as given."""
+    the separator over the columns they span (:func:`table_columns`) and the ``rows`` as given."""
     print(f"\n{title}\n" if title else "")
     print("| " + " | ".join(header) + " |")
-    print("|" + "---|" * (columns or len(header)))
+    print("|" + "---|" * table_columns(header))
     print("\n".join(rows))
 
 
@@ -624,9 +630,7 @@ def main(argv: list[str] | None = None) -> int:
             name = relaxed.name
             print(f"\n{name}: repeat {1e3 * relaxed.repeat_size[0]:.3g} × {1e3 * relaxed.repeat_size[1]:.3g} mm")
         order = sorted(curves.values(), key=lambda c: (c["direction"], c["nodes"]))
-        header = convergence_header()
-        print_table("", header, [convergence_row(curve) for curve in order],
-                    columns=sum(len(cell.split(" | ")) for cell in header))
+        print_table("", convergence_header(), [convergence_row(curve) for curve in order])
         pulls = periodic_pulls(relaxed, sorted({curve["direction"] for curve in curves.values()}))
 
         def periodic(direction: str, strain: float):
